@@ -1,0 +1,35 @@
+# lmeform entry points. Each target does all set-up on a fresh Debian 12 machine:
+# installs the packages (idempotent), configures, builds, then runs.
+#   make demo   - the main demo
+#   make test   - the whole test suite (unit, form FD checks, 2-rank MPI tests)
+#   make bench  - the benchmarks in quick mode; JSON lands in build/bench/
+
+BUILD_DIR ?= build
+BUILD_TYPE ?= Release
+JOBS ?= $(shell nproc)
+CMAKE_FLAGS ?=
+
+.PHONY: all deps configure build test demo bench clean
+
+all: build
+
+deps:
+	bash scripts/install-deps.sh
+
+configure: deps
+	cmake -S . -B $(BUILD_DIR) -DCMAKE_BUILD_TYPE=$(BUILD_TYPE) $(CMAKE_FLAGS)
+
+build: configure
+	cmake --build $(BUILD_DIR) -j $(JOBS)
+
+test: build
+	ctest --test-dir $(BUILD_DIR) --output-on-failure -j $(JOBS)
+
+demo: build
+	bash scripts/run-demo.sh $(BUILD_DIR)
+
+bench: build
+	bash scripts/run-benchmarks.sh $(BUILD_DIR)
+
+clean:
+	rm -rf $(BUILD_DIR)

@@ -1,0 +1,18 @@
+#!/usr/bin/env bash
+# Runs every registered benchmark (build/benchmarks.txt) in quick mode; JSON goes to BUILD/bench/.
+set -euo pipefail
+build=${1:-build}
+out="$build/bench"
+mkdir -p "$out"
+status=0
+while IFS= read -r exe; do
+  [ -z "$exe" ] && continue
+  echo "== $(basename "$exe")"
+  if ! "$exe" --quick --out "$out"; then
+    echo "benchmark $(basename "$exe") failed" >&2
+    status=1
+  fi
+done < "$build/benchmarks.txt"
+echo "benchmark results in $out/:"
+ls -1 "$out"
+exit $status
