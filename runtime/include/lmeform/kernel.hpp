@@ -28,6 +28,9 @@
 #pragma once
 
 #include <cstddef>
+#include <cstring>
+
+#include <Eigen/Core>
 
 namespace lmeform::kernel {
 
@@ -116,9 +119,98 @@ struct FormKernels {
   VectorKernel vector = nullptr;       ///< gradient (Energy, Constraint), residual, linear form
   MatrixKernel matrix = nullptr;       ///< Hessian (Energy), Jacobian (Residual), bilinear form
 
+  // --- added by the compiler (issue 3); appended so existing initializers stay valid ---
+  int target_constant = -1;            ///< Constraint: index into constants of the target, -1 if numeric
+  double target_value = 0.0;           ///< Constraint: numeric target when target_constant < 0
+
   double flops_value = 0.0;            ///< per cell, as functions of n and nq: a*n*nq + b*nq ...
   double flops_vector = 0.0;           ///< (estimates for n = 1, nq = 1 scaled by the runtime)
   double flops_matrix = 0.0;
+
+  /// Flop model of each kernel: flops(n, nq) = nq * (per_point + n*per_node_point + n*n*per_node_pair_point).
+  struct FlopModel {
+    double per_point = 0.0;
+    double per_node_point = 0.0;
+    double per_node_pair_point = 0.0;
+    constexpr double operator()(int n, int nq) const noexcept {
+      return nq * (per_point + n * per_node_point + double(n) * n * per_node_pair_point);
+    }
+  };
+  FlopModel flop_model_value{}, flop_model_vector{}, flop_model_matrix{};
+  const char* source = "";             ///< the .form file the kernels were generated from
 };
+
+// ---- Contraction helpers used by generated kernels (added by the compiler, issue 3) ------------
+// The generated code evaluates, per quadrature point, the derivatives of the integrand with respect
+// to the jet slots it uses (a dense (R*S) x (C*S) block D_q, weight included), then these helpers
+// contract with the basis as dense products: gradient = Bsᵀ G and, per non-zero component block
+// (r, c), H_rc = Bsᵀ (blockdiag_q D_q^{rc}) Bs, i.e. one small product per point and one GEMM per
+// block with inner dimension nq*S.
+namespace detail {
+using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+using ConstRowMap = Eigen::Map<const RowMatrix>;
+using RowMap = Eigen::Map<RowMatrix>;
+using StridedRowMap = Eigen::Map<RowMatrix, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
+}  // namespace detail
+
+/// Gathers the used jet slots of every point's tabulation: `out` is (nq*S x n), row (q*S + i) =
+/// basis row `slots[i]` of point q.
+inline void gather_slots(const CellInputs& in, int dim, int n_slots, const int* slots, double* out) noexcept {
+  const int n = in.n_nodes;
+  const int J = jet_size(dim, in.basis_order);
+  for (int q = 0; q < in.n_points; ++q)
+    for (int i = 0; i < n_slots; ++i)
+      std::memcpy(out + (std::size_t(q) * n_slots + i) * n, in.basis + (std::size_t(q) * J + slots[i]) * n,
+                  sizeof(double) * std::size_t(n));
+}
+
+/// local_vector (n x R, dof-interleaved) += Bsᵀ G with Bs (nq*S x n) and G (nq*S x R).
+inline void contract_vector(int n, int nq, int n_slots, int R, const double* Bs, const double* G,
+                            double* local_vector) {
+  detail::RowMap out(local_vector, n, R);
+  out.noalias() += detail::ConstRowMap(Bs, Eigen::Index(nq) * n_slots, n).transpose() *
+                   detail::ConstRowMap(G, Eigen::Index(nq) * n_slots, R);
+}
+
+/// A structurally non-zero component block of the local matrix; `mirror` adds its transpose at
+/// (col, row) too (symmetric Hessians compute only the upper blocks).
+struct MatrixBlock {
+  int row;
+  int col;
+  bool mirror;
+};
+
+/// Workspace of contract_matrix (beyond Bs and D): nq*S*n + n*n doubles.
+constexpr std::size_t contract_matrix_workspace(int n, int nq, int n_slots) noexcept {
+  return std::size_t(nq) * n_slots * n + std::size_t(n) * n;
+}
+
+/// local_matrix ((n*R) x (n*C), dof-interleaved) += Σ_q Bs_qᵀ D_q^{rc} Bs_q for every block.
+/// D holds per point a row-major (R*S) x (C*S) matrix (weights included).
+inline void contract_matrix(int n, int nq, int n_slots, int R, int C, const double* Bs, const double* D,
+                            const MatrixBlock* blocks, int n_blocks, double* work, double* local_matrix) {
+  const Eigen::Index S = n_slots;
+  const Eigen::Index ld = Eigen::Index(C) * S;
+  double* stacked = work;                                  // (nq*S x n): D_q^{rc} Bs_q stacked
+  double* block = work + std::size_t(nq) * n_slots * n;     // (n x n)
+  const detail::ConstRowMap Ball(Bs, Eigen::Index(nq) * S, n);
+  for (int b = 0; b < n_blocks; ++b) {
+    const int r = blocks[b].row, c = blocks[b].col;
+    for (int q = 0; q < nq; ++q) {
+      const double* Dq = D + std::size_t(q) * std::size_t(R) * S * ld + std::size_t(r) * S * ld + std::size_t(c) * S;
+      Eigen::Map<const detail::RowMatrix, 0, Eigen::OuterStride<>> Dblock(Dq, S, S, Eigen::OuterStride<>(ld));
+      detail::RowMap(stacked + std::size_t(q) * S * n, S, n).noalias() =
+          Dblock * detail::ConstRowMap(Bs + std::size_t(q) * S * n, S, n);
+    }
+    detail::RowMap H(block, n, n);
+    H.noalias() = Ball.transpose() * detail::ConstRowMap(stacked, Eigen::Index(nq) * S, n);
+    const Eigen::Index row_stride = Eigen::Index(R) * n * C;
+    detail::StridedRowMap(local_matrix + std::size_t(r) * n * C + c, n, n,
+                          Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>(row_stride, C)) += H;
+    if (blocks[b].mirror)
+      detail::StridedRowMap(local_matrix + std::size_t(c) * n * C + r, n, n,
+                            Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>(row_stride, C)) += H.transpose();
+  }
+}
 
 }  // namespace lmeform::kernel

@@ -1,0 +1,46 @@
+// Variational differentiation (second layer of ARCHITECTURE §3) and C++/JSON emission.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "lmeform/compiler/compile.hpp"
+
+namespace lmeform::compiler {
+
+/// What one output needs at one dimension: derivatives of the integrand with respect to the jet
+/// slots of its row fields (unknowns or tests) and column fields (unknowns or trials).
+struct KernelPlan {
+  const OutputDecl* output = nullptr;
+  int dim = 0;
+  ir::Role row_role = ir::Role::Unknown;
+  ir::Role col_role = ir::Role::Unknown;
+  int row_dofs = 0;                 ///< dofs per node of the rows
+  int col_dofs = 0;                 ///< dofs per node of the columns (0: no matrix)
+  std::vector<int> slots;           ///< union of used jet slots (the gathered basis rows), sorted
+  int basis_order = 0;              ///< highest slot order of any nodal-field jet read or contracted
+  int coefficient_order = 0;
+  bool symmetric = false;           ///< energy/constraint Hessians
+
+  ir::NodeId value = -1;            ///< energy/constraint integrand
+  struct VectorEntry { int row; int slot_index; ir::NodeId node; };
+  struct MatrixEntry { int row; int row_slot; int col; int col_slot; ir::NodeId node; };
+  std::vector<VectorEntry> vector;  ///< non-zero ∂f/∂J_row
+  std::vector<MatrixEntry> matrix;  ///< non-zero ∂²f/∂J_row∂J_col (both triangles when symmetric)
+  bool has_value() const { return value >= 0; }
+  bool has_vector() const { return !vector.empty() || output->kind != OutputKind::Bilinear; }
+  bool has_matrix() const { return col_dofs > 0; }
+};
+
+/// Differentiates one output at one dimension. Throws CompileError (e.g. a residual not linear in v).
+KernelPlan plan_kernel(const CompiledForm& form, const OutputDecl& output, int dim);
+
+struct GeneratedModule {
+  std::string header;  ///< <module>_kernels.hpp
+  std::string json;    ///< <module>.json
+  std::string ir;      ///< --print-ir text
+};
+
+GeneratedModule generate(const CompiledForm& form, const std::string& source_name);
+
+}  // namespace lmeform::compiler

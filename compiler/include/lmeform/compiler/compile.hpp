@@ -1,0 +1,80 @@
+// Front end of lmeformc: parse a .form file (and its includes), check names and shapes, and lower
+// every output to a scalar integrand in the IR, once per requested spatial dimension.
+#pragma once
+
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "lmeform/compiler/ir.hpp"
+#include "lmeform/compiler/source.hpp"
+
+namespace lmeform::compiler {
+
+struct FieldDecl {
+  std::string name;
+  ir::Role role;
+  bool is_vector = false;
+  Loc loc;
+  int components(int dim) const { return is_vector ? dim : 1; }
+};
+
+struct ConstantDecl {
+  std::string name;
+  std::optional<double> default_value;
+  Loc loc;
+};
+
+struct QdataDecl {
+  std::string name;
+  int rank = 0;  ///< 0 scalar, 1 vector, 2 matrix, 3 tensor3
+  Loc loc;
+  int size(int dim) const { int s = 1; for (int i = 0; i < rank; ++i) s *= dim; return s; }
+};
+
+enum class OutputKind { Energy, Constraint, Residual, Bilinear, Linear };
+const char* to_string(OutputKind k);
+
+struct OutputDecl {
+  OutputKind kind = OutputKind::Energy;
+  std::string name;
+  Loc loc;
+  int target_constant = -1;      ///< Constraint: index of the target constant, or -1
+  double target_value = 0.0;     ///< Constraint: numeric target when target_constant < 0
+  std::map<int, ir::NodeId> integrand;  ///< per dimension: f such that the output is Σ_q w_q f
+};
+
+struct CompileOptions {
+  std::vector<std::filesystem::path> include_dirs;
+};
+
+struct CompiledForm {
+  std::string module;
+  std::vector<int> dims;
+  std::vector<FieldDecl> fields;       ///< all nodal fields, declaration order
+  std::vector<ConstantDecl> constants;
+  std::vector<QdataDecl> qdata;
+  std::string coordinate;              ///< name of the coordinate, empty if none
+  std::vector<OutputDecl> outputs;
+  SourceSet sources;
+  std::vector<std::filesystem::path> dependencies;  ///< the form and every included file
+  std::map<int, std::shared_ptr<ir::Graph>> graphs;  ///< one IR per dimension
+
+  /// Fields of one role in declaration order (the order of their dofs).
+  std::vector<const FieldDecl*> fields_of(ir::Role role) const;
+  /// Index of a field within its role.
+  const FieldDecl& field(ir::Role role, int index) const { return *fields_of(role).at(static_cast<std::size_t>(index)); }
+  int qdata_offset(int index, int dim) const;
+  int qdata_per_point(int dim) const;
+};
+
+/// Compiles a .form file. Throws CompileError (already formatted) on any error.
+CompiledForm compile_file(const std::filesystem::path& path, const CompileOptions& options = {});
+/// Same for text held in memory (tests); `path` is used in messages and to resolve includes.
+CompiledForm compile_source(const std::string& text, const std::filesystem::path& path,
+                            const CompileOptions& options = {});
+
+}  // namespace lmeform::compiler

@@ -1,0 +1,573 @@
+// Variational differentiation and code generation.
+//
+// For each output and dimension: f = integrand (IR node). The rows/columns of the local vector and
+// matrix are the jet slots J = (u, ∇u, ∇∇u) of the row/column fields; ∂f/∂J and ∂²f/∂J² are
+// formed symbolically (forward mode, memoized per variable) and emitted once per quadrature point
+// in topological order: each hash-consed node becomes one `const double tN = ...;` (CSE). The
+// contraction with the basis is done by the Eigen helpers of kernel.hpp (dense products).
+#include <algorithm>
+#include <cmath>
+#include <iomanip>
+#include <map>
+#include <set>
+#include <sstream>
+
+#include "lmeform/compiler/codegen.hpp"
+
+namespace lmeform::compiler {
+namespace {
+
+using ir::NodeId;
+using ir::Op;
+
+ir::Role row_role_of(OutputKind k) {
+  return (k == OutputKind::Energy || k == OutputKind::Constraint) ? ir::Role::Unknown : ir::Role::Test;
+}
+
+std::vector<int> field_offsets(const CompiledForm& form, ir::Role role, int dim, int* total) {
+  std::vector<int> off;
+  int t = 0;
+  for (const auto* f : form.fields_of(role)) {
+    off.push_back(t);
+    t += f->components(dim);
+  }
+  if (total) *total = t;
+  return off;
+}
+
+std::unique_ptr<ir::Differentiator> variable_differentiator(ir::Graph& g, NodeId var) {
+  return std::make_unique<ir::Differentiator>(g, [var](ir::Graph& gr, NodeId t) { return t == var ? gr.one() : gr.zero(); });
+}
+
+bool reaches_role(const ir::Graph& g, std::span<const NodeId> roots, ir::Role role, std::string* field_hint, const CompiledForm& form) {
+  for (NodeId id : g.reachable(roots))
+    if (g.node(id).op == Op::Jet && g.jet_var(id).role == role) {
+      if (field_hint) *field_hint = form.field(role, g.jet_var(id).field).name;
+      return true;
+    }
+  return false;
+}
+
+std::string literal(double v) {
+  std::ostringstream s;
+  if (std::isfinite(v) && v == std::floor(v) && std::abs(v) < 1e15) s << std::fixed << std::setprecision(1) << v;
+  else s << std::setprecision(17) << v;
+  std::string r = s.str();
+  return v < 0 ? "(" + r + ")" : r;
+}
+
+}  // namespace
+
+KernelPlan plan_kernel(const CompiledForm& form, const OutputDecl& output, int dim) {
+  ir::Graph& g = *form.graphs.at(dim);
+  KernelPlan plan;
+  plan.output = &output;
+  plan.dim = dim;
+  plan.row_role = row_role_of(output.kind);
+  plan.symmetric = output.kind == OutputKind::Energy || output.kind == OutputKind::Constraint;
+  const bool has_cols = output.kind != OutputKind::Linear;
+  plan.col_role = output.kind == OutputKind::Bilinear ? ir::Role::Trial : ir::Role::Unknown;
+  const auto row_off = field_offsets(form, plan.row_role, dim, &plan.row_dofs);
+  std::vector<int> col_off;
+  if (has_cols) col_off = field_offsets(form, plan.col_role, dim, &plan.col_dofs);
+  const NodeId f = output.integrand.at(dim);
+  if (plan.symmetric) plan.value = f;
+
+  // The differentiation variables: jets of the row and column fields that occur in f.
+  std::vector<NodeId> row_vars, col_vars;
+  const NodeId froots[] = {f};
+  for (NodeId id : g.reachable(froots)) {
+    if (g.node(id).op != Op::Jet) continue;
+    const auto v = g.jet_var(id);
+    if (v.role == plan.row_role) row_vars.push_back(id);
+    if (has_cols && v.role == plan.col_role) col_vars.push_back(id);
+    const int order = ir::slot_order(v.slot, dim);
+    if (v.role == ir::Role::Coefficient) plan.coefficient_order = std::max(plan.coefficient_order, order);
+    else plan.basis_order = std::max(plan.basis_order, order);
+  }
+  auto by_var = [&](NodeId a, NodeId b) { return g.jet_var(a) < g.jet_var(b); };
+  std::sort(row_vars.begin(), row_vars.end(), by_var);
+  std::sort(col_vars.begin(), col_vars.end(), by_var);
+  std::set<int> slot_set;
+  for (NodeId v : row_vars) slot_set.insert(g.jet_var(v).slot);
+  for (NodeId v : col_vars) slot_set.insert(g.jet_var(v).slot);
+  plan.slots.assign(slot_set.begin(), slot_set.end());
+  auto slot_index = [&](int slot) {
+    return static_cast<int>(std::lower_bound(plan.slots.begin(), plan.slots.end(), slot) - plan.slots.begin());
+  };
+  auto row_of = [&](NodeId v, const std::vector<int>& off) { const auto j = g.jet_var(v); return off[static_cast<std::size_t>(j.field)] + j.component; };
+
+  const Loc saved = g.current_origin();
+  std::map<NodeId, std::unique_ptr<ir::Differentiator>> diff;
+  auto D = [&](NodeId var) -> ir::Differentiator& {
+    auto& p = diff[var];
+    if (!p) p = variable_differentiator(g, var);
+    return *p;
+  };
+  std::vector<NodeId> first(row_vars.size());
+  for (std::size_t k = 0; k < row_vars.size(); ++k) {
+    first[k] = D(row_vars[k]).derivative(f);
+    if (!g.is_const(first[k], 0.0))
+      plan.vector.push_back({row_of(row_vars[k], row_off), slot_index(g.jet_var(row_vars[k]).slot), first[k]});
+  }
+  if (has_cols) {
+    for (std::size_t k = 0; k < row_vars.size(); ++k) {
+      if (g.is_const(first[k], 0.0)) continue;
+      for (std::size_t l = plan.symmetric ? k : 0; l < col_vars.size(); ++l) {
+        const NodeId h = D(col_vars[l]).derivative(first[k]);
+        if (g.is_const(h, 0.0)) continue;
+        const int r = row_of(row_vars[k], row_off), rs = slot_index(g.jet_var(row_vars[k]).slot);
+        const int c = row_of(col_vars[l], col_off), cs = slot_index(g.jet_var(col_vars[l]).slot);
+        plan.matrix.push_back({r, rs, c, cs, h});
+        if (plan.symmetric && l != k) plan.matrix.push_back({c, cs, r, rs, h});
+      }
+    }
+  }
+  g.set_origin(saved);
+
+  // Linearity in test/trial functions: their jets must be gone after differentiation.
+  std::vector<NodeId> vroots, mroots;
+  for (const auto& e : plan.vector) vroots.push_back(e.node);
+  for (const auto& e : plan.matrix) mroots.push_back(e.node);
+  std::string field;
+  const std::string what = std::string(to_string(output.kind)) + " '" + output.name + "'";
+  if (output.kind == OutputKind::Residual || output.kind == OutputKind::Linear || output.kind == OutputKind::Bilinear) {
+    if (reaches_role(g, vroots, ir::Role::Test, &field, form) || reaches_role(g, mroots, ir::Role::Test, &field, form))
+      fail_at(form.sources, output.loc, what + " is not linear in the test function '" + field + "'");
+  }
+  if (output.kind == OutputKind::Bilinear && reaches_role(g, mroots, ir::Role::Trial, &field, form))
+    fail_at(form.sources, output.loc, what + " is not linear in the trial function '" + field + "'");
+  if (output.kind == OutputKind::Bilinear) plan.vector.clear();  // the vector of a bilinear form is not generated
+  return plan;
+}
+
+namespace {
+
+/// Emits the body of one kernel: per-point evaluation of a set of roots, with assignments.
+class KernelWriter {
+ public:
+  KernelWriter(const CompiledForm& form, const KernelPlan& plan) : form_(form), plan_(plan), g_(*form.graphs.at(plan.dim)) {}
+
+  std::string ref(NodeId id) const {
+    const ir::Node& n = g_.node(id);
+    switch (n.op) {
+      case Op::Const: return literal(n.value);
+      case Op::Jet: {
+        const auto v = g_.jet_var(id);
+        return std::string(v.role == ir::Role::Coefficient ? "c" : v.role == ir::Role::Unknown ? "u" : "v") +
+               std::to_string(v.field) + "_" + std::to_string(v.component) + "_s" + std::to_string(v.slot);
+      }
+      case Op::Coord: return "x_" + std::to_string(n.arg[0]);
+      case Op::Param: return "k_" + std::to_string(n.arg[0]);
+      case Op::Qdata: return "qd_" + std::to_string(n.arg[0]);
+      default: return "t" + std::to_string(id);
+    }
+  }
+
+  std::string expression(NodeId id) const {
+    const ir::Node& n = g_.node(id);
+    auto A = [&](int k) { return ref(n.arg[static_cast<std::size_t>(k)]); };
+    switch (n.op) {
+      case Op::Add: return A(0) + " + " + A(1);
+      case Op::Mul: return A(0) + " * " + A(1);
+      case Op::Neg: return "-" + A(0);
+      case Op::Div: return A(0) + " / " + A(1);
+      case Op::Pow: {
+        const ir::Node& e = g_.node(n.arg[1]);
+        if (e.op == Op::Const) {
+          if (e.value == 2.0) return A(0) + " * " + A(0);
+          if (e.value == 3.0) return A(0) + " * " + A(0) + " * " + A(0);
+          if (e.value == 4.0) return "(" + A(0) + " * " + A(0) + ") * (" + A(0) + " * " + A(0) + ")";
+          if (e.value == -1.0) return "1.0 / " + A(0);
+          if (e.value == -2.0) return "1.0 / (" + A(0) + " * " + A(0) + ")";
+        }
+        return "std::pow(" + A(0) + ", " + A(1) + ")";
+      }
+      case Op::Sqrt: return "std::sqrt(" + A(0) + ")";
+      case Op::Exp: return "std::exp(" + A(0) + ")";
+      case Op::Log: return "std::log(" + A(0) + ")";
+      case Op::Sin: return "std::sin(" + A(0) + ")";
+      case Op::Cos: return "std::cos(" + A(0) + ")";
+      case Op::Tanh: return "std::tanh(" + A(0) + ")";
+      case Op::Abs: return "std::abs(" + A(0) + ")";
+      case Op::Sign: return "(" + A(0) + " > 0.0 ? 1.0 : (" + A(0) + " < 0.0 ? -1.0 : 0.0))";
+      case Op::Select: return "(" + A(0) + " != 0.0 ? " + A(1) + " : " + A(2) + ")";
+      case Op::Lt: return "(" + A(0) + " < " + A(1) + " ? 1.0 : 0.0)";
+      case Op::Le: return "(" + A(0) + " <= " + A(1) + " ? 1.0 : 0.0)";
+      case Op::Gt: return "(" + A(0) + " > " + A(1) + " ? 1.0 : 0.0)";
+      case Op::Ge: return "(" + A(0) + " >= " + A(1) + " ? 1.0 : 0.0)";
+      case Op::Eq: return "(" + A(0) + " == " + A(1) + " ? 1.0 : 0.0)";
+      case Op::Ne: return "(" + A(0) + " != " + A(1) + " ? 1.0 : 0.0)";
+      case Op::And: return "((" + A(0) + " != 0.0 && " + A(1) + " != 0.0) ? 1.0 : 0.0)";
+      case Op::Or: return "((" + A(0) + " != 0.0 || " + A(1) + " != 0.0) ? 1.0 : 0.0)";
+      case Op::Not: return "(" + A(0) + " == 0.0 ? 1.0 : 0.0)";
+      default: return ref(id);
+    }
+  }
+
+  /// Writes the quadrature loop: terminals, nodes, then `sink(os)` for the outputs.
+  /// Returns the flop estimate per point and the number of nodal jets evaluated.
+  std::pair<double, int> point_loop(std::ostream& os, const std::vector<NodeId>& roots, const std::string& sink) {
+    const auto order = g_.reachable(roots);
+    std::set<int> params;
+    std::vector<NodeId> jets;
+    std::set<int> coords, qdata;
+    double flops = 0;
+    for (NodeId id : order) {
+      const ir::Node& n = g_.node(id);
+      if (n.op == Op::Param) params.insert(n.arg[0]);
+      if (n.op == Op::Coord) coords.insert(n.arg[0]);
+      if (n.op == Op::Qdata) qdata.insert(n.arg[0]);
+      if (n.op == Op::Jet) jets.push_back(id);
+      flops += ir::flop_cost(n.op);
+    }
+    for (int p : params) os << "  const double k_" << p << " = in.constants[" << p << "];\n";
+    os << "  for (int q = 0; q < nq; ++q) {\n";
+    os << "    [[maybe_unused]] const double w = in.weights[q];\n";
+    os << "    [[maybe_unused]] const double* Bq = in.basis + std::size_t(q) * std::size_t(J) * std::size_t(n);\n";
+    for (int c : coords) os << "    const double x_" << c << " = in.points[std::size_t(q) * " << plan_.dim << " + " << c << "];\n";
+    const int qpp = form_.qdata_per_point(plan_.dim);
+    for (int o : qdata) os << "    const double qd_" << o << " = in.qdata[std::size_t(q) * " << qpp << " + " << o << "];\n";
+    if (!jets.empty()) {
+      int udofs = 0, cdofs = 0;
+      const auto uoff = field_offsets(form_, ir::Role::Unknown, plan_.dim, &udofs);
+      const auto coff = field_offsets(form_, ir::Role::Coefficient, plan_.dim, &cdofs);
+      os << "    // jets of the nodal fields at the point: J = B_q u (only the slots used)\n    double";
+      for (std::size_t i = 0; i < jets.size(); ++i) os << (i ? ", " : " ") << ref(jets[i]) << " = 0.0";
+      os << ";\n    for (int a = 0; a < n; ++a) {\n";
+      bool need_u = false, need_c = false;
+      for (NodeId j : jets) (g_.jet_var(j).role == ir::Role::Coefficient ? need_c : need_u) = true;
+      if (need_u) os << "      const double* ua = in.unknowns + std::size_t(a) * " << udofs << ";\n";
+      if (need_c) os << "      const double* ca = in.coefficients + std::size_t(a) * " << cdofs << ";\n";
+      for (NodeId j : jets) {
+        const auto v = g_.jet_var(j);
+        const bool coef = v.role == ir::Role::Coefficient;
+        const int dof = (coef ? coff : uoff)[static_cast<std::size_t>(v.field)] + v.component;
+        os << "      " << ref(j) << " += Bq[" << v.slot << " * n + a] * " << (coef ? "ca" : "ua") << "[" << dof << "];\n";
+      }
+      os << "    }\n";
+    }
+    int last_line = -1, last_file = -2;
+    for (NodeId id : order) {
+      const ir::Node& n = g_.node(id);
+      if (ir::is_terminal(n.op)) continue;
+      const Loc& o = g_.origin(id);
+      if (o.file >= 0) {
+        const int line = form_.sources.line_col(o).first;
+        if (line != last_line || o.file != last_file) {
+          std::string text = form_.sources.line_text(o);
+          text.erase(0, text.find_first_not_of(" \t"));
+          if (text.size() > 90) text = text.substr(0, 87) + "...";
+          os << "    // " << form_.sources.file(o.file).path.filename().string() << ":" << line << ": " << text << "\n";
+          last_line = line;
+          last_file = o.file;
+        }
+      }
+      os << "    const double t" << id << " = " << expression(id) << ";\n";
+    }
+    os << sink << "  }\n";
+    return {flops, static_cast<int>(jets.size())};
+  }
+
+ private:
+  const CompiledForm& form_;
+  const KernelPlan& plan_;
+  const ir::Graph& g_;
+};
+
+std::string json_escape(const std::string& s) {
+  std::string o;
+  for (char c : s) {
+    if (c == '"' || c == '\\') o += '\\';
+    if (c == '\n') { o += "\\n"; continue; }
+    o += c;
+  }
+  return o;
+}
+
+struct FlopModel {
+  double per_point = 0, per_node_point = 0, per_node_pair_point = 0;
+};
+
+struct EmittedKernel {
+  std::string symbol;
+  KernelPlan plan;
+  FlopModel value, vector, matrix;
+  bool has_value = false, has_vector = false, has_matrix = false;
+  int n_blocks = 0;
+  int line = 0;
+};
+
+std::string flop_json(const FlopModel& f) {
+  std::ostringstream s;
+  s << "{\"per_point\": " << f.per_point << ", \"per_node_point\": " << f.per_node_point
+    << ", \"per_node_pair_point\": " << f.per_node_pair_point << "}";
+  return s.str();
+}
+
+std::string flop_cxx(const FlopModel& f) {
+  std::ostringstream s;
+  s << "{" << f.per_point << ", " << f.per_node_point << ", " << f.per_node_pair_point << "}";
+  return s.str();
+}
+
+}  // namespace
+
+GeneratedModule generate(const CompiledForm& form, const std::string& source_name) {
+  GeneratedModule out;
+  std::ostringstream h, ir_text;
+  const std::string& m = form.module;
+  h << "// Generated by lmeformc from " << source_name << " -- do not edit.\n"
+    << "// Every kernel block below carries `// file:line: source` comments mapping it back to the form.\n"
+    << "#pragma once\n\n#include <algorithm>\n#include <cmath>\n#include <cstddef>\n\n#include <lmeform/kernel.hpp>\n\n"
+    << "namespace " << m << "_detail {\n\n";
+  std::vector<EmittedKernel> kernels;
+
+  auto fields_array = [&](ir::Role role, int dim) {
+    std::ostringstream s;
+    for (const auto* f : form.fields_of(role)) s << "{\"" << f->name << "\", " << f->components(dim) << "}, ";
+    return s.str();
+  };
+  for (int dim : form.dims) {
+    static const std::pair<ir::Role, const char*> roles[] = {{ir::Role::Unknown, "unknowns"}, {ir::Role::Test, "tests"},
+                                                             {ir::Role::Trial, "trials"}, {ir::Role::Coefficient, "coefficients"}};
+    for (const auto& [role, nm] : roles)
+      if (!form.fields_of(role).empty())
+        h << "inline constexpr lmeform::kernel::FieldInfo " << nm << "_" << dim << "d[] = {" << fields_array(role, dim) << "};\n";
+    if (!form.qdata.empty()) {
+      h << "inline constexpr lmeform::kernel::QdataInfo qdata_" << dim << "d[] = {";
+      for (const auto& q : form.qdata) h << "{\"" << q.name << "\", " << q.size(dim) << "}, ";
+      h << "};\n";
+    }
+  }
+  if (!form.constants.empty()) {
+    h << "inline constexpr const char* constant_names[] = {";
+    for (const auto& c : form.constants) h << "\"" << c.name << "\", ";
+    h << "};\n";
+  }
+  h << "\n";
+
+  for (const auto& output : form.outputs) {
+    for (int dim : form.dims) {
+      EmittedKernel k;
+      k.plan = plan_kernel(form, output, dim);
+      const KernelPlan& p = k.plan;
+      k.symbol = output.name + "_" + std::to_string(dim) + "d";
+      k.line = form.sources.line_col(output.loc).first;
+      KernelWriter w(form, p);
+      const int S = static_cast<int>(p.slots.size());
+      const int R = p.row_dofs, C = p.col_dofs;
+      std::ostringstream slots;
+      for (int i = 0; i < S; ++i) slots << (i ? ", " : "") << p.slots[static_cast<std::size_t>(i)];
+      const std::string head = "  const int n = in.n_nodes;\n  const int nq = in.n_points;\n"
+                               "  [[maybe_unused]] const int J = lmeform::kernel::jet_size(" + std::to_string(dim) + ", in.basis_order);\n";
+      h << "// ---- " << to_string(output.kind) << " " << output.name << ", dimension " << dim << " ("
+        << form.sources.where(output.loc) << ")\n";
+      ir_text << "== " << to_string(output.kind) << " " << output.name << " (dim " << dim << "): slots {" << slots.str() << "}\n";
+      auto terminal_name = [&](NodeId id) { return w.ref(id); };
+      auto dump = [&](const std::vector<NodeId>& roots) {
+        for (NodeId id : form.graphs.at(dim)->reachable(roots))
+          if (!ir::is_terminal(form.graphs.at(dim)->node(id).op)) ir_text << "  " << ir::describe(*form.graphs.at(dim), id, terminal_name) << "\n";
+      };
+      if (p.has_value()) {
+        k.has_value = true;
+        h << "inline double " << k.symbol << "_value(const lmeform::kernel::CellInputs& in) {\n" << head
+          << "  double result = 0.0;\n";
+        const auto [fl, nj] = w.point_loop(h, {p.value}, "    result += w * " + w.ref(p.value) + ";\n");
+        h << "  return result;\n}\n\n";
+        k.value = {fl + 2, 2.0 * nj, 0};
+        ir_text << " value:\n";
+        dump({p.value});
+        ir_text << "  f = " << w.ref(p.value) << "\n";
+      }
+      if (p.output->kind != OutputKind::Bilinear) {
+        k.has_vector = true;
+        std::vector<NodeId> roots;
+        std::ostringstream sink;
+        sink << "    double* Gq = G + std::size_t(q) * " << S * R << ";\n";
+        for (const auto& e : p.vector) {
+          roots.push_back(e.node);
+          sink << "    Gq[" << e.slot_index * R + e.row << "] = w * " << w.ref(e.node) << ";\n";
+        }
+        h << "inline void " << k.symbol << "_vector(const lmeform::kernel::CellInputs& in, double* local_vector) {\n" << head
+          << "  static constexpr int slots[] = {" << slots.str() << "};\n"
+          << "  double* Bs = in.workspace;  // gathered basis rows (nq*S x n)\n"
+          << "  double* G = Bs + std::size_t(nq) * " << S << " * std::size_t(n);  // w_q df/dJ (nq*S x R)\n"
+          << "  std::fill(G, G + std::size_t(nq) * " << S * R << ", 0.0);\n";
+        const auto [fl, nj] = w.point_loop(h, roots, sink.str());
+        h << "  lmeform::kernel::gather_slots(in, " << dim << ", " << S << ", slots, Bs);\n"
+          << "  lmeform::kernel::contract_vector(n, nq, " << S << ", " << R << ", Bs, G, local_vector);\n}\n\n";
+        k.vector = {fl + static_cast<double>(p.vector.size()), 2.0 * nj + 2.0 * S * R, 0};
+        ir_text << " vector (df/dJ):\n";
+        dump(roots);
+        for (const auto& e : p.vector) ir_text << "  df/dJ[row " << e.row << ", slot " << p.slots[static_cast<std::size_t>(e.slot_index)] << "] = " << w.ref(e.node) << "\n";
+      }
+      if (p.has_matrix()) {
+        k.has_matrix = true;
+        std::vector<NodeId> roots;
+        std::ostringstream sink;
+        const int ld = C * S;
+        sink << "    double* Dq = D + std::size_t(q) * " << R * S * ld << ";\n";
+        std::set<std::pair<int, int>> blocks;
+        for (const auto& e : p.matrix) {
+          roots.push_back(e.node);
+          blocks.insert({e.row, e.col});
+        }
+        // Symmetric forms: emit only the upper blocks' entries and mirror them in the contraction.
+        std::set<std::pair<int, int>> emitted;
+        for (const auto& e : p.matrix) {
+          if (p.symmetric && e.row > e.col) continue;
+          sink << "    Dq[" << (e.row * S + e.row_slot) * ld + e.col * S + e.col_slot << "] = w * " << w.ref(e.node) << ";\n";
+        }
+        std::ostringstream bl;
+        int nb = 0;
+        for (const auto& [r, c] : blocks) {
+          if (p.symmetric && r > c) continue;
+          bl << "{" << r << ", " << c << ", " << (p.symmetric && r != c ? "true" : "false") << "}, ";
+          ++nb;
+        }
+        k.n_blocks = nb;
+        const std::size_t dsize = static_cast<std::size_t>(R) * S * ld;
+        h << "inline void " << k.symbol << "_matrix(const lmeform::kernel::CellInputs& in, double* local_matrix) {\n" << head
+          << "  static constexpr int slots[] = {" << slots.str() << "};\n";
+        if (nb > 0) h << "  static constexpr lmeform::kernel::MatrixBlock blocks[] = {" << bl.str() << "};\n";
+        h << "  double* Bs = in.workspace;  // gathered basis rows (nq*S x n)\n"
+          << "  double* D = Bs + std::size_t(nq) * " << S << " * std::size_t(n);  // w_q d2f/dJ2 per point\n"
+          << "  double* work = D + std::size_t(nq) * " << dsize << ";\n"
+          << "  std::fill(D, D + std::size_t(nq) * " << dsize << ", 0.0);\n";
+        const auto [fl, nj] = w.point_loop(h, roots, sink.str());
+        h << "  lmeform::kernel::gather_slots(in, " << dim << ", " << S << ", slots, Bs);\n";
+        if (nb > 0)
+          h << "  lmeform::kernel::contract_matrix(n, nq, " << S << ", " << R << ", " << C
+            << ", Bs, D, blocks, " << nb << ", work, local_matrix);\n";
+        else
+          h << "  (void)work; (void)local_matrix;\n";
+        h << "}\n\n";
+        const double mirror_blocks = static_cast<double>(blocks.size());
+        k.matrix = {fl + static_cast<double>(p.matrix.size()), 2.0 * nj + 2.0 * S * S * nb, 2.0 * S * nb + (mirror_blocks - nb)};
+        ir_text << " matrix (d2f/dJ2):\n";
+        dump(roots);
+        for (const auto& e : p.matrix)
+          ir_text << "  d2f/dJ2[row " << e.row << " slot " << p.slots[static_cast<std::size_t>(e.row_slot)] << ", col " << e.col << " slot "
+                  << p.slots[static_cast<std::size_t>(e.col_slot)] << "] = " << w.ref(e.node) << "\n";
+      }
+      // Workspace: the larger of the vector and matrix kernels' needs.
+      const std::size_t dsize = static_cast<std::size_t>(R) * S * C * S;
+      h << "inline std::size_t " << k.symbol << "_workspace(int n, int nq) {\n"
+        << "  const std::size_t N = std::size_t(n), Q = std::size_t(nq);\n"
+        << "  const std::size_t vec = Q * " << S << " * N + Q * " << S * R << ";\n"
+        << "  const std::size_t mat = " << (p.has_matrix() ? "Q * " + std::to_string(S) + " * N + Q * " + std::to_string(dsize) +
+                                                                   " + lmeform::kernel::contract_matrix_workspace(n, nq, " + std::to_string(S) + ")"
+                                                             : std::string("0"))
+        << ";\n  return std::max(vec, mat);\n}\n\n";
+      kernels.push_back(std::move(k));
+    }
+  }
+  h << "}  // namespace " << m << "_detail\n\n";
+
+  // Descriptors.
+  for (const auto& k : kernels) {
+    const KernelPlan& p = k.plan;
+    const int dim = p.dim;
+    const ir::Role urole = p.output->kind == OutputKind::Bilinear ? ir::Role::Trial
+                         : p.output->kind == OutputKind::Linear   ? ir::Role::Test : ir::Role::Unknown;
+    const char* unm = urole == ir::Role::Trial ? "trials" : urole == ir::Role::Test ? "tests" : "unknowns";
+    int udofs = 0, cdofs = 0;
+    field_offsets(form, urole, dim, &udofs);
+    field_offsets(form, ir::Role::Coefficient, dim, &cdofs);
+    static const char* kinds[] = {"Energy", "Constraint", "Residual", "Bilinear", "Linear"};
+    const std::string d = m + "_detail::";
+    h << "inline const lmeform::kernel::FormKernels " << m << "_" << k.symbol << " = [] {\n"
+      << "  lmeform::kernel::FormKernels k;\n"
+      << "  k.module = \"" << m << "\";\n  k.name = \"" << p.output->name << "\";\n"
+      << "  k.kind = lmeform::kernel::FunctionalKind::" << kinds[static_cast<int>(p.output->kind)] << ";\n"
+      << "  k.dim = " << dim << ";\n  k.basis_order = " << p.basis_order << ";\n";
+    if (!form.fields_of(urole).empty())
+      h << "  k.unknowns = " << d << unm << "_" << dim << "d;\n  k.n_unknowns = " << form.fields_of(urole).size() << ";\n";
+    h << "  k.dofs_per_node = " << udofs << ";\n";
+    if (!form.fields_of(ir::Role::Coefficient).empty())
+      h << "  k.coefficients = " << d << "coefficients_" << dim << "d;\n  k.n_coefficients = "
+        << form.fields_of(ir::Role::Coefficient).size() << ";\n";
+    h << "  k.coefficient_components_per_node = " << cdofs << ";\n  k.coefficient_basis_order = " << p.coefficient_order << ";\n";
+    if (!form.qdata.empty())
+      h << "  k.qdata = " << d << "qdata_" << dim << "d;\n  k.n_qdata = " << form.qdata.size() << ";\n";
+    h << "  k.qdata_per_point = " << form.qdata_per_point(dim) << ";\n";
+    if (!form.constants.empty()) h << "  k.constants = " << d << "constant_names;\n  k.n_constants = " << form.constants.size() << ";\n";
+    h << "  k.workspace_doubles = &" << d << k.symbol << "_workspace;\n";
+    if (k.has_value) h << "  k.value = &" << d << k.symbol << "_value;\n";
+    if (k.has_vector) h << "  k.vector = &" << d << k.symbol << "_vector;\n";
+    if (k.has_matrix) h << "  k.matrix = &" << d << k.symbol << "_matrix;\n";
+    if (p.output->kind == OutputKind::Constraint)
+      h << "  k.target_constant = " << p.output->target_constant << ";\n  k.target_value = " << literal(p.output->target_value) << ";\n";
+    auto total = [](const FlopModel& f) { return f.per_point + f.per_node_point + f.per_node_pair_point; };
+    h << "  k.flops_value = " << total(k.value) << ";\n  k.flops_vector = " << total(k.vector) << ";\n  k.flops_matrix = " << total(k.matrix) << ";\n"
+      << "  k.flop_model_value = " << flop_cxx(k.value) << ";\n  k.flop_model_vector = " << flop_cxx(k.vector)
+      << ";\n  k.flop_model_matrix = " << flop_cxx(k.matrix) << ";\n"
+      << "  k.source = \"" << json_escape(source_name) << "\";\n  return k;\n}();\n\n";
+  }
+  h << "/// Every functional of the module, for registration by name.\n"
+    << "inline const lmeform::kernel::FormKernels* const " << m << "_all_kernels[] = {";
+  for (const auto& k : kernels) h << "&" << m << "_" << k.symbol << ", ";
+  h << "};\ninline constexpr int " << m << "_n_kernels = " << kernels.size() << ";\n";
+  out.header = h.str();
+  out.ir = ir_text.str();
+
+  // JSON metadata.
+  std::ostringstream j;
+  auto fields_json = [&](ir::Role role) {
+    std::string s = "[";
+    for (const auto* f : form.fields_of(role))
+      s += std::string(s.size() > 1 ? ", " : "") + "{\"name\": \"" + f->name + "\", \"shape\": \"" + (f->is_vector ? "vector" : "scalar") + "\"}";
+    return s + "]";
+  };
+  j << "{\n  \"module\": \"" << m << "\",\n  \"source\": \"" << json_escape(source_name) << "\",\n  \"dimensions\": [";
+  for (std::size_t i = 0; i < form.dims.size(); ++i) j << (i ? ", " : "") << form.dims[i];
+  j << "],\n  \"unknowns\": " << fields_json(ir::Role::Unknown) << ",\n  \"tests\": " << fields_json(ir::Role::Test)
+    << ",\n  \"trials\": " << fields_json(ir::Role::Trial) << ",\n  \"coefficients\": " << fields_json(ir::Role::Coefficient)
+    << ",\n  \"constants\": [";
+  for (std::size_t i = 0; i < form.constants.size(); ++i) {
+    const auto& c = form.constants[i];
+    j << (i ? ", " : "") << "{\"name\": \"" << c.name << "\"";
+    if (c.default_value) j << ", \"default\": " << std::setprecision(17) << *c.default_value;
+    j << "}";
+  }
+  static const char* qshapes[] = {"scalar", "vector", "matrix", "tensor3"};
+  j << "],\n  \"qdata\": [";
+  for (std::size_t i = 0; i < form.qdata.size(); ++i)
+    j << (i ? ", " : "") << "{\"name\": \"" << form.qdata[i].name << "\", \"shape\": \"" << qshapes[form.qdata[i].rank] << "\"}";
+  j << "],\n  \"coordinate\": \"" << form.coordinate << "\",\n  \"kernels\": [\n";
+  for (std::size_t i = 0; i < kernels.size(); ++i) {
+    const auto& k = kernels[i];
+    const auto& p = k.plan;
+    j << "    {\"symbol\": \"" << m << "_" << k.symbol << "\", \"output\": \"" << p.output->name << "\", \"kind\": \""
+      << to_string(p.output->kind) << "\", \"dim\": " << p.dim << ", \"line\": " << k.line
+      << ", \"basis_order\": " << p.basis_order << ", \"coefficient_basis_order\": " << p.coefficient_order << ", \"jet_slots\": [";
+    for (std::size_t s = 0; s < p.slots.size(); ++s) j << (s ? ", " : "") << p.slots[s];
+    // Jet components used per row component (structurally non-zero gradient entries).
+    j << "], \"jet_components\": [";
+    for (std::size_t e = 0; e < p.vector.size(); ++e)
+      j << (e ? ", " : "") << "{\"component\": " << p.vector[e].row << ", \"slot\": " << p.slots[static_cast<std::size_t>(p.vector[e].slot_index)] << "}";
+    j << "], \"hessian_entries\": " << p.matrix.size() << ", \"matrix_blocks\": " << k.n_blocks;
+    if (p.output->kind == OutputKind::Constraint) {
+      j << ", \"target\": ";
+      if (p.output->target_constant >= 0) j << "\"" << form.constants[static_cast<std::size_t>(p.output->target_constant)].name << "\"";
+      else j << p.output->target_value;
+    }
+    j << ",\n     \"flops\": {";
+    bool first = true;
+    auto add = [&](bool have, const char* nm, const FlopModel& f) {
+      if (!have) return;
+      j << (first ? "" : ", ") << "\"" << nm << "\": " << flop_json(f);
+      first = false;
+    };
+    add(k.has_value, "value", k.value);
+    add(k.has_vector, "vector", k.vector);
+    add(k.has_matrix, "matrix", k.matrix);
+    j << "}}" << (i + 1 < kernels.size() ? "," : "") << "\n";
+  }
+  j << "  ]\n}\n";
+  out.json = j.str();
+  return out;
+}
+
+}  // namespace lmeform::compiler

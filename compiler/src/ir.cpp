@@ -1,0 +1,338 @@
+#include "lmeform/compiler/ir.hpp"
+
+#include <bit>
+#include <cmath>
+#include <sstream>
+
+namespace lmeform::compiler::ir {
+
+bool is_terminal(Op op) { return op <= Op::Qdata; }
+
+int flop_cost(Op op) {
+  switch (op) {
+    case Op::Const: case Op::Jet: case Op::Coord: case Op::Param: case Op::Qdata: return 0;
+    case Op::Sqrt: case Op::Div: return 4;
+    case Op::Exp: case Op::Log: case Op::Sin: case Op::Cos: case Op::Tanh: case Op::Pow: return 20;
+    default: return 1;
+  }
+}
+
+std::size_t Graph::KeyHash::operator()(const Node& n) const noexcept {
+  std::size_t h = static_cast<std::size_t>(n.op) * 0x9E3779B97F4A7C15ull;
+  h ^= std::bit_cast<std::uint64_t>(n.value) + 0x9E3779B97F4A7C15ull + (h << 6) + (h >> 2);
+  for (int a : n.arg) h ^= static_cast<std::size_t>(a) + 0x9E3779B97F4A7C15ull + (h << 6) + (h >> 2);
+  return h;
+}
+bool Graph::KeyEq::operator()(const Node& a, const Node& b) const noexcept {
+  return a.op == b.op && std::bit_cast<std::uint64_t>(a.value) == std::bit_cast<std::uint64_t>(b.value) && a.arg == b.arg;
+}
+
+Graph::Graph() {
+  zero_ = constant(0.0);
+  one_ = constant(1.0);
+}
+
+NodeId Graph::intern(const Node& n) {
+  auto it = table_.find(n);
+  if (it != table_.end()) return it->second;
+  const auto id = static_cast<NodeId>(nodes_.size());
+  nodes_.push_back(n);
+  origins_.push_back(current_origin_);
+  table_.emplace(n, id);
+  return id;
+}
+
+NodeId Graph::constant(double v) {
+  Node n;
+  n.op = Op::Const;
+  n.value = (v == 0.0) ? 0.0 : v;  // one zero (no -0.0)
+  return intern(n);
+}
+NodeId Graph::jet(JetVar v) {
+  Node n;
+  n.op = Op::Jet;
+  n.arg = {static_cast<int>(v.role), v.field, v.component, v.slot};
+  return intern(n);
+}
+JetVar Graph::jet_var(NodeId id) const {
+  const Node& n = node(id);
+  return JetVar{static_cast<Role>(n.arg[0]), n.arg[1], n.arg[2], n.arg[3]};
+}
+static Node leaf(Op op, int i) {
+  Node n;
+  n.op = op;
+  n.arg[0] = i;
+  return n;
+}
+NodeId Graph::coord(int i) { return intern(leaf(Op::Coord, i)); }
+NodeId Graph::param(int i) { return intern(leaf(Op::Param, i)); }
+NodeId Graph::qdata(int i) { return intern(leaf(Op::Qdata, i)); }
+
+static Node op2(Op op, NodeId a, NodeId b) {
+  Node n;
+  n.op = op;
+  n.arg[0] = a;
+  n.arg[1] = b;
+  return n;
+}
+
+NodeId Graph::add(NodeId a, NodeId b) {
+  if (is_const(a) && is_const(b)) return constant(node(a).value + node(b).value);
+  if (is_const(a, 0.0)) return b;
+  if (is_const(b, 0.0)) return a;
+  if (node(a).op == Op::Neg && node(a).arg[0] == b) return zero_;
+  if (node(b).op == Op::Neg && node(b).arg[0] == a) return zero_;
+  if (a > b) std::swap(a, b);  // commutative: canonical order shares a+b and b+a
+  return intern(op2(Op::Add, a, b));
+}
+
+NodeId Graph::mul(NodeId a, NodeId b) {
+  if (is_const(a) && is_const(b)) return constant(node(a).value * node(b).value);
+  if (is_const(a, 0.0) || is_const(b, 0.0)) return zero_;
+  if (is_const(a, 1.0)) return b;
+  if (is_const(b, 1.0)) return a;
+  if (is_const(a, -1.0)) return neg(b);
+  if (is_const(b, -1.0)) return neg(a);
+  // Pull negations out so that -a*b and a*-b are one node.
+  if (node(a).op == Op::Neg) return neg(mul(node(a).arg[0], b));
+  if (node(b).op == Op::Neg) return neg(mul(a, node(b).arg[0]));
+  if (is_const(b)) std::swap(a, b);  // constant first
+  if (is_const(a) && node(b).op == Op::Mul && is_const(node(b).arg[0]))
+    return mul(constant(node(a).value * node(node(b).arg[0]).value), node(b).arg[1]);
+  if (!is_const(a) && a > b) std::swap(a, b);
+  return intern(op2(Op::Mul, a, b));
+}
+
+NodeId Graph::neg(NodeId a) {
+  if (is_const(a)) return constant(-node(a).value);
+  if (node(a).op == Op::Neg) return node(a).arg[0];
+  Node n;
+  n.op = Op::Neg;
+  n.arg[0] = a;
+  return intern(n);
+}
+
+NodeId Graph::div(NodeId a, NodeId b) {
+  if (is_const(a, 0.0)) return zero_;
+  if (is_const(b, 1.0)) return a;
+  if (is_const(b)) return mul(constant(1.0 / node(b).value), a);
+  if (a == b) return one_;
+  if (node(a).op == Op::Neg) return neg(div(node(a).arg[0], b));
+  return intern(op2(Op::Div, a, b));
+}
+
+NodeId Graph::pow(NodeId a, NodeId b) {
+  if (is_const(b, 0.0)) return one_;
+  if (is_const(b, 1.0)) return a;
+  if (is_const(a) && is_const(b)) return constant(std::pow(node(a).value, node(b).value));
+  if (is_const(a, 0.0) && is_const(b) && node(b).value > 0) return zero_;
+  if (is_const(a, 1.0)) return one_;
+  if (is_const(b, 0.5)) return unary(Op::Sqrt, a);
+  return intern(op2(Op::Pow, a, b));
+}
+
+NodeId Graph::unary(Op op, NodeId a) {
+  if (is_const(a)) {
+    const double v = node(a).value;
+    switch (op) {
+      case Op::Sqrt: return constant(std::sqrt(v));
+      case Op::Exp: return constant(std::exp(v));
+      case Op::Log: return constant(std::log(v));
+      case Op::Sin: return constant(std::sin(v));
+      case Op::Cos: return constant(std::cos(v));
+      case Op::Tanh: return constant(std::tanh(v));
+      case Op::Abs: return constant(std::abs(v));
+      case Op::Sign: return constant(v > 0 ? 1.0 : v < 0 ? -1.0 : 0.0);
+      case Op::Neg: return constant(-v);
+      default: break;
+    }
+  }
+  if (op == Op::Neg) return neg(a);
+  Node n;
+  n.op = op;
+  n.arg[0] = a;
+  return intern(n);
+}
+
+NodeId Graph::compare(Op op, NodeId a, NodeId b) {
+  if (is_const(a) && is_const(b)) {
+    const double x = node(a).value, y = node(b).value;
+    bool r = false;
+    switch (op) {
+      case Op::Lt: r = x < y; break;
+      case Op::Le: r = x <= y; break;
+      case Op::Gt: r = x > y; break;
+      case Op::Ge: r = x >= y; break;
+      case Op::Eq: r = x == y; break;
+      case Op::Ne: r = x != y; break;
+      default: break;
+    }
+    return r ? one_ : zero_;
+  }
+  return intern(op2(op, a, b));
+}
+
+NodeId Graph::logic(Op op, NodeId a, NodeId b) {
+  if (op == Op::Not) {
+    if (is_const(a)) return node(a).value != 0.0 ? zero_ : one_;
+    Node n;
+    n.op = Op::Not;
+    n.arg[0] = a;
+    return intern(n);
+  }
+  if (is_const(a) && is_const(b)) {
+    const bool x = node(a).value != 0.0, y = node(b).value != 0.0;
+    return (op == Op::And ? (x && y) : (x || y)) ? one_ : zero_;
+  }
+  return intern(op2(op, a, b));
+}
+
+NodeId Graph::select(NodeId c, NodeId a, NodeId b) {
+  if (a == b) return a;
+  if (is_const(c)) return node(c).value != 0.0 ? a : b;
+  Node n;
+  n.op = Op::Select;
+  n.arg = {c, a, b, -1};
+  return intern(n);
+}
+
+std::vector<NodeId> Graph::reachable(std::span<const NodeId> roots) const {
+  std::vector<char> seen(nodes_.size(), 0);
+  std::vector<NodeId> stack(roots.begin(), roots.end());
+  while (!stack.empty()) {
+    const NodeId id = stack.back();
+    stack.pop_back();
+    if (id < 0 || seen[static_cast<std::size_t>(id)]) continue;
+    seen[static_cast<std::size_t>(id)] = 1;
+    const Node& n = node(id);
+    if (is_terminal(n.op)) continue;
+    for (int a : n.arg)
+      if (a >= 0) stack.push_back(a);
+  }
+  std::vector<NodeId> out;
+  for (std::size_t i = 0; i < seen.size(); ++i)
+    if (seen[i]) out.push_back(static_cast<NodeId>(i));
+  return out;
+}
+
+NodeId Differentiator::derivative(NodeId id) {
+  if (auto it = memo_.find(id); it != memo_.end()) return it->second;
+  const Node n = g_.node(id);  // copy: the graph grows below
+  const Loc saved = g_.current_origin();
+  g_.set_origin(g_.origin(id));
+  NodeId d = g_.zero();
+  const NodeId a = n.arg[0], b = n.arg[1];
+  switch (n.op) {
+    case Op::Const: d = g_.zero(); break;
+    case Op::Jet: case Op::Coord: case Op::Param: case Op::Qdata: d = rule_(g_, id); break;
+    case Op::Add: d = g_.add(derivative(a), derivative(b)); break;
+    case Op::Mul: d = g_.add(g_.mul(derivative(a), b), g_.mul(a, derivative(b))); break;
+    case Op::Neg: d = g_.neg(derivative(a)); break;
+    case Op::Div: {  // (a/b)' = (a' - (a/b) b') / b
+      const NodeId db = derivative(b);
+      d = g_.div(g_.sub(derivative(a), g_.mul(id, db)), b);
+      break;
+    }
+    case Op::Pow: {
+      const NodeId da = derivative(a);
+      if (g_.is_const(b)) {
+        const double p = g_.node(b).value;
+        d = g_.mul(g_.mul(b, g_.pow(a, g_.constant(p - 1.0))), da);
+      } else {  // (a^b)' = a^b (b' log a + b a'/a)
+        d = g_.mul(id, g_.add(g_.mul(derivative(b), g_.unary(Op::Log, a)), g_.div(g_.mul(b, da), a)));
+      }
+      break;
+    }
+    case Op::Sqrt: d = g_.div(derivative(a), g_.mul(g_.constant(2.0), id)); break;
+    case Op::Exp: d = g_.mul(id, derivative(a)); break;
+    case Op::Log: d = g_.div(derivative(a), a); break;
+    case Op::Sin: d = g_.mul(g_.unary(Op::Cos, a), derivative(a)); break;
+    case Op::Cos: d = g_.neg(g_.mul(g_.unary(Op::Sin, a), derivative(a))); break;
+    case Op::Tanh: d = g_.mul(g_.sub(g_.one(), g_.mul(id, id)), derivative(a)); break;
+    case Op::Abs: d = g_.mul(g_.unary(Op::Sign, a), derivative(a)); break;
+    case Op::Select: d = g_.select(a, derivative(b), derivative(n.arg[2])); break;
+    default: d = g_.zero(); break;  // Sign, comparisons and logic are piecewise constant
+  }
+  g_.set_origin(saved);
+  memo_.emplace(id, d);
+  return d;
+}
+
+std::vector<double> Interpreter::evaluate(std::span<const NodeId> roots,
+                                          const std::function<double(const Node&)>& terminal) const {
+  const auto order = g_.reachable(roots);
+  std::unordered_map<NodeId, double> v;
+  for (NodeId id : order) {
+    const Node& n = g_.node(id);
+    auto A = [&](int k) { return v.at(n.arg[static_cast<std::size_t>(k)]); };
+    double r = 0;
+    switch (n.op) {
+      case Op::Const: r = n.value; break;
+      case Op::Jet: case Op::Coord: case Op::Param: case Op::Qdata: r = terminal(n); break;
+      case Op::Add: r = A(0) + A(1); break;
+      case Op::Mul: r = A(0) * A(1); break;
+      case Op::Neg: r = -A(0); break;
+      case Op::Div: r = A(0) / A(1); break;
+      case Op::Pow: r = std::pow(A(0), A(1)); break;
+      case Op::Sqrt: r = std::sqrt(A(0)); break;
+      case Op::Exp: r = std::exp(A(0)); break;
+      case Op::Log: r = std::log(A(0)); break;
+      case Op::Sin: r = std::sin(A(0)); break;
+      case Op::Cos: r = std::cos(A(0)); break;
+      case Op::Tanh: r = std::tanh(A(0)); break;
+      case Op::Abs: r = std::abs(A(0)); break;
+      case Op::Sign: r = A(0) > 0 ? 1.0 : A(0) < 0 ? -1.0 : 0.0; break;
+      case Op::Select: r = A(0) != 0.0 ? A(1) : A(2); break;
+      case Op::Lt: r = A(0) < A(1); break;
+      case Op::Le: r = A(0) <= A(1); break;
+      case Op::Gt: r = A(0) > A(1); break;
+      case Op::Ge: r = A(0) >= A(1); break;
+      case Op::Eq: r = A(0) == A(1); break;
+      case Op::Ne: r = A(0) != A(1); break;
+      case Op::And: r = (A(0) != 0.0) && (A(1) != 0.0); break;
+      case Op::Or: r = (A(0) != 0.0) || (A(1) != 0.0); break;
+      case Op::Not: r = A(0) == 0.0; break;
+    }
+    v[id] = r;
+  }
+  std::vector<double> out;
+  for (NodeId r : roots) out.push_back(v.at(r));
+  return out;
+}
+
+static const char* op_name(Op op) {
+  switch (op) {
+    case Op::Sqrt: return "sqrt"; case Op::Exp: return "exp"; case Op::Log: return "log";
+    case Op::Sin: return "sin"; case Op::Cos: return "cos"; case Op::Tanh: return "tanh";
+    case Op::Abs: return "abs"; case Op::Sign: return "sign"; case Op::Not: return "!";
+    case Op::Add: return "+"; case Op::Mul: return "*"; case Op::Div: return "/"; case Op::Pow: return "^";
+    case Op::Lt: return "<"; case Op::Le: return "<="; case Op::Gt: return ">"; case Op::Ge: return ">=";
+    case Op::Eq: return "=="; case Op::Ne: return "!="; case Op::And: return "&&"; case Op::Or: return "||";
+    default: return "?";
+  }
+}
+
+std::string describe(const Graph& g, NodeId id, const std::function<std::string(NodeId)>& name) {
+  const Node& n = g.node(id);
+  auto ref = [&](int c) {
+    const Node& m = g.node(c);
+    if (m.op == Op::Const) { std::ostringstream s; s.precision(17); s << m.value; return s.str(); }
+    if (is_terminal(m.op)) return name(c);
+    return "t" + std::to_string(c);
+  };
+  std::ostringstream s;
+  s << "t" << id << " = ";
+  switch (n.op) {
+    case Op::Neg: s << "-" << ref(n.arg[0]); break;
+    case Op::Select: s << ref(n.arg[0]) << " ? " << ref(n.arg[1]) << " : " << ref(n.arg[2]); break;
+    case Op::Add: case Op::Mul: case Op::Div: case Op::Pow: case Op::Lt: case Op::Le: case Op::Gt:
+    case Op::Ge: case Op::Eq: case Op::Ne: case Op::And: case Op::Or:
+      s << ref(n.arg[0]) << " " << op_name(n.op) << " " << ref(n.arg[1]); break;
+    default:
+      if (is_terminal(n.op)) s << ref(id);
+      else s << op_name(n.op) << "(" << ref(n.arg[0]) << ")";
+  }
+  return s.str();
+}
+
+}  // namespace lmeform::compiler::ir

@@ -1,0 +1,132 @@
+// lmeformc: the form compiler's command line.
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include "lmeform/compiler/codegen.hpp"
+#include "lmeform/compiler/compile.hpp"
+
+#ifdef LMEFORM_HAVE_CLI11
+#include <CLI/CLI.hpp>
+#endif
+
+namespace fs = std::filesystem;
+using namespace lmeform::compiler;
+
+namespace {
+
+struct Options {
+  std::string form;
+  std::string out_dir = ".";
+  bool json = false;
+  bool print_ir = false;
+  std::vector<std::string> include_dirs;
+  std::string depfile;
+};
+
+const char* kUsage =
+    "lmeformc FILE.form -o DIR [--json] [--print-ir] [-I DIR]... [--depfile FILE]\n"
+    "  Compiles a lmeform form file into DIR/<module>_kernels.hpp (C++ kernels: value, gradient,\n"
+    "  Hessian / residual, Jacobian) and, with --json, DIR/<module>.json (metadata).\n"
+    "  -o, --output DIR   output directory (created if missing; default .)\n"
+    "  --json             also write the JSON description\n"
+    "  --print-ir         print the IR after differentiation to stdout (for debugging a form)\n"
+    "  -I DIR             add an include search directory (after the including file's own directory)\n"
+    "  --depfile FILE     write a Makefile dependency file (the form and every included file)\n"
+    "  -h, --help         this text\n";
+
+/// Writes through a temporary file renamed at the end, so that a failure leaves nothing behind.
+void write_atomically(const fs::path& path, const std::string& text) {
+  const fs::path tmp = path.string() + ".tmp";
+  {
+    std::ofstream o(tmp, std::ios::binary);
+    o << text;
+    if (!o) throw std::runtime_error("cannot write " + tmp.string());
+  }
+  fs::rename(tmp, path);
+}
+
+std::string make_escape(const std::string& s) {
+  std::string o;
+  for (char c : s) {
+    if (c == ' ' || c == '#') o += '\\';
+    if (c == '$') o += '$';
+    o += c;
+  }
+  return o;
+}
+
+int run(const Options& opt) {
+  CompileOptions copt;
+  for (const auto& d : opt.include_dirs) copt.include_dirs.emplace_back(d);
+  try {
+    const auto t0 = std::chrono::steady_clock::now();
+    const CompiledForm form = compile_file(opt.form, copt);
+    const GeneratedModule gen = generate(form, fs::path(opt.form).filename().string());
+    if (opt.print_ir) std::cout << gen.ir;
+    fs::create_directories(opt.out_dir);
+    // Everything is generated before anything is written: an error above leaves no files.
+    const fs::path header = fs::path(opt.out_dir) / (form.module + "_kernels.hpp");
+    std::vector<std::pair<fs::path, std::string>> files{{header, gen.header}};
+    if (opt.json) files.emplace_back(fs::path(opt.out_dir) / (form.module + ".json"), gen.json);
+    if (!opt.depfile.empty()) {
+      std::string dep = make_escape(header.string()) + ":";
+      for (const auto& d : form.dependencies) dep += " " + make_escape(fs::absolute(d).lexically_normal().string());
+      files.emplace_back(opt.depfile, dep + "\n");
+    }
+    for (const auto& [p, t] : files) write_atomically(p, t);
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (!opt.print_ir)
+      std::cerr << "lmeformc: " << opt.form << " -> " << header.string() << " (" << form.outputs.size() << " outputs, "
+                << form.dims.size() << " dimension(s), " << s << " s)\n";
+    return 0;
+  } catch (const CompileError& e) {
+    std::cerr << e.what();
+    return 1;
+  } catch (const std::exception& e) {
+    std::cerr << "lmeformc: error: " << e.what() << "\n";
+    return 1;
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options opt;
+#ifdef LMEFORM_HAVE_CLI11
+  CLI::App app{"lmeformc: compiles a .form file into C++ kernels for the lmeform runtime"};
+  app.add_option("form", opt.form, "the .form file")->required();
+  app.add_option("-o,--output", opt.out_dir, "output directory");
+  app.add_flag("--json", opt.json, "also write <module>.json");
+  app.add_flag("--print-ir", opt.print_ir, "print the IR after differentiation");
+  app.add_option("-I", opt.include_dirs, "include search directory")->allow_extra_args(false);
+  app.add_option("--depfile", opt.depfile, "write a Makefile dependency file");
+  app.footer(kUsage);
+  CLI11_PARSE(app, argc, argv);
+#else
+  std::vector<std::string> args(argv + 1, argv + argc);
+  for (std::size_t i = 0; i < args.size(); ++i) {
+    const std::string& a = args[i];
+    auto value = [&]() -> std::string {
+      if (i + 1 >= args.size()) { std::cerr << "lmeformc: error: " << a << " needs a value\n" << kUsage; std::exit(1); }
+      return args[++i];
+    };
+    if (a == "-h" || a == "--help") { std::cout << kUsage; return 0; }
+    else if (a == "-o" || a == "--output") opt.out_dir = value();
+    else if (a == "--json") opt.json = true;
+    else if (a == "--print-ir") opt.print_ir = true;
+    else if (a == "-I") opt.include_dirs.push_back(value());
+    else if (a.rfind("-I", 0) == 0) opt.include_dirs.push_back(a.substr(2));
+    else if (a == "--depfile") opt.depfile = value();
+    else if (!a.empty() && a[0] == '-') { std::cerr << "lmeformc: error: unknown option " << a << "\n" << kUsage; return 1; }
+    else if (opt.form.empty()) opt.form = a;
+    else { std::cerr << "lmeformc: error: more than one form file given\n" << kUsage; return 1; }
+  }
+  if (opt.form.empty()) { std::cerr << "lmeformc: error: no form file given\n" << kUsage; return 1; }
+#endif
+  return run(opt);
+}
