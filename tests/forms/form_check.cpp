@@ -130,11 +130,18 @@ std::vector<double> axpy(const std::vector<double>& u, double h, const std::vect
 }
 
 void finish(Remainder& rem) {
+  // The asymptotic order shows at small h: fit over the (at most kFitPoints) smallest steps whose
+  // remainder stands 100x clear of the round-off floor.
+  constexpr std::size_t kFitPoints = 5;
   std::vector<double> hs, rs;
-  for (std::size_t i = 0; i < rem.h.size(); ++i)
-    if (rem.r[i] > 100.0 * rem.floor[i]) { hs.push_back(rem.h[i]); rs.push_back(rem.r[i]); }
+  bool any = false;
+  for (std::size_t i = rem.h.size(); i-- > 0;) {
+    if (!(rem.r[i] > 100.0 * rem.floor[i])) continue;
+    any = true;
+    if (hs.size() < kFitPoints) { hs.push_back(rem.h[i]); rs.push_back(rem.r[i]); }
+  }
   rem.points_used = static_cast<int>(hs.size());
-  rem.exact = hs.empty();
+  rem.exact = !any;
   rem.slope = hs.size() >= 2 ? fitted_slope(hs, rs) : std::numeric_limits<double>::quiet_NaN();
 }
 

@@ -53,7 +53,7 @@ struct Options {
   double hess_tol = 1e-6;       ///< max |H - H_fd| / max|H|
   double sym_tol = 1e-12;       ///< max |H - H^T| / max|H|
   double taylor_h0 = 1e-1;      ///< largest Taylor step (the direction is given by the caller)
-  int taylor_levels = 10;       ///< steps h0 * 2^-k, k = 0 .. levels-1
+  int taylor_levels = 12;       ///< steps h0 * 2^-k, k = 0 .. levels-1
   double slope_tol = 0.2;       ///< |fitted slope - expected| allowed
   /// Polynomial degree of the functional in the unknowns: 1 (linear), 2 (quadratic), or 0 for
   /// genuinely nonlinear. Selects which remainders must be exact and which must show slopes.
@@ -64,7 +64,7 @@ struct Remainder {
   std::vector<double> h;
   std::vector<double> r;
   std::vector<double> floor;  ///< round-off floor estimate at each h
-  double slope = 0.0;         ///< fitted over the points with r > 100*floor
+  double slope = 0.0;         ///< fitted over the 5 smallest h with r > 100*floor
   int points_used = 0;
   bool exact = false;         ///< r below 100*floor at every h
 };

@@ -16,8 +16,9 @@ namespace hand = lmeform::formcheck::hand;
 namespace {
 
 struct Fixture {
-  fc::NodeCloud cloud = fc::graded_cloud(12, 12, 0.0, 1.0, 0.0, 1.0, 3.0, 0.2, 7);
-  fc::BasisChoice basis = fc::test_basis();
+  fc::TestSetup setup = fc::test_setup();
+  fc::NodeCloud& cloud = setup.cloud;
+  fc::BasisChoice& basis = setup.basis;
   std::mt19937_64 rng{2024};
 };
 
