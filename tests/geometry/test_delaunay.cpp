@@ -4,6 +4,7 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <cmath>
 #include <map>
 #include <string>
 #include <vector>
@@ -82,6 +83,22 @@ TEST(Delaunay, RandomSetsCoverTheirHull) {
     EXPECT_NEAR(cells.total_measure(), hull.measure, 1e-13 * hull.measure);
     EXPECT_EQ(boundary_facets(cells).size(), hull.facet_count());
   }
+}
+
+TEST(Delaunay, AllNodesCosphericalIsOneMergedCell) {
+  // Nodes on a sphere form one merged Delaunay cell with many vertices (the qhull-faces branch).
+  std::vector<double> s;
+  const int n = 60;
+  for (int i = 0; i < n; ++i) {
+    const double z = -1 + 2.0 * (i + 0.5) / n, r = std::sqrt(1 - z * z), phi = 2.399963 * i;
+    s.insert(s.end(), {r * std::cos(phi), r * std::sin(phi), z});
+  }
+  const NodeSet nodes(3, s);
+  const auto cells = delaunay(nodes);
+  expect_valid_cells(cells, nodes);
+  const auto hull = convex_hull(nodes);
+  EXPECT_NEAR(cells.total_measure(), hull.measure, 1e-13 * hull.measure);
+  EXPECT_EQ(boundary_facets(cells).size(), hull.facet_count());
 }
 
 TEST(Delaunay, GradedSetIsCovered) {

@@ -204,3 +204,23 @@ TEST(Quadrature, MappedOntoCells3DAnd1D) {
 }
 
 }  // namespace
+
+namespace {
+
+// The example of docs/geometry.md, verbatim in substance.
+TEST(Quadrature, DocsExample) {
+  using namespace lmeform;
+  const Box box{2, {0.0, 0.0, 0.0}, {2.0, 1.0, 0.0}};
+  const NodeSet nodes = jitter_interior(uniform_grid(box, 0.1), box, 0.02, 1);
+  const BackgroundCells cells = delaunay(nodes);
+  const CellQuadrature cq = map_to_cells(cells, nodes, simplex_rule(2, 4));
+  EXPECT_EQ(cq.points_per_cell, 6);
+  double integral = 0;
+  for (std::size_t q = 0; q < cq.size(); ++q) {
+    const auto x = cq.point(q);
+    integral += cq.weights[q] * x[0] * x[0] * x[1] * x[1];
+  }
+  EXPECT_NEAR(integral, 8.0 / 9.0, 1e-13);
+}
+
+}  // namespace
