@@ -137,7 +137,8 @@ KernelPlan plan_kernel(const CompiledForm& form, const OutputDecl& output, int d
   }
   if (output.kind == OutputKind::Bilinear && reaches_role(g, mroots, ir::Role::Trial, &field, form))
     fail_at(form.sources, output.loc, what + " is not linear in the trial function '" + field + "'");
-  if (output.kind == OutputKind::Bilinear) plan.vector.clear();  // the vector of a bilinear form is not generated
+  // For a bilinear form plan.vector holds ∂f/∂v (still linear in the trial function): the
+  // intermediate of the matrix; no vector kernel is generated for it.
   return plan;
 }
 

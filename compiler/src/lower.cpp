@@ -4,6 +4,7 @@
 // nodal fields (the first differentiation layer of ARCHITECTURE §3).
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <fstream>
 #include <set>
 #include <sstream>
@@ -340,7 +341,7 @@ class Lowering {
         fail(e.loc, "'" + e.name + "' is a function; call it with arguments: " + e.name + "(...)");
       return it->second.value;
     }
-    if (e.name == "pi") return scalar(g_->constant(M_PI));
+    if (e.name == "pi") return scalar(g_->constant(std::numbers::pi));
     if (e.name == "identity" || e.name == "I") return identity();
     if (e.name == "dx") {
       Value v = scalar(g_->one());
@@ -721,7 +722,10 @@ void expand(CompiledForm& form, int file, const CompileOptions& options, std::ve
       if (std::filesystem::is_regular_file(c)) { found = c; break; }
     if (found.empty()) {
       std::string searched;
-      for (const auto& c : candidates) searched += (searched.empty() ? "" : ", ") + c.parent_path().string();
+      for (const auto& c : candidates) {
+        const std::string dir = c.parent_path().string();
+        searched += (searched.empty() ? "" : ", ") + (dir.empty() ? std::string(".") : dir);
+      }
       fail_at(form.sources, s.loc, "cannot find include file '" + s.path + "' (searched: " + searched + ")");
     }
     const auto canonical = std::filesystem::weakly_canonical(found);

@@ -28,7 +28,7 @@ struct KernelPlan {
   std::vector<VectorEntry> vector;  ///< non-zero ∂f/∂J_row
   std::vector<MatrixEntry> matrix;  ///< non-zero ∂²f/∂J_row∂J_col (both triangles when symmetric)
   bool has_value() const { return value >= 0; }
-  bool has_vector() const { return !vector.empty() || output->kind != OutputKind::Bilinear; }
+  bool has_vector() const { return output->kind != OutputKind::Bilinear; }
   bool has_matrix() const { return col_dofs > 0; }
 };
 
