@@ -1,0 +1,114 @@
+// Assembly of generated kernels into distributed PETSc objects.
+//
+// One Assembler binds one functional (a FormKernels from a generated module) to a
+// Discretization. It owns the per-element scratch (tabulation, gathered nodal values, the
+// kernel's workspace, the dense local result), so an assembly allocates nothing per element,
+// and it adds each element's dense block with one MatSetValuesBlocked / VecSetValuesBlocked.
+//
+//   Discretization disc(PETSC_COMM_WORLD, nodes, options);
+//   Assembler poisson(disc, poisson_energy_2d);        // from poisson_kernels.hpp
+//   poisson.set_constants({1.0});
+//   PetscMatrix K = poisson.create_matrix();            // exact preallocation from the pattern
+//   PetscVector u = poisson.create_vector(), g = poisson.create_vector();
+//   double E = poisson.value(u);  poisson.vector(u, g);  poisson.matrix(u, K);
+#pragma once
+
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "lmeform/discretization.hpp"
+#include "lmeform/kernel.hpp"
+#include "lmeform/petsc.hpp"
+
+namespace lmeform {
+
+/// Seconds of the last calls, this rank.
+struct AssemblyTimes {
+  double create_matrix = 0;  ///< matrix creation + exact preallocation
+  double value = 0;
+  double vector = 0;
+  double matrix = 0;         ///< element loop + MatAssemblyBegin/End
+  double matrix_kernel = 0;  ///< of which: tabulation + kernel (no PETSc insertion)
+};
+
+class Assembler {
+ public:
+  Assembler(const Discretization& discretization, const kernel::FormKernels& form);
+
+  [[nodiscard]] const kernel::FormKernels& form() const noexcept { return *form_; }
+  [[nodiscard]] const Discretization& discretization() const noexcept { return *disc_; }
+  [[nodiscard]] int block_size() const noexcept { return form_->dofs_per_node; }
+  /// "module/name (dim D)" for messages.
+  [[nodiscard]] std::string describe() const;
+
+  /// Constants in the declaration order of the form (FormKernels::constants).
+  void set_constants(std::span<const double> values);
+  void set_constant(std::string_view name, double value);
+  /// Known nodal fields, a vector with coefficient_components_per_node entries per node, in the
+  /// renumbered node order (create it with create_coefficient_vector()).
+  void set_coefficients(Vec coefficients);
+  /// Quadrature-point data for every global quadrature point, qdata_per_point values each.
+  void set_qdata(std::span<const double> values);
+
+  [[nodiscard]] PetscVector create_vector() const;
+  [[nodiscard]] PetscVector create_coefficient_vector() const;
+  /// A matrix preallocated exactly from the discretization's pattern; inserting outside it is an
+  /// error (MAT_NEW_NONZERO_ALLOCATION_ERR).
+  [[nodiscard]] PetscMatrix create_matrix();
+
+  /// Energy or constraint value (summed over ranks).
+  [[nodiscard]] double value(Vec u);
+  /// Gradient / residual / linear form, overwriting `out`.
+  void vector(Vec u, Vec out);
+  /// Hessian / Jacobian / bilinear form, overwriting `out` (which must come from create_matrix()).
+  void matrix(Vec u, Mat out);
+
+  [[nodiscard]] const AssemblyTimes& times() const noexcept { return times_; }
+
+ private:
+  template <class PerElement>
+  void element_loop(Vec u, bool owned_only, PerElement&& per_element);
+  void gather_ghosted(Vec source, Vec ghosted);
+
+  const Discretization* disc_;
+  const kernel::FormKernels* form_;
+  std::vector<double> constants_;
+  std::vector<double> qdata_;
+  std::vector<PetscInt> ghost_blocks_;
+  PetscVector u_ghosted_;
+  PetscVector c_ghosted_;
+  bool have_coefficients_ = false;
+
+  // Per-element scratch, sized for the largest element.
+  std::vector<double> tabulation_;
+  std::vector<double> element_u_;
+  std::vector<double> element_c_;
+  std::vector<double> element_qdata_;
+  std::vector<double> workspace_;
+  std::vector<double> local_;
+  std::vector<PetscInt> rows_;
+  std::vector<PetscInt> cols_;
+  LmeWorkspace lme_ws_;
+  AssemblyTimes times_;
+};
+
+/// Dirichlet conditions on node values, applied symmetrically: rows and columns of the
+/// constrained dofs are zeroed with 1 on the diagonal, and b is corrected with the columns'
+/// contribution (MatZeroRowsColumns). `dofs` are global (renumbered) dof indices owned by this
+/// rank; `x` holds the prescribed values at those dofs (other entries are ignored).
+void apply_dirichlet(Mat A, Vec b, Vec x, std::span<const PetscInt> dofs);
+
+/// Owned dofs (renumbered, global) of the given original node indices, all components.
+[[nodiscard]] std::vector<PetscInt> owned_dofs_of_nodes(const Discretization& disc, std::span<const int> original_nodes,
+                                                        int block_size);
+
+/// Sets the owned entries of v (renumbered layout, block_size per node) from an array in the
+/// original node order that every rank holds.
+void set_from_original(const Discretization& disc, std::span<const double> original_values, int block_size, Vec v);
+
+/// Gathers v into the original node order on every rank.
+[[nodiscard]] std::vector<double> to_original(const Discretization& disc, Vec v, int block_size);
+
+}  // namespace lmeform

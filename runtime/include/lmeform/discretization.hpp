@@ -1,0 +1,177 @@
+// A meshfree discretization distributed over MPI ranks: the pipeline every assembly runs on.
+//
+//   nodes ─► LME basis (spacing h_a, β_a = γ_a/h_a², kd-tree, support radii)
+//         ─► METIS partition of the node adjacency graph, renumbering to contiguous row ranges
+//         ─► Delaunay background cells + Gauss rule per cell
+//         ─► primal lists of the quadrature points ─► elements (cells or single points)
+//         ─► this rank's elements, ghost nodes, sparsity pattern of its rows
+//         ─► basis storage (full or compressed) for the points of this rank's elements
+//
+// Elements are what the assembly loops over. With cell-based neighbourhoods an element is a
+// background cell whose node list is the union of its quadrature points' lists; with per-point
+// neighbourhoods (the standard meshfree scheme) an element is one quadrature point. Both
+// evaluate every point against its own primal list, so they assemble the same operator and a
+// comparison between them measures the algorithm alone.
+//
+// Geometry (nodes, cells, quadrature points, neighbour search) is replicated on every rank:
+// fine up to a few hundred thousand nodes in 2D. Basis evaluation, pattern and assembly are
+// distributed: a rank works only on the elements that touch its rows.
+#pragma once
+
+#include <mpi.h>
+
+#include <optional>
+#include <span>
+#include <variant>
+#include <vector>
+
+#include "lmeform/delaunay.hpp"
+#include "lmeform/lme_basis.hpp"
+#include "lmeform/lme_storage.hpp"
+#include "lmeform/neighbour_search.hpp"
+#include "lmeform/node_set.hpp"
+#include "lmeform/partition.hpp"
+#include "lmeform/quadrature.hpp"
+#include "lmeform/sparsity_pattern.hpp"
+
+namespace lmeform {
+
+enum class NeighbourhoodStrategy {
+  CellBased,  ///< one element per background cell (seed Algorithm 2)
+  PerPoint,   ///< one element per quadrature point (seed Algorithm 1)
+};
+
+enum class BasisStorage {
+  Full,        ///< p, ∇p, Hp of every neighbour of every point
+  Compressed,  ///< per point Z, λ, r_β, Dλ, β̄, J, Q, T; rebuilt at each assembly
+};
+
+enum class OffProcessMode {
+  ZeroCommunication,  ///< each rank computes every element touching its rows and keeps its own rows
+  PetscExchange,      ///< each element is computed once; PETSc sends off-process rows
+};
+
+[[nodiscard]] const char* to_string(NeighbourhoodStrategy s) noexcept;
+[[nodiscard]] const char* to_string(BasisStorage s) noexcept;
+[[nodiscard]] const char* to_string(OffProcessMode m) noexcept;
+
+struct DiscretizationOptions {
+  std::vector<double> gamma{1.6};  ///< one γ for all nodes, or one per node (original numbering)
+  LmeOptions lme{};
+  int quadrature_points = 6;       ///< Gauss points per background cell (a rule size of quadrature.hpp)
+  int basis_order = 1;             ///< derivative order tabulated: the highest the forms need
+  NeighbourhoodStrategy strategy = NeighbourhoodStrategy::CellBased;
+  BasisStorage storage = BasisStorage::Full;
+  OffProcessMode off_process = OffProcessMode::ZeroCommunication;
+  bool use_metis = true;           ///< false: contiguous blocks of the original numbering
+};
+
+/// Wall-clock seconds of each stage (this rank).
+struct StageTimes {
+  double neighbour_search = 0;  ///< LME setup, node lists, partition, point lists, element lists
+  double cells = 0;             ///< Delaunay and quadrature
+  double basis = 0;             ///< basis evaluation into storage
+  double structure = 0;         ///< local elements, ghosts, sparsity pattern
+};
+
+class Discretization {
+ public:
+  /// Builds everything from a node set given identically on every rank of `comm`.
+  Discretization(MPI_Comm comm, const NodeSet& nodes, DiscretizationOptions options);
+
+  [[nodiscard]] MPI_Comm comm() const noexcept { return comm_; }
+  [[nodiscard]] int rank() const noexcept { return rank_; }
+  [[nodiscard]] int ranks() const noexcept { return size_; }
+  [[nodiscard]] int dim() const noexcept { return nodes_.dim; }
+  [[nodiscard]] const DiscretizationOptions& options() const noexcept { return options_; }
+
+  /// Nodes in the renumbered order (rank r owns [owned_begin(), owned_end()) on rank r).
+  [[nodiscard]] const NodeSet& nodes() const noexcept { return nodes_; }
+  [[nodiscard]] int n_nodes() const noexcept { return static_cast<int>(nodes_.size()); }
+  [[nodiscard]] const NodePartition& partition() const noexcept { return partition_; }
+  [[nodiscard]] int owned_begin() const noexcept { return partition_.offsets[static_cast<std::size_t>(rank_)]; }
+  [[nodiscard]] int owned_end() const noexcept { return partition_.offsets[static_cast<std::size_t>(rank_) + 1]; }
+  [[nodiscard]] int n_owned() const noexcept { return owned_end() - owned_begin(); }
+  [[nodiscard]] bool owns(int node) const noexcept { return node >= owned_begin() && node < owned_end(); }
+
+  [[nodiscard]] const LmeBasis& basis() const noexcept { return *basis_; }
+  /// Background cells with renumbered connectivity (triangulated in the original numbering, so
+  /// the same cells and quadrature points whatever the number of ranks).
+  [[nodiscard]] const BackgroundCells& cells() const noexcept { return cells_; }
+  [[nodiscard]] const QuadratureRule& rule() const noexcept { return rule_; }
+  [[nodiscard]] const CellQuadrature& quadrature() const noexcept { return quadrature_; }
+  [[nodiscard]] const CsrLists& point_lists() const noexcept { return point_lists_; }
+
+  // --- this rank's elements -------------------------------------------------------------
+  [[nodiscard]] int n_elements() const noexcept { return static_cast<int>(element_nodes_.size()); }
+  /// Renumbered global nodes of element e, sorted.
+  [[nodiscard]] std::span<const int> element_nodes(int e) const noexcept { return element_nodes_[static_cast<std::size_t>(e)]; }
+  /// The same nodes as positions in the local (owned + ghost) numbering.
+  [[nodiscard]] std::span<const int> element_local_nodes(int e) const noexcept { return element_local_[static_cast<std::size_t>(e)]; }
+  /// Global quadrature points of element e: [first, first + count).
+  [[nodiscard]] int element_first_point(int e) const noexcept { return element_first_point_[static_cast<std::size_t>(e)]; }
+  [[nodiscard]] int element_point_count(int e) const noexcept { return element_point_count_[static_cast<std::size_t>(e)]; }
+  /// True on exactly one rank per element: that rank counts it for energies and, in
+  /// PetscExchange mode, is the only one to compute it.
+  [[nodiscard]] bool element_owned(int e) const noexcept { return element_owned_[static_cast<std::size_t>(e)] != 0; }
+  [[nodiscard]] int max_element_nodes() const noexcept { return max_element_nodes_; }
+  [[nodiscard]] int max_element_points() const noexcept { return max_element_points_; }
+  [[nodiscard]] const CsrLists& element_lists() const noexcept { return element_nodes_; }
+
+  /// Ghost nodes (renumbered, sorted): used by this rank's elements, owned elsewhere. The local
+  /// numbering is [owned nodes..., ghost nodes...].
+  [[nodiscard]] std::span<const int> ghost_nodes() const noexcept { return ghosts_; }
+
+  /// Node-to-node pattern of this rank's rows.
+  [[nodiscard]] const SparsityPattern& pattern() const noexcept { return pattern_; }
+
+  /// Writes element e's basis tabulation in the kernel layout basis[(q*J + s)*n + a],
+  /// J = jet_size(dim, order). Throws if order exceeds the tabulated order.
+  void tabulate(int e, int order, std::span<double> out, LmeWorkspace& ws) const;
+
+  /// Doubles held by the basis storage of this rank.
+  [[nodiscard]] std::size_t basis_storage_doubles() const noexcept;
+  /// Mean number of nodes per quadrature point's list.
+  [[nodiscard]] double mean_point_neighbours() const noexcept { return point_lists_.mean_size(); }
+
+  [[nodiscard]] const StageTimes& times() const noexcept { return times_; }
+
+  /// Original index of each renumbered node, and the reverse.
+  [[nodiscard]] std::span<const int> original_index() const noexcept { return partition_.old_index; }
+  [[nodiscard]] std::span<const int> renumbered_index() const noexcept { return partition_.new_index; }
+
+ private:
+  void select_local_elements(const CsrLists& all_elements, int points_per_element);
+  void build_ghosts();
+  void build_storage();
+
+  MPI_Comm comm_;
+  int rank_ = 0;
+  int size_ = 1;
+  DiscretizationOptions options_;
+  NodeSet nodes_;
+  NodePartition partition_;
+  std::optional<LmeBasis> basis_;  // built after renumbering
+  BackgroundCells cells_;
+  QuadratureRule rule_;
+  CellQuadrature quadrature_;
+  CsrLists point_lists_;
+
+  CsrLists element_nodes_;
+  CsrLists element_local_;
+  std::vector<int> element_first_point_;
+  std::vector<int> element_point_count_;
+  std::vector<char> element_owned_;
+  std::vector<int> element_first_local_point_;  // into the storage's local points
+  int max_element_nodes_ = 0;
+  int max_element_points_ = 0;
+  std::vector<int> ghosts_;
+  SparsityPattern pattern_;
+
+  std::vector<int> local_points_;  // global point ids held by the storage, element by element
+  std::vector<int> storage_point_ids_;  // 0, 1, 2, ...: element e's storage points are a slice
+  std::variant<std::monostate, LmeFullStorage, LmeCompressedStorage> storage_;
+  StageTimes times_;
+};
+
+}  // namespace lmeform

@@ -1,0 +1,31 @@
+// Node partitioning for distributed assembly: METIS on the node adjacency graph, then a
+// renumbering so that every rank owns one contiguous range of nodes (and so of matrix rows).
+#pragma once
+
+#include <span>
+#include <vector>
+
+namespace lmeform {
+
+struct NodePartition {
+  int n_parts = 1;
+  std::vector<int> part_of;    ///< part of each node, original numbering
+  std::vector<int> new_index;  ///< original node -> renumbered node
+  std::vector<int> old_index;  ///< renumbered node -> original node
+  std::vector<int> offsets;    ///< n_parts + 1: renumbered nodes of part p are [offsets[p], offsets[p+1])
+
+  [[nodiscard]] int size() const noexcept { return static_cast<int>(part_of.size()); }
+  [[nodiscard]] int owner(int renumbered_node) const;
+  [[nodiscard]] int edge_cut(std::span<const int> adjacency_offsets, std::span<const int> adjacency) const;
+};
+
+/// Partitions a graph given in CSR form (symmetric; self-loops are ignored) into n_parts with METIS
+/// and renumbers the nodes part by part, keeping their original order inside a part.
+/// n_parts == 1 gives the identity (METIS itself crashes on one part).
+NodePartition partition_nodes(std::span<const int> adjacency_offsets, std::span<const int> adjacency, int n_parts);
+
+/// The identity partition into contiguous blocks of nearly equal size (no graph needed);
+/// useful as a baseline against METIS.
+NodePartition block_partition(int n_nodes, int n_parts);
+
+}  // namespace lmeform

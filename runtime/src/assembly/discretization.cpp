@@ -1,0 +1,252 @@
+#include "lmeform/discretization.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <stdexcept>
+#include <string>
+
+#include "lmeform/kernel.hpp"
+#include "lmeform/neighbourhoods.hpp"
+
+namespace lmeform {
+
+const char* to_string(NeighbourhoodStrategy s) noexcept {
+  return s == NeighbourhoodStrategy::CellBased ? "cell" : "point";
+}
+const char* to_string(BasisStorage s) noexcept { return s == BasisStorage::Full ? "full" : "compressed"; }
+const char* to_string(OffProcessMode m) noexcept {
+  return m == OffProcessMode::ZeroCommunication ? "zero-communication" : "petsc-exchange";
+}
+
+namespace {
+
+class StageClock {
+ public:
+  explicit StageClock(double& accumulator) : acc_(accumulator), start_(std::chrono::steady_clock::now()) {}
+  ~StageClock() { acc_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count(); }
+  StageClock(const StageClock&) = delete;
+  StageClock& operator=(const StageClock&) = delete;
+
+ private:
+  double& acc_;
+  std::chrono::steady_clock::time_point start_;
+};
+
+QuadratureRule rule_for(int dim, int points) {
+  switch (dim) {
+    case 1: return gauss_legendre(points);
+    case 2: return triangle_rule(points);
+    case 3: return tetrahedron_rule(points);
+    default: throw std::invalid_argument("Discretization: no quadrature for dimension " + std::to_string(dim));
+  }
+}
+
+std::vector<double> expand_gamma(const std::vector<double>& gamma, std::size_t n_nodes) {
+  if (gamma.size() == 1) return std::vector<double>(n_nodes, gamma.front());
+  if (gamma.size() != n_nodes) {
+    throw std::invalid_argument("Discretization: gamma has " + std::to_string(gamma.size()) +
+                                " values; give one for all nodes or one per node (" + std::to_string(n_nodes) + ")");
+  }
+  return gamma;
+}
+
+}  // namespace
+
+Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, DiscretizationOptions options)
+    : comm_(comm), options_(std::move(options)) {
+  MPI_Comm_rank(comm_, &rank_);
+  MPI_Comm_size(comm_, &size_);
+  if (options_.basis_order < 0 || options_.basis_order > 2) {
+    throw std::invalid_argument("Discretization: basis_order must be 0, 1 or 2, got " +
+                                std::to_string(options_.basis_order));
+  }
+  const int n = static_cast<int>(nodes.size());
+  const std::vector<double> gamma = expand_gamma(options_.gamma, nodes.size());
+
+  // Stage: neighbours in the original numbering (spacing, β, supports) and the partition.
+  std::vector<double> spacing;
+  {
+    StageClock clock(times_.neighbour_search);
+    LmeBasis original(nodes, gamma, options_.lme);
+    spacing.assign(original.spacing().begin(), original.spacing().end());
+    if (size_ > 1 && options_.use_metis) {
+      // Nodes couple when their supports overlap a common point; the node-to-node lists of the
+      // supports are the graph the matrix will have, up to the quadrature points.
+      const CsrLists node_lists = original.neighbour_lists(nodes.coords);
+      partition_ = partition_nodes(node_lists.offsets, node_lists.indices, size_);
+    } else {
+      partition_ = block_partition(n, size_);
+    }
+    if (size_ == 1) basis_.emplace(std::move(original));
+  }
+
+  // Stage: cells. Triangulated in the original numbering so that cells, and hence quadrature
+  // points, do not depend on the number of ranks (cocircular grids have several Delaunay
+  // triangulations and qhull's choice depends on the input order).
+  {
+    StageClock clock(times_.cells);
+    const BackgroundCells original_cells = delaunay(nodes);
+    rule_ = rule_for(nodes.dim, options_.quadrature_points);
+    quadrature_ = map_to_cells(original_cells, nodes, rule_);
+    cells_ = original_cells;
+    for (int& v : cells_.connectivity) v = partition_.new_index[static_cast<std::size_t>(v)];
+  }
+
+  // Renumbered nodes and basis.
+  {
+    StageClock clock(times_.neighbour_search);
+    std::vector<double> coords(nodes.coords.size());
+    std::vector<double> renumbered_gamma(static_cast<std::size_t>(n));
+    std::vector<double> renumbered_spacing(static_cast<std::size_t>(n));
+    const auto d = static_cast<std::size_t>(nodes.dim);
+    for (int b = 0; b < n; ++b) {
+      const auto old = static_cast<std::size_t>(partition_.old_index[static_cast<std::size_t>(b)]);
+      std::copy_n(nodes.coords.begin() + static_cast<std::ptrdiff_t>(old * d), d,
+                  coords.begin() + static_cast<std::ptrdiff_t>(static_cast<std::size_t>(b) * d));
+      renumbered_gamma[static_cast<std::size_t>(b)] = gamma[old];
+      renumbered_spacing[static_cast<std::size_t>(b)] = spacing[old];
+    }
+    nodes_ = NodeSet(nodes.dim, std::move(coords));
+    if (!basis_) basis_.emplace(nodes_, renumbered_gamma, std::move(renumbered_spacing), options_.lme);
+    point_lists_ = basis_->neighbour_lists(quadrature_.points);
+  }
+
+  // Elements: cells (union of their points' lists) or single points.
+  CsrLists all_elements;
+  int points_per_element = 1;
+  {
+    StageClock clock(times_.neighbour_search);
+    if (options_.strategy == NeighbourhoodStrategy::CellBased) {
+      points_per_element = quadrature_.points_per_cell;
+      all_elements = union_of_groups(point_lists_, points_per_element, n);
+    } else {
+      all_elements = point_lists_;
+    }
+  }
+
+  {
+    StageClock clock(times_.structure);
+    select_local_elements(all_elements, points_per_element);
+    build_ghosts();
+    const CsrLists dual = dual_lists(element_nodes_, n);
+    pattern_ = build_sparsity_pattern(element_nodes_.offsets, element_nodes_.indices, dual.offsets, dual.indices, n,
+                                      owned_begin(), owned_end());
+  }
+
+  {
+    StageClock clock(times_.basis);
+    build_storage();
+  }
+}
+
+void Discretization::select_local_elements(const CsrLists& all_elements, int points_per_element) {
+  const int begin = owned_begin();
+  const int end = owned_end();
+  element_nodes_ = CsrLists{};
+  element_first_point_.clear();
+  element_point_count_.clear();
+  element_owned_.clear();
+  max_element_nodes_ = 0;
+  max_element_points_ = points_per_element;
+  for (std::size_t e = 0; e < all_elements.size(); ++e) {
+    const auto list = all_elements[e];
+    // Lists are sorted: the element touches this rank's rows if some node falls in [begin, end).
+    const auto it = std::lower_bound(list.begin(), list.end(), begin);
+    const bool touches = it != list.end() && *it < end;
+    if (!touches) continue;
+    // Exactly one rank owns each element: the owner of its smallest node, which by construction
+    // holds the element. It counts the element's energy and, in PetscExchange mode, is the only
+    // rank that computes it.
+    element_nodes_.push_back(list);
+    element_first_point_.push_back(static_cast<int>(e) * points_per_element);
+    element_point_count_.push_back(points_per_element);
+    element_owned_.push_back(list.front() >= begin ? 1 : 0);
+    max_element_nodes_ = std::max(max_element_nodes_, static_cast<int>(list.size()));
+  }
+}
+
+void Discretization::build_ghosts() {
+  const int begin = owned_begin();
+  const int end = owned_end();
+  ghosts_.clear();
+  for (const int b : element_nodes_.indices) {
+    if (b < begin || b >= end) ghosts_.push_back(b);
+  }
+  std::sort(ghosts_.begin(), ghosts_.end());
+  ghosts_.erase(std::unique(ghosts_.begin(), ghosts_.end()), ghosts_.end());
+  element_local_ = CsrLists{};
+  element_local_.offsets = element_nodes_.offsets;
+  element_local_.indices.resize(element_nodes_.indices.size());
+  const int n_owned_nodes = end - begin;
+  for (std::size_t k = 0; k < element_nodes_.indices.size(); ++k) {
+    const int b = element_nodes_.indices[k];
+    if (b >= begin && b < end) {
+      element_local_.indices[k] = b - begin;
+    } else {
+      const auto it = std::lower_bound(ghosts_.begin(), ghosts_.end(), b);
+      element_local_.indices[k] = n_owned_nodes + static_cast<int>(it - ghosts_.begin());
+    }
+  }
+}
+
+void Discretization::build_storage() {
+  // The storage holds the points of this rank's elements, element after element, each point
+  // with its own primal list.
+  local_points_.clear();
+  element_first_local_point_.clear();
+  for (int e = 0; e < n_elements(); ++e) {
+    element_first_local_point_.push_back(static_cast<int>(local_points_.size()));
+    for (int q = 0; q < element_point_count(e); ++q) local_points_.push_back(element_first_point(e) + q);
+  }
+  element_first_local_point_.push_back(static_cast<int>(local_points_.size()));
+  storage_point_ids_.resize(local_points_.size());
+  for (std::size_t k = 0; k < storage_point_ids_.size(); ++k) storage_point_ids_[k] = static_cast<int>(k);
+  const auto d = static_cast<std::size_t>(dim());
+  std::vector<double> coords(local_points_.size() * d);
+  CsrLists lists;
+  lists.offsets.reserve(local_points_.size() + 1);
+  for (std::size_t k = 0; k < local_points_.size(); ++k) {
+    const auto q = static_cast<std::size_t>(local_points_[k]);
+    std::copy_n(quadrature_.points.begin() + static_cast<std::ptrdiff_t>(q * d), d,
+                coords.begin() + static_cast<std::ptrdiff_t>(k * d));
+    lists.push_back(point_lists_[q]);
+  }
+  if (options_.storage == BasisStorage::Full) {
+    storage_.emplace<LmeFullStorage>(*basis_, coords, std::move(lists), options_.basis_order);
+  } else {
+    storage_.emplace<LmeCompressedStorage>(*basis_, coords, std::move(lists), options_.basis_order);
+  }
+}
+
+void Discretization::tabulate(int e, int order, std::span<double> out, LmeWorkspace& ws) const {
+  if (order > options_.basis_order) {
+    throw std::invalid_argument("Discretization::tabulate: derivative order " + std::to_string(order) +
+                                " requested but the basis was tabulated to order " +
+                                std::to_string(options_.basis_order) +
+                                " (set DiscretizationOptions::basis_order to the highest order the forms need)");
+  }
+  const auto first = static_cast<std::size_t>(element_first_local_point_[static_cast<std::size_t>(e)]);
+  const auto count = static_cast<std::size_t>(element_point_count_[static_cast<std::size_t>(e)]);
+  if (options_.strategy == NeighbourhoodStrategy::PerPoint) {
+    if (const auto* full = std::get_if<LmeFullStorage>(&storage_)) {
+      full->point_jet(first, order, out);
+    } else {
+      std::get<LmeCompressedStorage>(storage_).point_jet(*basis_, first, order, out, ws);
+    }
+    return;
+  }
+  const std::span<const int> point_ids(storage_point_ids_.data() + first, count);
+  if (const auto* full = std::get_if<LmeFullStorage>(&storage_)) {
+    full->tabulate_cell(point_ids, element_nodes(e), order, out, ws);
+  } else {
+    std::get<LmeCompressedStorage>(storage_).tabulate_cell(*basis_, point_ids, element_nodes(e), order, out, ws);
+  }
+}
+
+std::size_t Discretization::basis_storage_doubles() const noexcept {
+  if (const auto* full = std::get_if<LmeFullStorage>(&storage_)) return full->doubles();
+  if (const auto* compressed = std::get_if<LmeCompressedStorage>(&storage_)) return compressed->doubles();
+  return 0;
+}
+
+}  // namespace lmeform

@@ -1,0 +1,113 @@
+#include "lmeform/partition.hpp"
+
+#include <metis.h>
+
+#include <algorithm>
+#include <stdexcept>
+#include <string>
+
+namespace lmeform {
+
+namespace {
+void renumber_by_part(NodePartition& p) {
+  const int n = p.size();
+  p.offsets.assign(static_cast<std::size_t>(p.n_parts) + 1, 0);
+  for (int a = 0; a < n; ++a) ++p.offsets[static_cast<std::size_t>(p.part_of[static_cast<std::size_t>(a)]) + 1];
+  for (int q = 0; q < p.n_parts; ++q) p.offsets[static_cast<std::size_t>(q) + 1] += p.offsets[static_cast<std::size_t>(q)];
+  std::vector<int> next(p.offsets.begin(), p.offsets.end() - 1);
+  p.new_index.assign(static_cast<std::size_t>(n), -1);
+  p.old_index.assign(static_cast<std::size_t>(n), -1);
+  for (int a = 0; a < n; ++a) {
+    const int b = next[static_cast<std::size_t>(p.part_of[static_cast<std::size_t>(a)])]++;
+    p.new_index[static_cast<std::size_t>(a)] = b;
+    p.old_index[static_cast<std::size_t>(b)] = a;
+  }
+}
+}  // namespace
+
+int NodePartition::owner(int renumbered_node) const {
+  const auto it = std::upper_bound(offsets.begin(), offsets.end(), renumbered_node);
+  return static_cast<int>(it - offsets.begin()) - 1;
+}
+
+int NodePartition::edge_cut(std::span<const int> adjacency_offsets, std::span<const int> adjacency) const {
+  int cut = 0;
+  for (int a = 0; a < size(); ++a) {
+    for (int k = adjacency_offsets[static_cast<std::size_t>(a)]; k < adjacency_offsets[static_cast<std::size_t>(a) + 1]; ++k) {
+      const int b = adjacency[static_cast<std::size_t>(k)];
+      if (b > a && part_of[static_cast<std::size_t>(a)] != part_of[static_cast<std::size_t>(b)]) ++cut;
+    }
+  }
+  return cut;
+}
+
+NodePartition block_partition(int n_nodes, int n_parts) {
+  if (n_parts < 1) throw std::invalid_argument("block_partition: need at least one part, got " + std::to_string(n_parts));
+  NodePartition p;
+  p.n_parts = n_parts;
+  p.part_of.resize(static_cast<std::size_t>(n_nodes));
+  for (int a = 0; a < n_nodes; ++a) {
+    p.part_of[static_cast<std::size_t>(a)] =
+        static_cast<int>((static_cast<long long>(a) * n_parts) / std::max(n_nodes, 1));
+  }
+  renumber_by_part(p);
+  return p;
+}
+
+NodePartition partition_nodes(std::span<const int> adjacency_offsets, std::span<const int> adjacency, int n_parts) {
+  if (adjacency_offsets.empty()) throw std::invalid_argument("partition_nodes: empty adjacency offsets");
+  const int n = static_cast<int>(adjacency_offsets.size()) - 1;
+  if (n_parts < 1) throw std::invalid_argument("partition_nodes: need at least one part, got " + std::to_string(n_parts));
+  if (n_parts > n) {
+    throw std::invalid_argument("partition_nodes: " + std::to_string(n_parts) + " parts for only " +
+                                std::to_string(n) + " nodes");
+  }
+  if (n_parts == 1) return block_partition(n, 1);
+
+  // METIS wants a symmetric graph without self-loops, in its own integer type.
+  std::vector<idx_t> xadj(static_cast<std::size_t>(n) + 1, 0);
+  std::vector<idx_t> adjncy;
+  adjncy.reserve(adjacency.size());
+  for (int a = 0; a < n; ++a) {
+    for (int k = adjacency_offsets[static_cast<std::size_t>(a)]; k < adjacency_offsets[static_cast<std::size_t>(a) + 1]; ++k) {
+      const int b = adjacency[static_cast<std::size_t>(k)];
+      if (b < 0 || b >= n) {
+        throw std::invalid_argument("partition_nodes: node " + std::to_string(a) + " has neighbour " +
+                                    std::to_string(b) + " outside [0, " + std::to_string(n) + ")");
+      }
+      if (b != a) adjncy.push_back(static_cast<idx_t>(b));
+    }
+    xadj[static_cast<std::size_t>(a) + 1] = static_cast<idx_t>(adjncy.size());
+  }
+
+  idx_t nvtxs = n;
+  idx_t ncon = 1;
+  idx_t nparts = n_parts;
+  idx_t objval = 0;
+  std::vector<idx_t> part(static_cast<std::size_t>(n), 0);
+  idx_t options[METIS_NOPTIONS];
+  METIS_SetDefaultOptions(options);
+  options[METIS_OPTION_SEED] = 7;  // deterministic partitions: runs must be reproducible
+  options[METIS_OPTION_NUMBERING] = 0;
+  const int status = n_parts <= 8
+                         ? METIS_PartGraphRecursive(&nvtxs, &ncon, xadj.data(), adjncy.data(), nullptr, nullptr,
+                                                    nullptr, &nparts, nullptr, nullptr, options, &objval, part.data())
+                         : METIS_PartGraphKway(&nvtxs, &ncon, xadj.data(), adjncy.data(), nullptr, nullptr, nullptr,
+                                               &nparts, nullptr, nullptr, options, &objval, part.data());
+  if (status != METIS_OK) {
+    throw std::runtime_error("partition_nodes: METIS failed with status " + std::to_string(status) + " for " +
+                             std::to_string(n) + " nodes into " + std::to_string(n_parts) + " parts");
+  }
+  NodePartition p;
+  p.n_parts = n_parts;
+  p.part_of.assign(part.begin(), part.end());
+  renumber_by_part(p);
+  for (int q = 0; q < n_parts; ++q) {
+    if (p.offsets[static_cast<std::size_t>(q)] == p.offsets[static_cast<std::size_t>(q) + 1]) {
+      throw std::runtime_error("partition_nodes: METIS left part " + std::to_string(q) + " empty");
+    }
+  }
+  return p;
+}
+
+}  // namespace lmeform

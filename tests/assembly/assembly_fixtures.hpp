@@ -1,0 +1,66 @@
+// Shared helpers of the assembly tests: a PETSc-initialising main, dense copies of PETSc objects
+// in the original node numbering, and a linear solve.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <vector>
+
+#include "lmeform/assembler.hpp"
+#include "lmeform/discretization.hpp"
+#include "lmeform/petsc.hpp"
+
+namespace lmeform::testing {
+
+/// Dense (N*bs)^2 copy of A in the ORIGINAL node numbering, summed over ranks (every rank gets it).
+inline std::vector<double> dense_original(const Discretization& disc, Mat A, int bs) {
+  const int n = disc.n_nodes() * bs;
+  std::vector<double> dense(static_cast<std::size_t>(n) * static_cast<std::size_t>(n), 0.0);
+  PetscInt begin = 0, end = 0;
+  LMEFORM_PETSC_CHECK(MatGetOwnershipRange(A, &begin, &end));
+  for (PetscInt row = begin; row < end; ++row) {
+    PetscInt ncols = 0;
+    const PetscInt* cols = nullptr;
+    const PetscScalar* vals = nullptr;
+    LMEFORM_PETSC_CHECK(MatGetRow(A, row, &ncols, &cols, &vals));
+    const int orow = disc.original_index()[static_cast<std::size_t>(row / bs)] * bs + static_cast<int>(row % bs);
+    for (PetscInt k = 0; k < ncols; ++k) {
+      const int ocol = disc.original_index()[static_cast<std::size_t>(cols[k] / bs)] * bs + static_cast<int>(cols[k] % bs);
+      dense[static_cast<std::size_t>(orow) * static_cast<std::size_t>(n) + static_cast<std::size_t>(ocol)] = vals[k];
+    }
+    LMEFORM_PETSC_CHECK(MatRestoreRow(A, row, &ncols, &cols, &vals));
+  }
+  MPI_Allreduce(MPI_IN_PLACE, dense.data(), static_cast<int>(dense.size()), MPI_DOUBLE, MPI_SUM, disc.comm());
+  return dense;
+}
+
+inline double max_abs(const std::vector<double>& v) {
+  double m = 0;
+  for (const double x : v) m = std::max(m, std::abs(x));
+  return m;
+}
+
+inline double max_abs_difference(const std::vector<double>& a, const std::vector<double>& b) {
+  double m = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) m = std::max(m, std::abs(a[i] - b[i]));
+  return m;
+}
+
+/// Solves A x = b with a direct solver (MUMPS in parallel, PETSc LU serially).
+inline void solve_direct(Mat A, Vec b, Vec x) {
+  PetscLinearSolver ksp;
+  MPI_Comm comm = MPI_COMM_NULL;
+  LMEFORM_PETSC_CHECK(PetscObjectGetComm(reinterpret_cast<PetscObject>(A), &comm));
+  LMEFORM_PETSC_CHECK(KSPCreate(comm, ksp.out()));
+  LMEFORM_PETSC_CHECK(KSPSetOperators(ksp, A, A));
+  LMEFORM_PETSC_CHECK(KSPSetType(ksp, KSPPREONLY));
+  PC pc = nullptr;
+  LMEFORM_PETSC_CHECK(KSPGetPC(ksp, &pc));
+  LMEFORM_PETSC_CHECK(PCSetType(pc, PCLU));
+  int size = 1;
+  MPI_Comm_size(comm, &size);
+  if (size > 1) LMEFORM_PETSC_CHECK(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
+  LMEFORM_PETSC_CHECK(KSPSolve(ksp, b, x));
+}
+
+}  // namespace lmeform::testing

@@ -1,0 +1,327 @@
+// Serial tests of the assembly engine with hand-written reference kernels.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <set>
+
+#include "assembly_fixtures.hpp"
+#include "lmeform/convex_hull.hpp"
+#include "lmeform/node_sets.hpp"
+#include "reference_kernels.hpp"
+
+namespace lmeform {
+namespace {
+
+using testing::Bilaplacian;
+using testing::JetKernel;
+using testing::ManufacturedError;
+using testing::Nonlinear;
+using testing::Poisson;
+using testing::VectorField;
+
+const char* const kSourceConstant[] = {"source"};
+
+NodeSet jittered_grid(int per_axis, double amplitude, std::uint64_t seed) {
+  const Box box = Box::unit(2);
+  const NodeSet grid = uniform_grid(box, {per_axis, per_axis, 1});
+  return jitter_interior(grid, box, amplitude / (per_axis - 1), seed);
+}
+
+std::vector<double> random_values(std::size_t n, std::uint64_t seed, double scale = 1.0) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-scale, scale);
+  std::vector<double> v(n);
+  for (double& x : v) x = u(rng);
+  return v;
+}
+
+DiscretizationOptions options(double gamma, int points, NeighbourhoodStrategy strategy,
+                              BasisStorage storage = BasisStorage::Full, int order = 1) {
+  DiscretizationOptions o;
+  o.gamma = {gamma};
+  o.quadrature_points = points;
+  o.strategy = strategy;
+  o.storage = storage;
+  o.basis_order = order;
+  return o;
+}
+
+struct Assembled {
+  double energy;
+  std::vector<double> gradient;
+  std::vector<double> hessian;
+};
+
+Assembled assemble_all(const Discretization& disc, const kernel::FormKernels& form, const std::vector<double>& u_original,
+                       std::span<const double> constants = {}) {
+  Assembler assembler(disc, form);
+  if (!constants.empty()) assembler.set_constants(constants);
+  const int bs = form.dofs_per_node;
+  PetscVector u = assembler.create_vector();
+  PetscVector g = assembler.create_vector();
+  set_from_original(disc, u_original, bs, u);
+  PetscMatrix H = assembler.create_matrix();
+  Assembled out;
+  out.energy = assembler.value(u);
+  assembler.vector(u, g);
+  assembler.matrix(u, H);
+  out.gradient = to_original(disc, g, bs);
+  out.hessian = testing::dense_original(disc, H, bs);
+  return out;
+}
+
+TEST(Assembly, PatternCoversEveryKernelContribution) {
+  // A dense reference assembled element by element must equal the PETSc matrix, which was
+  // preallocated from the pattern with new nonzeros forbidden.
+  const NodeSet nodes = jittered_grid(11, 0.3, 3);
+  const Discretization disc(PETSC_COMM_SELF, nodes, options(0.8, 6, NeighbourhoodStrategy::CellBased));
+  const auto form = JetKernel<Poisson<false>>::descriptor("poisson", kSourceConstant, 1);
+  const double source = 1.0;
+  const auto assembled = assemble_all(disc, form, std::vector<double>(nodes.size(), 0.0), {&source, 1});
+
+  const int n = disc.n_nodes();
+  std::vector<double> dense(static_cast<std::size_t>(n * n), 0.0);
+  std::vector<double> tab(static_cast<std::size_t>(disc.max_element_points() * 3 * disc.max_element_nodes()));
+  std::vector<double> local;
+  std::vector<double> zeros(static_cast<std::size_t>(disc.max_element_nodes()), 0.0);
+  LmeWorkspace ws;
+  for (int e = 0; e < disc.n_elements(); ++e) {
+    const auto list = disc.element_nodes(e);
+    const int m = static_cast<int>(list.size());
+    disc.tabulate(e, 1, tab, ws);
+    kernel::CellInputs in;
+    in.n_nodes = m;
+    in.n_points = disc.element_point_count(e);
+    in.basis_order = 1;
+    in.weights = disc.quadrature().weights.data() + disc.element_first_point(e);
+    in.points = disc.quadrature().points.data() + 2 * disc.element_first_point(e);
+    in.basis = tab.data();
+    in.unknowns = zeros.data();
+    in.constants = &source;
+    local.assign(static_cast<std::size_t>(m * m), 0.0);
+    form.matrix(in, local.data());
+    for (int a = 0; a < m; ++a) {
+      for (int b = 0; b < m; ++b) {
+        const int oa = disc.original_index()[static_cast<std::size_t>(list[static_cast<std::size_t>(a)])];
+        const int ob = disc.original_index()[static_cast<std::size_t>(list[static_cast<std::size_t>(b)])];
+        dense[static_cast<std::size_t>(oa * n + ob)] += local[static_cast<std::size_t>(a * m + b)];
+      }
+    }
+  }
+  const double scale = testing::max_abs(dense);
+  EXPECT_GT(scale, 0.0);
+  EXPECT_LE(testing::max_abs_difference(dense, assembled.hessian), 1e-13 * scale);
+  // The pattern holds exactly the pairs that share an element list: checked against a brute-force
+  // set. (Pairs that share a cell but no quadrature point are in it with value 0: the price of
+  // cell-based coarsening.)
+  std::set<std::pair<int, int>> pairs;
+  for (int e = 0; e < disc.n_elements(); ++e) {
+    for (const int a : disc.element_nodes(e)) {
+      for (const int b : disc.element_nodes(e)) pairs.emplace(a, b);
+    }
+  }
+  std::set<std::pair<int, int>> pattern;
+  for (int r = 0; r < disc.pattern().n_rows(); ++r) {
+    for (const int b : disc.pattern().row(r)) pattern.emplace(r + disc.pattern().row_begin, b);
+  }
+  EXPECT_EQ(pattern, pairs);
+  long long structural = 0;
+  for (const double v : dense) structural += v != 0.0 ? 1 : 0;
+  EXPECT_LE(structural, disc.pattern().nonzeros());
+  std::printf("pattern %lld entries, %lld structurally non-zero (%.1f %%)\n", disc.pattern().nonzeros(), structural,
+              100.0 * static_cast<double>(structural) / static_cast<double>(disc.pattern().nonzeros()));
+}
+
+TEST(Assembly, CellBasedAndPerPointAssembleTheSameOperator) {
+  const NodeSet nodes = jittered_grid(10, 0.3, 5);
+  const auto form = JetKernel<Nonlinear>::descriptor("nonlinear", nullptr, 0);
+  const auto u = random_values(nodes.size(), 11);
+  for (const BasisStorage storage : {BasisStorage::Full, BasisStorage::Compressed}) {
+    const Discretization cell(PETSC_COMM_SELF, nodes, options(1.6, 6, NeighbourhoodStrategy::CellBased, storage));
+    const Discretization point(PETSC_COMM_SELF, nodes, options(1.6, 6, NeighbourhoodStrategy::PerPoint, storage));
+    const auto a = assemble_all(cell, form, u);
+    const auto b = assemble_all(point, form, u);
+    EXPECT_NEAR(a.energy, b.energy, 1e-12 * std::abs(a.energy)) << to_string(storage);
+    EXPECT_LE(testing::max_abs_difference(a.gradient, b.gradient), 1e-12 * testing::max_abs(a.gradient));
+    EXPECT_LE(testing::max_abs_difference(a.hessian, b.hessian), 1e-12 * testing::max_abs(a.hessian));
+    EXPECT_LT(cell.n_elements(), point.n_elements());
+  }
+}
+
+TEST(Assembly, CompressedAndFullStorageAgree) {
+  const NodeSet nodes = jittered_grid(9, 0.3, 8);
+  const auto form = JetKernel<Bilaplacian>::descriptor("bilaplacian", nullptr, 0);
+  const auto u = random_values(nodes.size(), 12);
+  const Discretization full(PETSC_COMM_SELF, nodes, options(1.6, 6, NeighbourhoodStrategy::CellBased, BasisStorage::Full, 2));
+  const Discretization compressed(PETSC_COMM_SELF, nodes,
+                                  options(1.6, 6, NeighbourhoodStrategy::CellBased, BasisStorage::Compressed, 2));
+  const auto a = assemble_all(full, form, u);
+  const auto b = assemble_all(compressed, form, u);
+  EXPECT_LE(testing::max_abs_difference(a.hessian, b.hessian), 1e-10 * testing::max_abs(a.hessian));
+  EXPECT_LT(compressed.basis_storage_doubles() * 5, full.basis_storage_doubles());
+}
+
+// Directional finite differences of the global energy and gradient: g·v and H v.
+template <class Integrand>
+void check_global_derivatives(const NodeSet& nodes, const DiscretizationOptions& opts, std::uint64_t seed) {
+  const Discretization disc(PETSC_COMM_SELF, nodes, opts);
+  const auto form = JetKernel<Integrand>::descriptor("fd", nullptr, 0);
+  const int bs = form.dofs_per_node;
+  Assembler assembler(disc, form);
+  const std::size_t n = nodes.size() * static_cast<std::size_t>(bs);
+  const auto u0 = random_values(n, seed, 0.8);
+  const auto v = random_values(n, seed + 1);
+  PetscVector u = assembler.create_vector(), g = assembler.create_vector(), gp = assembler.create_vector(),
+              gm = assembler.create_vector(), Hv = assembler.create_vector(), dir = assembler.create_vector();
+  PetscMatrix H = assembler.create_matrix();
+  set_from_original(disc, u0, bs, u);
+  set_from_original(disc, v, bs, dir);
+  assembler.vector(u, g);
+  assembler.matrix(u, H);
+  LMEFORM_PETSC_CHECK(MatMult(H, dir, Hv));
+  PetscScalar gv = 0;
+  LMEFORM_PETSC_CHECK(VecDot(g, dir, &gv));
+
+  const double h = 1e-5;
+  std::vector<double> up(n), um(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    up[i] = u0[i] + h * v[i];
+    um[i] = u0[i] - h * v[i];
+  }
+  set_from_original(disc, up, bs, u);
+  const double ep = assembler.value(u);
+  assembler.vector(u, gp);
+  set_from_original(disc, um, bs, u);
+  const double em = assembler.value(u);
+  assembler.vector(u, gm);
+  const double fd_gv = (ep - em) / (2 * h);
+  EXPECT_NEAR(gv, fd_gv, 1e-6 * std::abs(gv));
+
+  const auto hv = to_original(disc, Hv, bs);
+  const auto gpo = to_original(disc, gp, bs);
+  const auto gmo = to_original(disc, gm, bs);
+  std::vector<double> fd_hv(n);
+  for (std::size_t i = 0; i < n; ++i) fd_hv[i] = (gpo[i] - gmo[i]) / (2 * h);
+  EXPECT_LE(testing::max_abs_difference(hv, fd_hv), 1e-6 * testing::max_abs(hv));
+}
+
+TEST(Assembly, GlobalGradientAndHessianMatchFiniteDifferences) {
+  GradedGridOptions graded;
+  graded.h_min = 0.02;
+  graded.h_max = 0.2;
+  const NodeSet nodes = graded_grid_2d(graded);
+  check_global_derivatives<Nonlinear>(nodes, options(1.6, 6, NeighbourhoodStrategy::CellBased), 21);
+}
+
+TEST(Assembly, VectorUnknownBlocksMatchFiniteDifferences) {
+  check_global_derivatives<VectorField>(jittered_grid(9, 0.3, 4), options(1.6, 3, NeighbourhoodStrategy::CellBased), 31);
+  check_global_derivatives<VectorField>(jittered_grid(9, 0.3, 4), options(1.6, 3, NeighbourhoodStrategy::PerPoint), 41);
+}
+
+TEST(Assembly, DirichletRowsAndColumnsAreIdentity) {
+  const NodeSet nodes = uniform_grid(Box::unit(2), {9, 9, 1});
+  const Discretization disc(PETSC_COMM_SELF, nodes, options(1.6, 6, NeighbourhoodStrategy::CellBased));
+  const auto form = JetKernel<Poisson<false>>::descriptor("poisson", kSourceConstant, 1);
+  Assembler assembler(disc, form);
+  assembler.set_constant("source", 1.0);
+  PetscVector u = assembler.create_vector(), b = assembler.create_vector(), x = assembler.create_vector();
+  PetscMatrix K = assembler.create_matrix();
+  assembler.matrix(u, K);
+  assembler.vector(u, b);
+  LMEFORM_PETSC_CHECK(VecScale(b, -1.0));
+  const auto boundary = hull_boundary_nodes(nodes);
+  std::vector<double> prescribed(nodes.size(), 0.0);
+  for (const int a : boundary) prescribed[static_cast<std::size_t>(a)] = 1.0 + nodes.coords[2 * static_cast<std::size_t>(a)];
+  set_from_original(disc, prescribed, 1, x);
+  const auto dofs = owned_dofs_of_nodes(disc, boundary, 1);
+  ASSERT_EQ(dofs.size(), boundary.size());
+  apply_dirichlet(K, b, x, dofs);
+  const auto dense = testing::dense_original(disc, K, 1);
+  const auto rhs = to_original(disc, b, 1);
+  const auto n = static_cast<std::size_t>(disc.n_nodes());
+  for (const int a : boundary) {
+    const auto i = static_cast<std::size_t>(a);
+    EXPECT_EQ(rhs[i], prescribed[i]);
+    for (std::size_t j = 0; j < n; ++j) {
+      EXPECT_EQ(dense[i * n + j], i == j ? 1.0 : 0.0);
+      EXPECT_EQ(dense[j * n + i], i == j ? 1.0 : 0.0);
+    }
+  }
+  testing::solve_direct(K, b, x);
+  const auto solution = to_original(disc, x, 1);
+  for (const int a : boundary) EXPECT_NEAR(solution[static_cast<std::size_t>(a)], prescribed[static_cast<std::size_t>(a)], 1e-12);
+}
+
+TEST(Assembly, FormNeedingHessiansRejectsATabulationWithout) {
+  const NodeSet nodes = uniform_grid(Box::unit(2), {6, 6, 1});
+  const Discretization disc(PETSC_COMM_SELF, nodes, options(1.6, 3, NeighbourhoodStrategy::CellBased));
+  const auto form = JetKernel<Bilaplacian>::descriptor("bilaplacian", nullptr, 0);
+  try {
+    Assembler assembler(disc, form);
+    FAIL() << "expected an error";
+  } catch (const std::invalid_argument& e) {
+    const std::string message = e.what();
+    EXPECT_NE(message.find("needs basis Hessians"), std::string::npos) << message;
+    EXPECT_NE(message.find("basis_order = 2"), std::string::npos) << message;
+  }
+}
+
+TEST(Assembly, UnsetConstantIsAnError) {
+  const NodeSet nodes = uniform_grid(Box::unit(2), {6, 6, 1});
+  const Discretization disc(PETSC_COMM_SELF, nodes, options(1.6, 3, NeighbourhoodStrategy::CellBased));
+  const auto form = JetKernel<Poisson<false>>::descriptor("poisson", kSourceConstant, 1);
+  Assembler assembler(disc, form);
+  PetscVector u = assembler.create_vector();
+  try {
+    (void)assembler.value(u);
+    FAIL() << "expected an error";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("constant 'source' was not set"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(assembler.set_constant("sourse", 1.0), std::invalid_argument);
+}
+
+struct ErrorNorms {
+  double h, l2, h1;
+};
+
+ErrorNorms solve_manufactured(int per_axis, double gamma) {
+  const NodeSet nodes = uniform_grid(Box::unit(2), {per_axis, per_axis, 1});
+  const Discretization disc(PETSC_COMM_SELF, nodes, options(gamma, 6, NeighbourhoodStrategy::CellBased));
+  const auto form = JetKernel<Poisson<true>>::descriptor("manufactured", kSourceConstant, 1);
+  Assembler assembler(disc, form);
+  assembler.set_constant("source", 1.0);
+  PetscVector T = assembler.create_vector(), b = assembler.create_vector(), zero = assembler.create_vector();
+  PetscMatrix K = assembler.create_matrix();
+  assembler.matrix(T, K);
+  assembler.vector(T, b);
+  LMEFORM_PETSC_CHECK(VecScale(b, -1.0));
+  const auto dofs = owned_dofs_of_nodes(disc, hull_boundary_nodes(nodes), 1);
+  apply_dirichlet(K, b, zero, dofs);
+  testing::solve_direct(K, b, T);
+  const auto l2_form = JetKernel<ManufacturedError<false>>::descriptor("l2", nullptr, 0);
+  const auto h1_form = JetKernel<ManufacturedError<true>>::descriptor("h1", nullptr, 0);
+  Assembler l2(disc, l2_form), h1(disc, h1_form);
+  return {1.0 / (per_axis - 1), std::sqrt(l2.value(T)), std::sqrt(h1.value(T))};
+}
+
+TEST(Assembly, ManufacturedPoissonConvergesAtSecondOrderInL2) {
+  for (const double gamma : {0.8, 1.6, 4.0}) {
+    std::vector<ErrorNorms> e;
+    for (const int n : {11, 21, 41}) e.push_back(solve_manufactured(n, gamma));
+    for (std::size_t k = 1; k < e.size(); ++k) {
+      const double rate_l2 = std::log(e[k - 1].l2 / e[k].l2) / std::log(e[k - 1].h / e[k].h);
+      const double rate_h1 = std::log(e[k - 1].h1 / e[k].h1) / std::log(e[k - 1].h / e[k].h);
+      std::printf("gamma %.1f  h %.4f -> %.4f  L2 %.3e -> %.3e (rate %.2f)  H1 %.3e -> %.3e (rate %.2f)\n", gamma,
+                  e[k - 1].h, e[k].h, e[k - 1].l2, e[k].l2, rate_l2, e[k - 1].h1, e[k].h1, rate_h1);
+      if (gamma == 0.8) {
+        EXPECT_GE(rate_l2, 1.8) << "h " << e[k].h;
+      }
+      EXPECT_GE(rate_h1, 0.9) << "gamma " << gamma << " h " << e[k].h;
+    }
+  }
+}
+
+}  // namespace
+}  // namespace lmeform
