@@ -284,21 +284,30 @@ BackgroundCells delaunay(const NodeSet& nodes, const DelaunayOptions& options) {
 }
 
 std::array<double, 4> barycentric(const BackgroundCells& cells, const NodeSet& nodes, std::size_t c, std::span<const double> x) {
+  // Cramer's rule on the d x d edge matrix: called per cell in point location, so kept allocation- and
+  // pivoting-free (cells are non-degenerate by construction).
   const auto d = static_cast<std::size_t>(cells.dim);
   const auto v = cells.cell(c);
   const auto x0 = nodes.point(static_cast<std::size_t>(v[0]));
-  Eigen::Matrix3d J = Eigen::Matrix3d::Identity();
-  Eigen::Vector3d r = Eigen::Vector3d::Zero();
+  double J[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  double r[3] = {0, 0, 0};
   for (std::size_t k = 0; k < d; ++k) {
     const auto xk = nodes.point(static_cast<std::size_t>(v[k + 1]));
-    for (std::size_t i = 0; i < d; ++i) J(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(k)) = xk[i] - x0[i];
+    for (std::size_t i = 0; i < d; ++i) J[i][k] = xk[i] - x0[i];
   }
-  for (std::size_t i = 0; i < d; ++i) r(static_cast<Eigen::Index>(i)) = x[i] - x0[i];
-  const Eigen::Vector3d l = J.partialPivLu().solve(r);
+  for (std::size_t i = 0; i < d; ++i) r[i] = x[i] - x0[i];
+  auto det3 = [](const double (&m)[3][3]) {
+    return m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
+           m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+  };
+  const double det = det3(J);
   std::array<double, 4> out{};
   double s = 0;
   for (std::size_t k = 0; k < d; ++k) {
-    out[k + 1] = l(static_cast<Eigen::Index>(k));
+    double Jk[3][3];
+    for (std::size_t i = 0; i < 3; ++i)
+      for (std::size_t j = 0; j < 3; ++j) Jk[i][j] = j == k ? (i < d ? r[i] : 0.0) : J[i][j];
+    out[k + 1] = det3(Jk) / det;
     s += out[k + 1];
   }
   out[0] = 1.0 - s;
