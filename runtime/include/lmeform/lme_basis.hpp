@@ -1,0 +1,172 @@
+// Local maximum-entropy (LME) basis functions: values, gradients and Hessians (seed A.1-A.3).
+//
+// For a point x and its neighbour list N_x (nodes a with |x - x_a| <= r_a),
+//   p_a(x) = exp(-beta_a |x - x_a|^2 + lambda* . (x - x_a)) / Z,   lambda* = argmin ln Z(x, lambda),
+// with beta_a = gamma_a / h_a^2 (h_a: nodal spacing, gamma_a: dimensionless locality).
+//
+// Output layout ("jet", identical to lmeform/kernel.hpp): for one point with n neighbours the
+// result is a (jet_size(dim, order) x n) row-major block, jet[s * n + a]:
+//   s = 0: p_a;  s = 1..dim: dp_a/dx_i;  s = hessian_slot(i, j, dim): d2p_a/dx_i dx_j (i <= j).
+// Column a follows the order of the neighbour list given by the caller.
+//
+// Numerics (see docs/lme_basis.md):
+// * Newton works in coordinates relative to x and scaled by the local length l = RMS distance of
+//   the neighbours from x: y^ = (x - x_a)/l, beta^ = beta l^2, lambda^ = lambda l. Convergence is
+//   ||grad_lambda^ ln Z|| = ||sum_a p_a y^_a|| <= newton_tolerance (unit-free; the first-order
+//   consistency error |sum_a p_a x_a - x| is then <= newton_tolerance * l).
+// * ln Z is evaluated with a log-sum-exp shift; each Newton direction is checked for descent and
+//   globalised with an Armijo backtracking line search; when the Hessian J of ln Z cannot be
+//   factorised the step falls back to steepest descent.
+// * Failures throw LmeEvaluationError naming the point, the neighbour count and the reason.
+#pragma once
+
+#include <cstddef>
+#include <span>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "lmeform/kernel.hpp"
+#include "lmeform/neighbour_search.hpp"
+#include "lmeform/node_set.hpp"
+
+namespace lmeform {
+
+struct LmeOptions {
+  /// Cutoff on the Gaussian factor of p_a: node a is a neighbour of x iff
+  /// exp(-beta_a |x - x_a|^2) >= tol0, i.e. |x - x_a| <= r_a = sqrt(-ln(tol0)/beta_a).
+  double tol0 = 1e-6;
+  /// Newton stops when ||sum_a p_a (x - x_a)|| / l <= newton_tolerance (scaled, unit-free).
+  double newton_tolerance = 1e-12;
+  /// Upper bound on Newton iterations (each with at most 60 backtracking halvings).
+  int max_iterations = 100;
+  /// A neighbourhood whose thickness is below degeneracy_tolerance times its extent (square root
+  /// of the ratio of the smallest to the largest eigenvalue of its scaled covariance) is affinely
+  /// degenerate (collinear in 2D, coplanar in 3D): no LME basis exists there.
+  double degeneracy_tolerance = 1e-10;
+  /// Derivatives (order >= 1) need J^-1; they are refused when the reciprocal condition number of
+  /// the scaled J is below this (the point sits on the convex-hull boundary to machine precision).
+  double min_rcond = 1e-14;
+  /// Nearest neighbours averaged into the nodal spacing h_a; 0 means 2 * dim.
+  int spacing_neighbours = 0;
+};
+
+enum class LmeFailure {
+  too_few_neighbours,  ///< fewer than dim + 1 neighbours
+  degenerate,          ///< neighbours lie in a lower-dimensional affine subspace
+  outside_hull,        ///< x lies outside the convex hull of its neighbours
+  not_converged,       ///< Newton did not reach the tolerance within max_iterations
+  singular_jacobian,   ///< derivatives requested where J is singular (x on the hull boundary)
+};
+
+[[nodiscard]] const char* to_string(LmeFailure reason) noexcept;
+
+/// A point where the LME basis cannot be evaluated. what() reads e.g.
+/// "LME evaluation failed at x = (0.5, 1.2) with 12 neighbours: outside the convex hull of its
+///  neighbours (||grad ln Z|| = 3.1e-01)".
+class LmeEvaluationError : public std::runtime_error {
+ public:
+  LmeEvaluationError(LmeFailure reason, std::span<const double> x, std::size_t neighbours,
+                     double gradient_norm, const std::string& detail);
+  [[nodiscard]] LmeFailure reason() const noexcept { return reason_; }
+  [[nodiscard]] const std::vector<double>& point() const noexcept { return point_; }
+  [[nodiscard]] std::size_t neighbour_count() const noexcept { return neighbours_; }
+  /// Final scaled ||grad_lambda ln Z|| (NaN where Newton was not started).
+  [[nodiscard]] double gradient_norm() const noexcept { return gradient_norm_; }
+
+ private:
+  LmeFailure reason_;
+  std::vector<double> point_;
+  std::size_t neighbours_;
+  double gradient_norm_;
+};
+
+/// Size of one compressed-storage record (doubles) for derivative order 0, 1 or 2. Physical units;
+/// symmetric d x d matrices packed as their row-wise upper triangle (s = d(d+1)/2 entries):
+///   order 0: ln Z, lambda[d]                                               1 + d
+///   order 1: ln Z, lambda[d], r_beta[d], Dlambda[d*d] (row-major)          1 + 2d + d^2
+///   order 2: ln Z, lambda[d], r_beta[d], J_beta[s], beta_bar, J^-1[s], Q[s], T[d*s]
+///            = 2 + 7d/2 + 2d^2 + d^3/2, the seed's M_OS per point (Table B.2).
+/// Dlambda = (J_beta - I) J^-1 is not symmetric for non-uniform beta, so order 2 keeps the
+/// symmetric J_beta in its place and forms Dlambda once per point when reconstructing.
+[[nodiscard]] constexpr int lme_record_size(int dim, int order) noexcept {
+  const int s = dim * (dim + 1) / 2;
+  return order <= 0 ? 1 + dim : order == 1 ? 1 + 2 * dim + dim * dim : 2 + 2 * dim + 3 * s + dim * s;
+}
+
+/// Scratch buffers reused across evaluations (grow only; no allocation once warm). One per thread.
+struct LmeWorkspace {
+  std::vector<double> y;       ///< n * dim relative (scaled) coordinates
+  std::vector<double> beta;    ///< n scaled beta
+  std::vector<double> c;       ///< n exponents' lambda-free part -beta |y|^2
+  std::vector<double> p;       ///< n basis values
+  std::vector<double> record;  ///< one record
+  std::vector<int> position;   ///< node -> column in the current cell list (-1: absent)
+  std::vector<int> columns;    ///< a point's list mapped to cell columns
+  std::vector<double> jet;     ///< one point's jet when scattering
+};
+
+/// The LME basis of a node set: nodes, per-node gamma_a, spacing h_a, beta_a, support radius r_a
+/// and a kd-tree for neighbour lists. Evaluation methods are const and thread-safe given one
+/// workspace per thread.
+class LmeBasis {
+ public:
+  /// gamma: one value for all nodes or one per node. Spacing from nodal_spacing().
+  LmeBasis(NodeSet nodes, std::span<const double> gamma, LmeOptions options = {});
+  /// Same with a caller-provided spacing h_a (one per node).
+  LmeBasis(NodeSet nodes, std::span<const double> gamma, std::vector<double> spacing, LmeOptions options = {});
+
+  [[nodiscard]] int dim() const noexcept { return nodes_.dim; }
+  [[nodiscard]] std::size_t size() const noexcept { return nodes_.size(); }
+  [[nodiscard]] const NodeSet& nodes() const noexcept { return nodes_; }
+  [[nodiscard]] const KdTree& tree() const noexcept { return tree_; }
+  [[nodiscard]] const LmeOptions& options() const noexcept { return options_; }
+  [[nodiscard]] std::span<const double> gamma() const noexcept { return gamma_; }
+  [[nodiscard]] std::span<const double> spacing() const noexcept { return spacing_; }
+  [[nodiscard]] std::span<const double> beta() const noexcept { return beta_; }
+  [[nodiscard]] std::span<const double> support_radii() const noexcept { return radius_; }
+
+  /// Primal list of x: nodes b with |x - x_b| <= r_b, sorted by index.
+  [[nodiscard]] std::vector<int> neighbours(std::span<const double> x) const;
+  /// Primal lists of many points (point-major coordinates).
+  [[nodiscard]] CsrLists neighbour_lists(std::span<const double> points) const;
+
+  /// Values (order 0), + gradients (1), + Hessians (2) of the basis functions of `neighbours` at x,
+  /// written to jet[s * n + a] (n = neighbours.size(), jet.size() >= jet_size(dim, order) * n).
+  /// Throws LmeEvaluationError where x cannot be evaluated.
+  void evaluate(std::span<const double> x, std::span<const int> neighbours, int order, std::span<double> jet,
+                LmeWorkspace& ws) const;
+  /// Convenience: allocates the jet.
+  [[nodiscard]] std::vector<double> evaluate(std::span<const double> x, std::span<const int> neighbours,
+                                             int order) const;
+
+  /// Cell tabulation for the assembly: nq points (points[q * dim + i]) sharing ONE neighbour list
+  /// `cell_nodes` (n nodes, e.g. a background cell's union list) are evaluated against that list and
+  /// written in the kernel contract layout basis[(q * J + s) * n + a], J = jet_size(dim, order).
+  /// basis.size() >= nq * J * n. No allocation once `ws` is warm.
+  void tabulate_cell(std::span<const double> points, std::span<const int> cell_nodes, int order,
+                     std::span<double> basis, LmeWorkspace& ws) const;
+
+  /// Solves for lambda at x and writes the compressed record of `order` (lme_record_size(dim, order)
+  /// doubles, physical units) to `record`.
+  void solve_record(std::span<const double> x, std::span<const int> neighbours, int order, std::span<double> record,
+                    LmeWorkspace& ws) const;
+
+  /// Rebuilds the jet of `order` (<= record_order) at x from a record of `record_order`, writing
+  /// p/grad/Hessian of neighbour k to jet[s * stride + column(k)], column(k) = columns[k] or k when
+  /// `columns` is empty. Entries of other columns are left untouched.
+  void reconstruct(std::span<const double> x, std::span<const int> neighbours, int record_order,
+                   std::span<const double> record, int order, std::span<double> jet, std::size_t stride,
+                   std::span<const int> columns, LmeWorkspace& ws) const;
+
+ private:
+  void init(std::span<const double> gamma, std::vector<double> spacing);
+  void check_order(int order, const char* who) const;
+
+  NodeSet nodes_;
+  LmeOptions options_;
+  KdTree tree_;
+  std::vector<double> gamma_, spacing_, beta_, radius_;
+};
+
+}  // namespace lmeform

@@ -1,0 +1,589 @@
+#include "lmeform/lme_basis.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <string>
+#include <utility>
+
+#include <Eigen/Dense>
+
+namespace lmeform {
+
+const char* to_string(LmeFailure reason) noexcept {
+  switch (reason) {
+    case LmeFailure::too_few_neighbours: return "too few neighbours (need at least dim + 1)";
+    case LmeFailure::degenerate: return "affinely degenerate neighbourhood (neighbours collinear/coplanar)";
+    case LmeFailure::outside_hull: return "point outside the convex hull of its neighbours";
+    case LmeFailure::not_converged: return "Newton iteration on lambda did not converge";
+    case LmeFailure::singular_jacobian: return "singular J = sum p_a (x - x_a)(x - x_a)^T: derivatives undefined";
+  }
+  return "unknown failure";
+}
+
+namespace {
+
+std::string describe(LmeFailure reason, std::span<const double> x, std::size_t neighbours, double gnorm,
+                     const std::string& detail) {
+  std::ostringstream os;
+  os.precision(15);
+  os << "LME evaluation failed at x = (";
+  for (std::size_t i = 0; i < x.size(); ++i) os << (i ? ", " : "") << x[i];
+  os << ") with " << neighbours << " neighbour" << (neighbours == 1 ? "" : "s") << ": " << to_string(reason);
+  if (!detail.empty()) os << "; " << detail;
+  if (!std::isnan(gnorm)) {
+    os.precision(3);
+    os << " (final scaled ||grad ln Z|| = " << std::scientific << gnorm << ")";
+  }
+  return os.str();
+}
+
+}  // namespace
+
+LmeEvaluationError::LmeEvaluationError(LmeFailure reason, std::span<const double> x, std::size_t neighbours,
+                                       double gradient_norm, const std::string& detail)
+    : std::runtime_error(describe(reason, x, neighbours, gradient_norm, detail)),
+      reason_(reason),
+      point_(x.begin(), x.end()),
+      neighbours_(neighbours),
+      gradient_norm_(gradient_norm) {}
+
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+constexpr int sym_index(int i, int j, int d) noexcept { return kernel::hessian_slot(i, j, d) - 1 - d; }
+
+template <int D>
+using Vec = Eigen::Matrix<double, D, 1>;
+template <int D>
+using Mat = Eigen::Matrix<double, D, D>;
+
+template <int D>
+void pack(const Mat<D>& m, double* out) {
+  for (int i = 0; i < D; ++i)
+    for (int j = i; j < D; ++j) out[sym_index(i, j, D)] = m(i, j);
+}
+
+template <int D>
+Mat<D> unpack(const double* in) {
+  Mat<D> m;
+  for (int i = 0; i < D; ++i)
+    for (int j = i; j < D; ++j) m(i, j) = m(j, i) = in[sym_index(i, j, D)];
+  return m;
+}
+
+// Record offsets (see lme_record_size).
+template <int D>
+struct Layout {
+  static constexpr int s = D * (D + 1) / 2;
+  static constexpr int lnz = 0, lambda = 1, rbeta = 1 + D;
+  static constexpr int dlambda = 1 + 2 * D;  // order 1
+  static constexpr int jbeta = 1 + 2 * D, betabar = 1 + 2 * D + s, jinv = 2 + 2 * D + s, q = 2 + 2 * D + 2 * s,
+                       t = 2 + 2 * D + 3 * s;  // order 2
+};
+
+template <int D>
+struct Lme {
+  using V = Vec<D>;
+  using M = Mat<D>;
+
+  // ln Z at lambda with a log-sum-exp shift; p and r = grad_lambda ln Z = sum p_a y_a as by-products.
+  static double eval(int n, const double* y, const double* c, const V& lam, double* p, V& r) {
+    double fmax = -std::numeric_limits<double>::infinity();
+    for (int a = 0; a < n; ++a) {
+      const double f = c[a] + lam.dot(Eigen::Map<const V>(y + a * D));
+      p[a] = f;
+      fmax = std::max(fmax, f);
+    }
+    double sum = 0.0;
+    for (int a = 0; a < n; ++a) {
+      p[a] = std::exp(p[a] - fmax);
+      sum += p[a];
+    }
+    const double inv = 1.0 / sum;
+    r.setZero();
+    for (int a = 0; a < n; ++a) {
+      p[a] *= inv;
+      r += p[a] * Eigen::Map<const V>(y + a * D);
+    }
+    return fmax + std::log(sum);
+  }
+
+  // Inverse of a symmetric matrix through LDLT with its reciprocal condition number; false when it
+  // is not positive definite in floating point. (1x1 by hand: Eigen's LDLT trips gcc's -Warray-bounds.)
+  static bool spd_inverse(const M& a, M& inv, double& rcond) {
+    if constexpr (D == 1) {
+      if (!(a(0, 0) > 0.0) || !std::isfinite(a(0, 0))) return false;
+      inv(0, 0) = 1.0 / a(0, 0);
+      rcond = 1.0;
+      return true;
+    } else {
+      const Eigen::LDLT<M> ldlt(a);
+      if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) return false;
+      inv = ldlt.solve(M::Identity());
+      rcond = ldlt.rcond();
+      return inv.allFinite() && rcond > 0.0;
+    }
+  }
+
+  // Largest u . y_a over the neighbours for a unit direction u. If it is < -margin, every neighbour
+  // lies strictly on one side of a plane through x, so x is outside their hull by more than margin.
+  static double max_projection(int n, const double* y, const V& u) {
+    double best = -std::numeric_limits<double>::infinity();
+    for (int a = 0; a < n; ++a) best = std::max(best, u.dot(Eigen::Map<const V>(y + a * D)));
+    return best;
+  }
+
+  // Scaled relative coordinates y^_a = (x - x_a)/l, beta^_a = beta_a l^2; returns l.
+  static double prepare(const LmeBasis& basis, std::span<const double> x, std::span<const int> nbrs,
+                        LmeWorkspace& ws) {
+    const auto n = nbrs.size();
+    ws.y.resize(n * D);
+    ws.beta.resize(n);
+    ws.c.resize(n);
+    ws.p.resize(n);
+    const auto& coords = basis.nodes().coords;
+    const auto beta = basis.beta();
+    double sum2 = 0.0;
+    for (std::size_t a = 0; a < n; ++a) {
+      const auto b = static_cast<std::size_t>(nbrs[a]);
+      for (int i = 0; i < D; ++i) {
+        const double d = x[static_cast<std::size_t>(i)] - coords[b * D + static_cast<std::size_t>(i)];
+        ws.y[a * D + static_cast<std::size_t>(i)] = d;
+        sum2 += d * d;
+      }
+    }
+    const double len = std::sqrt(sum2 / static_cast<double>(n));
+    if (!(len > 0.0)) return 0.0;
+    const double inv = 1.0 / len;
+    for (std::size_t a = 0; a < n; ++a) {
+      double r2 = 0.0;
+      for (int i = 0; i < D; ++i) {
+        double& v = ws.y[a * D + static_cast<std::size_t>(i)];
+        v *= inv;
+        r2 += v * v;
+      }
+      ws.beta[a] = beta[static_cast<std::size_t>(nbrs[a])] * len * len;
+      ws.c[a] = -ws.beta[a] * r2;
+    }
+    return len;
+  }
+
+  static void check_geometry(std::span<const double> x, int n, double len, const LmeWorkspace& ws,
+                             const LmeOptions& opt) {
+    if (n < D + 1) {
+      throw LmeEvaluationError(LmeFailure::too_few_neighbours, x, static_cast<std::size_t>(n), kNaN,
+                               "got " + std::to_string(n) + ", need " + std::to_string(D + 1));
+    }
+    if (!(len > 0.0)) {
+      throw LmeEvaluationError(LmeFailure::degenerate, x, static_cast<std::size_t>(n), kNaN,
+                               "all neighbours coincide with x");
+    }
+    V mean = V::Zero();
+    for (int a = 0; a < n; ++a) mean += Eigen::Map<const V>(ws.y.data() + a * D);
+    mean /= n;
+    M cov = M::Zero();
+    for (int a = 0; a < n; ++a) {
+      const V d = Eigen::Map<const V>(ws.y.data() + a * D) - mean;
+      cov += d * d.transpose();
+    }
+    double lo = 0.0, hi = 0.0;
+    if constexpr (D == 1) {
+      lo = hi = cov(0, 0);
+    } else {
+      const Eigen::SelfAdjointEigenSolver<M> es(cov, Eigen::EigenvaluesOnly);
+      lo = es.eigenvalues()(0);
+      hi = es.eigenvalues()(D - 1);
+    }
+    const double tol = opt.degeneracy_tolerance;
+    if (!(hi > 0.0) || !(lo > tol * tol * hi)) {
+      std::ostringstream os;
+      os.precision(3);
+      os << "thickness/extent = " << std::scientific << std::sqrt(std::max(lo, 0.0) / std::max(hi, 1e-300))
+         << " <= " << tol;
+      throw LmeEvaluationError(LmeFailure::degenerate, x, static_cast<std::size_t>(n), kNaN, os.str());
+    }
+  }
+
+  // Safeguarded Newton on lambda^ minimising ln Z; leaves p at the solution in ws.p.
+  static V newton(std::span<const double> x, int n, LmeWorkspace& ws, const LmeOptions& opt, double& lnz) {
+    const double* y = ws.y.data();
+    const double* c = ws.c.data();
+    double* p = ws.p.data();
+    const double tol = opt.newton_tolerance;
+    V lam = V::Zero();
+    V r;
+    lnz = eval(n, y, c, lam, p, r);
+    double gnorm = r.norm();
+    // Once ||r^|| <= tol, up to kPolish further Newton steps drive the error in lambda itself to
+    // rounding: near the hull boundary J is nearly singular, and the derivative formulas (which
+    // assume r = 0) amplify a residual r by J^-1, so a small gradient alone is not enough.
+    constexpr int kPolish = 2;
+    int polish = 0;
+    for (int it = 0;; ++it) {
+      const bool converged = gnorm <= tol;
+      if (converged && polish >= kPolish) return lam;
+      if (!converged && it >= opt.max_iterations) {
+        throw LmeEvaluationError(LmeFailure::not_converged, x, static_cast<std::size_t>(n), gnorm,
+                                 std::to_string(opt.max_iterations) + " iterations, tolerance " +
+                                     std::to_string(tol));
+      }
+      if (!converged && it >= 2) {
+        // A certificate, not a guess: all neighbours strictly behind a plane through x.
+        const double ln = lam.norm();
+        if ((ln > 0.0 && max_projection(n, y, lam / ln) < -tol) || max_projection(n, y, -r / gnorm) < -tol) {
+          throw LmeEvaluationError(LmeFailure::outside_hull, x, static_cast<std::size_t>(n), gnorm,
+                                   "a plane through x separates it from all neighbours");
+        }
+      }
+      M hess = -r * r.transpose();
+      for (int a = 0; a < n; ++a) {
+        const auto ya = Eigen::Map<const V>(y + a * D);
+        hess.noalias() += p[a] * ya * ya.transpose();
+      }
+      V dir;
+      bool ok = false;
+      {
+        M inv = M::Zero();
+        double rc = 0.0;
+        if (spd_inverse(hess, inv, rc)) {
+          dir = -(inv * r);
+          ok = dir.allFinite() && r.dot(dir) < 0.0;
+        }
+      }
+      if (converged) {
+        if (!ok || dir.norm() <= 4.0 * std::numeric_limits<double>::epsilon() * (1.0 + lam.norm())) return lam;
+        ++polish;
+      }
+      // J singular or indefinite in floating point (e.g. near a hull vertex): steepest descent,
+      // which the line search below still globalises.
+      if (!ok) dir = -r;
+      const double slope = r.dot(dir);
+      double t = 1.0;
+      bool accepted = false;
+      V lam_t, r_t;
+      double lnz_t = lnz;
+      for (int ls = 0; ls < 60; ++ls, t *= 0.5) {
+        lam_t = lam + t * dir;
+        lnz_t = eval(n, y, c, lam_t, p, r_t);
+        if (lnz_t <= lnz + 1e-4 * t * slope) {
+          accepted = true;
+          break;
+        }
+        // Near the minimum ln Z is flat to rounding: then the gradient norm decides.
+        if (std::abs(lnz_t - lnz) <= 8.0 * std::numeric_limits<double>::epsilon() * (1.0 + std::abs(lnz)) &&
+            r_t.norm() <= gnorm) {
+          accepted = true;
+          break;
+        }
+        if (converged) break;  // polishing is best effort: no backtracking
+      }
+      if (!accepted) {
+        if (converged) {
+          // p was overwritten by the rejected trial: restore the converged state.
+          lnz = eval(n, y, c, lam, p, r);
+          return lam;
+        }
+        throw LmeEvaluationError(LmeFailure::not_converged, x, static_cast<std::size_t>(n), gnorm,
+                                 "line search stalled after " + std::to_string(it) + " iterations");
+      }
+      lam = lam_t;
+      lnz = lnz_t;
+      r = r_t;
+      gnorm = r.norm();
+    }
+  }
+
+  // Builds the record of `order` from p at the solution, in the units of y and beta.
+  static void build_record(std::span<const double> x, int n, const LmeWorkspace& ws, const V& lam, double lnz,
+                           int order, double min_rcond, double* rec) {
+    using L = Layout<D>;
+    const double* y = ws.y.data();
+    const double* beta = ws.beta.data();
+    const double* p = ws.p.data();
+    rec[L::lnz] = lnz;
+    for (int i = 0; i < D; ++i) rec[L::lambda + i] = lam(i);
+    if (order == 0) return;
+    V rb = V::Zero();
+    M jac = M::Zero(), jb = M::Zero();
+    double bbar = 0.0;
+    for (int a = 0; a < n; ++a) {
+      const auto ya = Eigen::Map<const V>(y + a * D);
+      const V pya = p[a] * ya;
+      rb += (2.0 * beta[a]) * pya;
+      const M outer = pya * ya.transpose();
+      jac += outer;
+      jb += (2.0 * beta[a]) * outer;
+      bbar += beta[a] * p[a];
+    }
+    M jinv = M::Zero();
+    double rc = 0.0;
+    if (!spd_inverse(jac, jinv, rc)) rc = 0.0;
+    if (!(rc >= min_rcond)) {
+      std::ostringstream os;
+      os.precision(3);
+      os << "rcond(J) = " << std::scientific << rc << " < " << min_rcond
+         << "; x is on the convex-hull boundary to machine precision";
+      throw LmeEvaluationError(LmeFailure::singular_jacobian, x, static_cast<std::size_t>(n), kNaN, os.str());
+    }
+    const M dl = (jb - M::Identity()) * jinv;  // the seed's D lambda (transpose of d lambda/dx)
+    for (int i = 0; i < D; ++i) rec[L::rbeta + i] = rb(i);
+    if (order == 1) {
+      for (int i = 0; i < D; ++i)
+        for (int j = 0; j < D; ++j) rec[L::dlambda + i * D + j] = dl(i, j);
+      return;
+    }
+    M q = M::Zero();
+    std::array<M, D> t;
+    for (auto& tk : t) tk.setZero();
+    for (int a = 0; a < n; ++a) {
+      const auto ya = Eigen::Map<const V>(y + a * D);
+      const V m = (2.0 * beta[a]) * ya - dl * ya;
+      const M pmm = p[a] * (m * m.transpose());
+      q += pmm;
+      for (int k = 0; k < D; ++k) t[k] += ya(k) * pmm;
+    }
+    pack<D>(jb, rec + L::jbeta);
+    rec[L::betabar] = bbar;
+    pack<D>(jinv, rec + L::jinv);
+    pack<D>(q, rec + L::q);
+    for (int k = 0; k < D; ++k) pack<D>(t[k], rec + L::t + k * L::s);
+  }
+
+  // Scaled record (lengths in units of len) to physical units: each entry carries len^-k.
+  static void unscale_record(int order, double len, double* rec) {
+    using L = Layout<D>;
+    const double i1 = 1.0 / len, i2 = i1 * i1;
+    for (int i = 0; i < D; ++i) rec[L::lambda + i] *= i1;
+    if (order == 0) return;
+    for (int i = 0; i < D; ++i) rec[L::rbeta + i] *= i1;
+    if (order == 1) {
+      for (int i = 0; i < D * D; ++i) rec[L::dlambda + i] *= i2;
+      return;
+    }
+    // J_beta is dimensionless.
+    rec[L::betabar] *= i2;
+    for (int i = 0; i < L::s; ++i) rec[L::jinv + i] *= i2;
+    for (int i = 0; i < L::s; ++i) rec[L::q + i] *= i2;
+    for (int i = 0; i < D * L::s; ++i) rec[L::t + i] *= i1;
+  }
+
+  // Jet of `order` from a record of `rec_order` (A.1-A.3). With y, beta, record in units of len,
+  // inv_len = 1/len turns gradients and Hessians to physical units (1 for physical input).
+  // p_given (optional) are the values at the solution, saving the exponentials.
+  static void jet(int n, const double* y, const double* beta, const double* rec, int rec_order, int order,
+                  const double* p_given, double inv_len, double* out, std::size_t stride, const int* cols) {
+    using L = Layout<D>;
+    const double lnz = rec[L::lnz];
+    const V lam = Eigen::Map<const V>(rec + L::lambda);
+    V rb = V::Zero();
+    M dl = M::Zero(), jinv = M::Zero(), q = M::Zero();
+    double bbar = 0.0;
+    std::array<M, D> t;
+    for (auto& tk : t) tk.setZero();
+    if (order >= 1) {
+      rb = Eigen::Map<const V>(rec + L::rbeta);
+      if (rec_order == 1) {
+        for (int i = 0; i < D; ++i)
+          for (int j = 0; j < D; ++j) dl(i, j) = rec[L::dlambda + i * D + j];
+      } else {
+        jinv = unpack<D>(rec + L::jinv);
+        dl = (unpack<D>(rec + L::jbeta) - M::Identity()) * jinv;
+        if (order == 2) {
+          bbar = rec[L::betabar];
+          q = unpack<D>(rec + L::q);
+          for (int k = 0; k < D; ++k) t[k] = unpack<D>(rec + L::t + k * L::s);
+        }
+      }
+    }
+    const M rr = rb * rb.transpose();
+    const double g1 = inv_len, g2 = inv_len * inv_len;
+    for (int a = 0; a < n; ++a) {
+      const std::size_t col = cols ? static_cast<std::size_t>(cols[a]) : static_cast<std::size_t>(a);
+      const auto ya = Eigen::Map<const V>(y + a * D);
+      const double pa = p_given ? p_given[a] : std::exp(-beta[a] * ya.squaredNorm() + lam.dot(ya) - lnz);
+      out[col] = pa;
+      if (order == 0) continue;
+      // g = grad ln p_a = r_beta - M_a y_a, M_a = 2 beta_a I - D lambda.
+      const V g = rb - (2.0 * beta[a]) * ya + dl * ya;
+      for (int i = 0; i < D; ++i) out[static_cast<std::size_t>(1 + i) * stride + col] = pa * g(i) * g1;
+      if (order == 1) continue;
+      const V ja = jinv * ya;
+      // Hessian of ln p_a; H p_a = p_a (g g^T + that).
+      M h = g * g.transpose() + rr + rb * ja.transpose() + ja * rb.transpose() - q;
+      h.diagonal().array() += 2.0 * (bbar - beta[a]) + rb.dot(ja);
+      for (int k = 0; k < D; ++k) h -= ja(k) * t[k];
+      for (int i = 0; i < D; ++i)
+        for (int j = i; j < D; ++j)
+          out[static_cast<std::size_t>(kernel::hessian_slot(i, j, D)) * stride + col] = pa * h(i, j) * g2;
+    }
+  }
+};
+
+template <class F>
+decltype(auto) dispatch(int dim, F&& f) {
+  switch (dim) {
+    case 1: return f(std::integral_constant<int, 1>{});
+    case 2: return f(std::integral_constant<int, 2>{});
+    default: return f(std::integral_constant<int, 3>{});
+  }
+}
+
+}  // namespace
+
+LmeBasis::LmeBasis(NodeSet nodes, std::span<const double> gamma, LmeOptions options)
+    : nodes_(std::move(nodes)), options_(options), tree_(nodes_) {
+  init(gamma, nodal_spacing(tree_, options_.spacing_neighbours));
+}
+
+LmeBasis::LmeBasis(NodeSet nodes, std::span<const double> gamma, std::vector<double> spacing, LmeOptions options)
+    : nodes_(std::move(nodes)), options_(options), tree_(nodes_) {
+  init(gamma, std::move(spacing));
+}
+
+void LmeBasis::init(std::span<const double> gamma, std::vector<double> spacing) {
+  const std::size_t n = nodes_.size();
+  if (gamma.size() != 1 && gamma.size() != n) {
+    throw std::invalid_argument("LmeBasis: " + std::to_string(gamma.size()) + " gamma values for " +
+                                std::to_string(n) + " nodes (need 1 or one per node)");
+  }
+  if (spacing.size() != n) {
+    throw std::invalid_argument("LmeBasis: " + std::to_string(spacing.size()) + " spacings for " +
+                                std::to_string(n) + " nodes");
+  }
+  if (!(options_.tol0 > 0.0 && options_.tol0 < 1.0) || !(options_.newton_tolerance > 0.0) ||
+      options_.max_iterations < 1) {
+    throw std::invalid_argument("LmeBasis: need 0 < tol0 < 1, newton_tolerance > 0, max_iterations >= 1");
+  }
+  spacing_ = std::move(spacing);
+  gamma_.resize(n);
+  beta_.resize(n);
+  radius_.resize(n);
+  for (std::size_t a = 0; a < n; ++a) {
+    gamma_[a] = gamma.size() == 1 ? gamma[0] : gamma[a];
+    if (!(gamma_[a] > 0.0) || !(spacing_[a] > 0.0)) {
+      throw std::invalid_argument("LmeBasis: node " + std::to_string(a) + " has gamma = " + std::to_string(gamma_[a]) +
+                                  ", h = " + std::to_string(spacing_[a]) + " (both must be > 0)");
+    }
+    beta_[a] = gamma_[a] / (spacing_[a] * spacing_[a]);
+    radius_[a] = support_radius(beta_[a], options_.tol0);
+  }
+}
+
+void LmeBasis::check_order(int order, const char* who) const {
+  if (order < 0 || order > 2) {
+    throw std::invalid_argument(std::string(who) + ": derivative order must be 0, 1 or 2, got " +
+                                std::to_string(order));
+  }
+}
+
+std::vector<int> LmeBasis::neighbours(std::span<const double> x) const {
+  return primal_lists(tree_, x, radius_).indices;
+}
+
+CsrLists LmeBasis::neighbour_lists(std::span<const double> points) const {
+  return primal_lists(tree_, points, radius_);
+}
+
+void LmeBasis::evaluate(std::span<const double> x, std::span<const int> nbrs, int order, std::span<double> jet,
+                        LmeWorkspace& ws) const {
+  check_order(order, "LmeBasis::evaluate");
+  const std::size_t n = nbrs.size();
+  if (x.size() != static_cast<std::size_t>(dim()) ||
+      jet.size() < static_cast<std::size_t>(kernel::jet_size(dim(), order)) * n) {
+    throw std::invalid_argument("LmeBasis::evaluate: point has " + std::to_string(x.size()) +
+                                " coordinates (dim " + std::to_string(dim()) + "), jet buffer holds " +
+                                std::to_string(jet.size()) + " doubles");
+  }
+  dispatch(dim(), [&](auto dc) {
+    constexpr int D = decltype(dc)::value;
+    using K = Lme<D>;
+    const int ni = static_cast<int>(n);
+    const double len = K::prepare(*this, x, nbrs, ws);
+    K::check_geometry(x, ni, len, ws, options_);
+    double lnz = 0.0;
+    const Vec<D> lam = K::newton(x, ni, ws, options_, lnz);
+    if (order == 0) {
+      std::copy(ws.p.begin(), ws.p.begin() + static_cast<std::ptrdiff_t>(n), jet.begin());
+      return;
+    }
+    ws.record.resize(static_cast<std::size_t>(lme_record_size(D, order)));
+    K::build_record(x, ni, ws, lam, lnz, order, options_.min_rcond, ws.record.data());
+    K::jet(ni, ws.y.data(), ws.beta.data(), ws.record.data(), order, order, ws.p.data(), 1.0 / len, jet.data(), n,
+           nullptr);
+  });
+}
+
+std::vector<double> LmeBasis::evaluate(std::span<const double> x, std::span<const int> nbrs, int order) const {
+  check_order(order, "LmeBasis::evaluate");
+  std::vector<double> jet(static_cast<std::size_t>(kernel::jet_size(dim(), order)) * nbrs.size());
+  LmeWorkspace ws;
+  evaluate(x, nbrs, order, jet, ws);
+  return jet;
+}
+
+void LmeBasis::tabulate_cell(std::span<const double> points, std::span<const int> cell_nodes, int order,
+                             std::span<double> basis, LmeWorkspace& ws) const {
+  check_order(order, "LmeBasis::tabulate_cell");
+  const auto d = static_cast<std::size_t>(dim());
+  const std::size_t nq = points.size() / d;
+  const std::size_t block = static_cast<std::size_t>(kernel::jet_size(dim(), order)) * cell_nodes.size();
+  if (points.size() % d != 0 || basis.size() < nq * block) {
+    throw std::invalid_argument("LmeBasis::tabulate_cell: " + std::to_string(points.size()) + " coordinates, buffer " +
+                                std::to_string(basis.size()) + " < " + std::to_string(nq * block) + " doubles");
+  }
+  for (std::size_t q = 0; q < nq; ++q) {
+    evaluate(points.subspan(q * d, d), cell_nodes, order, basis.subspan(q * block, block), ws);
+  }
+}
+
+void LmeBasis::solve_record(std::span<const double> x, std::span<const int> nbrs, int order, std::span<double> record,
+                            LmeWorkspace& ws) const {
+  check_order(order, "LmeBasis::solve_record");
+  if (x.size() != static_cast<std::size_t>(dim()) ||
+      record.size() < static_cast<std::size_t>(lme_record_size(dim(), order))) {
+    throw std::invalid_argument("LmeBasis::solve_record: bad point or record size");
+  }
+  dispatch(dim(), [&](auto dc) {
+    constexpr int D = decltype(dc)::value;
+    using K = Lme<D>;
+    const int ni = static_cast<int>(nbrs.size());
+    const double len = K::prepare(*this, x, nbrs, ws);
+    K::check_geometry(x, ni, len, ws, options_);
+    double lnz = 0.0;
+    const Vec<D> lam = K::newton(x, ni, ws, options_, lnz);
+    K::build_record(x, ni, ws, lam, lnz, order, options_.min_rcond, record.data());
+    K::unscale_record(order, len, record.data());
+  });
+}
+
+void LmeBasis::reconstruct(std::span<const double> x, std::span<const int> nbrs, int record_order,
+                           std::span<const double> record, int order, std::span<double> jet, std::size_t stride,
+                           std::span<const int> columns, LmeWorkspace& ws) const {
+  check_order(order, "LmeBasis::reconstruct");
+  if (order > record_order) {
+    throw std::invalid_argument("LmeBasis::reconstruct: order " + std::to_string(order) +
+                                " exceeds the record's order " + std::to_string(record_order));
+  }
+  if (!columns.empty() && columns.size() != nbrs.size()) {
+    throw std::invalid_argument("LmeBasis::reconstruct: columns and neighbours differ in size");
+  }
+  dispatch(dim(), [&](auto dc) {
+    constexpr int D = decltype(dc)::value;
+    const std::size_t n = nbrs.size();
+    ws.y.resize(n * D);
+    ws.beta.resize(n);
+    for (std::size_t a = 0; a < n; ++a) {
+      const auto b = static_cast<std::size_t>(nbrs[a]);
+      for (std::size_t i = 0; i < D; ++i) ws.y[a * D + i] = x[i] - nodes_.coords[b * D + i];
+      ws.beta[a] = beta_[b];
+    }
+    Lme<D>::jet(static_cast<int>(n), ws.y.data(), ws.beta.data(), record.data(), record_order, order, nullptr, 1.0,
+                jet.data(), stride, columns.empty() ? nullptr : columns.data());
+  });
+}
+
+}  // namespace lmeform
