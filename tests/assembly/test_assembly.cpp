@@ -8,6 +8,7 @@
 #include "assembly_fixtures.hpp"
 #include "lmeform/convex_hull.hpp"
 #include "lmeform/node_sets.hpp"
+#include "lmeform/quadrature_adequacy.hpp"
 #include "reference_kernels.hpp"
 
 namespace lmeform {
@@ -321,6 +322,57 @@ TEST(Assembly, ManufacturedPoissonConvergesAtSecondOrderInL2) {
       EXPECT_GE(rate_h1, 0.9) << "gamma " << gamma << " h " << e[k].h;
     }
   }
+}
+
+}  // namespace
+}  // namespace lmeform
+
+namespace lmeform {
+namespace {
+
+// A phase-field-like state: a tanh interface of width eps around a circle.
+std::vector<double> interface_state(const NodeSet& nodes, double eps) {
+  std::vector<double> u(nodes.size());
+  for (std::size_t a = 0; a < nodes.size(); ++a) {
+    const double x = nodes.coords[2 * a] - 0.5, y = nodes.coords[2 * a + 1] - 0.5;
+    u[a] = std::tanh((0.3 - std::sqrt(x * x + y * y)) / (std::sqrt(2.0) * eps));
+  }
+  return u;
+}
+
+TEST(QuadratureAdequacy, ThreePointsAreNotEnoughForAFourthOrderForm) {
+  const NodeSet nodes = uniform_grid(Box::unit(2), {26, 26, 1});
+  DiscretizationOptions opts;
+  opts.gamma = {1.6};
+  opts.basis_order = 2;
+  const Discretization disc(PETSC_COMM_SELF, nodes, opts);
+  const auto form = testing::JetKernel<testing::Bilaplacian>::descriptor("bilaplacian", nullptr, 0);
+  const auto u = interface_state(nodes, 0.06);
+  const auto three = check_quadrature(disc, form, u, {}, 3);
+  const auto twelve = check_quadrature(disc, form, u, {}, 12);
+  std::printf("bilaplacian on a tanh interface: %d vs %d points: energy %.2e gradient %.2e; %d vs %d: energy %.2e gradient %.2e (%d cells)\n",
+              three.points, three.richer_points, three.energy_relative_difference, three.gradient_relative_difference,
+              twelve.points, twelve.richer_points, twelve.energy_relative_difference, twelve.gradient_relative_difference,
+              twelve.cells_sampled);
+  EXPECT_EQ(three.richer_points, 6);
+  EXPECT_EQ(twelve.richer_points, 16);
+  // 3 points miss the energy by more than a percent; 12 points are ten times closer.
+  EXPECT_GT(three.energy_relative_difference, 1e-2);
+  EXPECT_LT(twelve.energy_relative_difference * 10, three.energy_relative_difference);
+  EXPECT_LT(twelve.gradient_relative_difference * 10, three.gradient_relative_difference);
+}
+
+TEST(QuadratureAdequacy, SecondOrderFormIsWellIntegratedBySixPoints) {
+  const NodeSet nodes = uniform_grid(Box::unit(2), {21, 21, 1});
+  DiscretizationOptions opts;
+  opts.gamma = {1.6};
+  const Discretization disc(PETSC_COMM_SELF, nodes, opts);
+  const auto form = testing::JetKernel<testing::Nonlinear>::descriptor("nonlinear", nullptr, 0);
+  const auto u = interface_state(nodes, 0.1);
+  const auto six = check_quadrature(disc, form, u, {}, 6, 0, 3);
+  EXPECT_EQ(six.richer_points, 7);
+  EXPECT_LT(six.energy_relative_difference, 1e-3);
+  EXPECT_THROW((void)check_quadrature(disc, form, u, {}, 19), std::invalid_argument);
 }
 
 }  // namespace
