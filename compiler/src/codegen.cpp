@@ -428,24 +428,30 @@ GeneratedModule generate(const CompiledForm& form, const std::string& source_nam
           ++nb;
         }
         k.n_blocks = nb;
+        double matrix_point_flops = 0;
+        int matrix_jets = 0;
         const std::size_t dsize = static_cast<std::size_t>(R) * S * ld;
-        h << "inline void " << k.symbol << "_matrix(const lmeform::kernel::CellInputs& in, double* local_matrix) {\n" << head
-          << "  static constexpr int slots[] = {" << slots.str() << "};\n";
-        if (nb > 0) h << "  static constexpr lmeform::kernel::MatrixBlock blocks[] = {" << bl.str() << "};\n";
-        h << "  double* Bs = in.workspace;  // gathered basis rows (nq*S x n)\n"
-          << "  double* D = Bs + std::size_t(nq) * " << S << " * std::size_t(n);  // w_q d2f/dJ2 per point\n"
-          << "  double* work = D + std::size_t(nq) * " << dsize << ";\n"
-          << "  std::fill(D, D + std::size_t(nq) * " << dsize << ", 0.0);\n";
-        const auto [fl, nj] = w.point_loop(h, roots, sink.str());
-        h << "  lmeform::kernel::gather_slots(in, " << dim << ", " << S << ", slots, Bs);\n";
-        if (nb > 0)
-          h << "  lmeform::kernel::contract_matrix(n, nq, " << S << ", " << R << ", " << C
-            << ", Bs, D, blocks, " << nb << ", work, local_matrix);\n";
-        else
-          h << "  (void)work; (void)local_matrix;\n";
-        h << "}\n\n";
+        h << "inline void " << k.symbol << "_matrix(const lmeform::kernel::CellInputs& in, double* local_matrix) {\n";
+        if (nb == 0) {
+          // Structurally zero (e.g. a functional linear in the unknowns): nothing to accumulate.
+          h << "  (void)in;\n  (void)local_matrix;\n}\n\n";
+        } else {
+          h << head << "  static constexpr int slots[] = {" << slots.str() << "};\n"
+            << "  static constexpr lmeform::kernel::MatrixBlock blocks[] = {" << bl.str() << "};\n"
+            << "  double* Bs = in.workspace;  // gathered basis rows (nq*S x n)\n"
+            << "  double* D = Bs + std::size_t(nq) * " << S << " * std::size_t(n);  // w_q d2f/dJ2 per point\n"
+            << "  double* work = D + std::size_t(nq) * " << dsize << ";\n"
+            << "  std::fill(D, D + std::size_t(nq) * " << dsize << ", 0.0);\n";
+          const auto [fl, nj] = w.point_loop(h, roots, sink.str());
+          h << "  lmeform::kernel::gather_slots(in, " << dim << ", " << S << ", slots, Bs);\n"
+            << "  lmeform::kernel::contract_matrix(n, nq, " << S << ", " << R << ", " << C
+            << ", Bs, D, blocks, " << nb << ", work, local_matrix);\n}\n\n";
+          matrix_point_flops = fl;
+          matrix_jets = nj;
+        }
         const double mirror_blocks = static_cast<double>(blocks.size());
-        k.matrix = {fl + static_cast<double>(p.matrix.size()), 2.0 * nj + 2.0 * S * S * nb, 2.0 * S * nb + (mirror_blocks - nb)};
+        k.matrix = {matrix_point_flops + static_cast<double>(p.matrix.size()), 2.0 * matrix_jets + 2.0 * S * S * nb,
+                    2.0 * S * nb + (mirror_blocks - nb)};
         ir_text << " matrix (d2f/dJ2):\n";
         dump(roots);
         for (const auto& e : p.matrix)
