@@ -129,9 +129,10 @@ void check_kernels(const FormKernels& k) {
       for (std::size_t i = 0; i < N; ++i)
         EXPECT_NEAR(H[i * N + j], (gp[i] - gm[i]) / (2 * h), 1e-6 * scale) << "matrix entry " << i << "," << j;
     }
-    if (k.kind == FunctionalKind::Energy || k.kind == FunctionalKind::Constraint)
+    if (k.kind == FunctionalKind::Energy || k.kind == FunctionalKind::Constraint) {
       for (std::size_t i = 0; i < N; ++i)
         for (std::size_t j = 0; j < i; ++j) EXPECT_NEAR(H[i * N + j], H[j * N + i], 1e-12 * scale);
+    }
   }
 }
 
