@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <iomanip>
 #include <limits>
 #include <sstream>
 #include <string>
@@ -227,9 +228,9 @@ struct Lme {
       const bool converged = gnorm <= tol;
       if (converged && polish >= kPolish) return lam;
       if (!converged && it >= opt.max_iterations) {
-        throw LmeEvaluationError(LmeFailure::not_converged, x, static_cast<std::size_t>(n), gnorm,
-                                 std::to_string(opt.max_iterations) + " iterations, tolerance " +
-                                     std::to_string(tol));
+        std::ostringstream os;
+        os << opt.max_iterations << " iterations, tolerance " << std::scientific << std::setprecision(1) << tol;
+        throw LmeEvaluationError(LmeFailure::not_converged, x, static_cast<std::size_t>(n), gnorm, os.str());
       }
       if (!converged && it >= 2) {
         // A certificate, not a guess: all neighbours strictly behind a plane through x.
