@@ -1,0 +1,78 @@
+// Output files: nodal fields in HDF5 with an XDMF sidecar (opens in ParaView), and atomic writes
+// of small text files. Nothing is ever half-written: every file is written to "<path>.tmp" and
+// renamed into place at the end; on any error the temporaries are removed and an exception
+// naming the path and the HDF5 / OS error is thrown.
+//
+// The HDF5 writer is serial: call it on one rank (rank 0) with the data gathered in the original
+// node order. Library `lmeform_io` (alias `lmeform::io`); see docs/output.md for the file layout.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <span>
+#include <string>
+#include <string_view>
+#include <variant>
+#include <vector>
+
+#include "lmeform/delaunay.hpp"
+#include "lmeform/node_set.hpp"
+
+namespace lmeform {
+
+/// A nodal field to write: `components` values per node, node-major
+/// (value k of node a is values[a * components + k]); values.size() == nodes * components.
+struct FieldView {
+  std::span<const double> values;
+  int components = 1;
+};
+
+/// A root attribute: a number (energy, eps), an integer (step, iterations) or a string.
+/// An `int` argument becomes std::int64_t, a string literal becomes std::string.
+using OutputAttribute = std::variant<double, std::int64_t, std::string>;
+
+using FieldViews = std::map<std::string, FieldView, std::less<>>;
+using OutputAttributes = std::map<std::string, OutputAttribute, std::less<>>;
+
+/// Writes `path` (HDF5) with
+///   /nodes            N x d   float64   (the node coordinates; r, z for axisymmetric runs)
+///   /cells            M x (d+1) int32   (background cells, 0-based node indices)
+///   /fields/<name>    N or N x components float64
+///   root attributes   one per entry of `attributes` (float64, int64 or UTF-8 string)
+/// and, for d = 2 or 3, the XDMF 3 sidecar "<stem>.xmf" next to it (Triangle / Tetrahedron
+/// topology, XY / XYZ geometry, one node-centred Attribute per field), which references the .h5 by
+/// its file name (keep the two files in the same folder). In 1D only the .h5 is written.
+/// Both files appear together or not at all (written as "*.tmp", renamed at the end).
+/// Throws std::invalid_argument for inconsistent input (field length, cell indices, field names),
+/// std::runtime_error naming the path and the HDF5 / OS error when writing fails.
+void write_field_hdf5(const std::filesystem::path& path, const NodeSet& nodes, const BackgroundCells& cells,
+                      const FieldViews& fields, const OutputAttributes& attributes = {});
+
+/// The XDMF sidecar's path for an HDF5 path: "out/state.h5" -> "out/state.xmf".
+[[nodiscard]] std::filesystem::path xdmf_sidecar_path(const std::filesystem::path& h5_path);
+
+/// A field read back from a file.
+struct FieldData {
+  std::vector<double> values;
+  int components = 1;
+};
+
+/// Everything write_field_hdf5 stores. cells.measures are recomputed from the coordinates.
+struct FieldFile {
+  NodeSet nodes;
+  BackgroundCells cells;
+  std::map<std::string, FieldData, std::less<>> fields;
+  std::map<std::string, OutputAttribute, std::less<>> attributes;
+};
+
+/// Reads a file written by write_field_hdf5 (for tests and restarts). Throws std::runtime_error
+/// naming the path and what is missing or malformed (e.g. "missing dataset /nodes").
+[[nodiscard]] FieldFile read_field_hdf5(const std::filesystem::path& path);
+
+/// Writes a small text file (JSON, CSV, a table) atomically: "<path>.tmp", flushed and fsynced,
+/// then renamed onto `path`. On failure the temporary is removed and std::runtime_error names the
+/// path and the OS error; an existing `path` is left as it was.
+void write_text_atomically(const std::filesystem::path& path, std::string_view content);
+
+}  // namespace lmeform

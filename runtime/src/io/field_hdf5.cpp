@@ -1,0 +1,424 @@
+// Field files: nodes, background cells and nodal fields in HDF5 (+ XDMF sidecar), and reading them back.
+#include <hdf5.h>
+
+#include <algorithm>
+#include <cstring>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "io_detail.hpp"
+#include "lmeform/output.hpp"
+
+namespace lmeform {
+namespace {
+
+constexpr const char* kFormatName = "lmeform-fields";
+constexpr std::int64_t kFormatVersion = 1;
+
+// ---- HDF5 plumbing -------------------------------------------------------------------------------
+
+// Turns HDF5's automatic error printing off for one call of ours and restores it afterwards:
+// errors are reported through our exceptions instead of on stderr.
+class QuietHdf5Errors {
+ public:
+  QuietHdf5Errors() {
+    H5Eget_auto2(H5E_DEFAULT, &func_, &data_);
+    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
+  }
+  QuietHdf5Errors(const QuietHdf5Errors&) = delete;
+  QuietHdf5Errors& operator=(const QuietHdf5Errors&) = delete;
+  ~QuietHdf5Errors() { H5Eset_auto2(H5E_DEFAULT, func_, data_); }
+
+ private:
+  H5E_auto2_t func_ = nullptr;
+  void* data_ = nullptr;
+};
+
+herr_t collect_error(unsigned n, const H5E_error2_t* err, void* data) {
+  auto* lines = static_cast<std::vector<std::string>*>(data);
+  if (err != nullptr && err->desc != nullptr) {
+    (void)n;
+    lines->emplace_back(err->desc);
+  }
+  return 0;
+}
+
+// The current HDF5 error stack as one line: the outermost description and the innermost one
+// (which carries errno and the OS message for file errors). Call right after the failing call.
+std::string hdf5_error() {
+  std::vector<std::string> lines;
+  H5Ewalk2(H5E_DEFAULT, H5E_WALK_DOWNWARD, collect_error, &lines);
+  H5Eclear2(H5E_DEFAULT);
+  if (lines.empty()) return "HDF5 error (no details)";
+  if (lines.size() == 1 || lines.front() == lines.back()) return "HDF5: " + lines.front();
+  return "HDF5: " + lines.front() + " (" + lines.back() + ")";
+}
+
+// An HDF5 identifier closed on scope exit; close() reports a failing close.
+class Handle {
+ public:
+  using Closer = herr_t (*)(hid_t);
+  Handle() = default;
+  Handle(hid_t id, Closer closer) noexcept : id_(id), closer_(closer) {}
+  Handle(const Handle&) = delete;
+  Handle& operator=(const Handle&) = delete;
+  Handle(Handle&& other) noexcept : id_(std::exchange(other.id_, H5I_INVALID_HID)), closer_(other.closer_) {}
+  Handle& operator=(Handle&&) = delete;
+  ~Handle() {
+    if (id_ >= 0 && closer_ != nullptr) closer_(id_);
+  }
+  [[nodiscard]] hid_t get() const noexcept { return id_; }
+  herr_t close() noexcept {
+    const hid_t id = std::exchange(id_, H5I_INVALID_HID);
+    return id >= 0 && closer_ != nullptr ? closer_(id) : 0;
+  }
+
+ private:
+  hid_t id_ = H5I_INVALID_HID;
+  Closer closer_ = nullptr;
+};
+
+// Throws "<context>: <what>: <HDF5 error>" when an HDF5 call failed.
+struct Checker {
+  std::string context;
+
+  [[noreturn]] void fail(const std::string& what) const {
+    throw std::runtime_error(context + ": " + what + ": " + hdf5_error());
+  }
+  Handle handle(hid_t id, Handle::Closer closer, const std::string& what) const {
+    if (id < 0) fail(what);
+    return {id, closer};
+  }
+  void status(herr_t status, const std::string& what) const {
+    if (status < 0) fail(what);
+  }
+};
+
+// ---- writing -------------------------------------------------------------------------------------
+
+void write_dataset(const Checker& check, hid_t parent, const std::string& name, hid_t file_type, hid_t mem_type,
+                   const std::vector<hsize_t>& dims, const void* data) {
+  const Handle space =
+      check.handle(H5Screate_simple(static_cast<int>(dims.size()), dims.data(), nullptr), H5Sclose,
+                   "cannot create the dataspace of " + name);
+  const Handle set = check.handle(H5Dcreate2(parent, name.c_str(), file_type, space.get(), H5P_DEFAULT,
+                                             H5P_DEFAULT, H5P_DEFAULT),
+                                  H5Dclose, "cannot create dataset " + name);
+  hsize_t count = 1;
+  for (const hsize_t d : dims) count *= d;
+  if (count > 0) {
+    check.status(H5Dwrite(set.get(), mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, data), "cannot write dataset " + name);
+  }
+}
+
+void write_attribute(const Checker& check, hid_t object, const std::string& name, const OutputAttribute& value) {
+  const Handle space = check.handle(H5Screate(H5S_SCALAR), H5Sclose, "cannot create a scalar dataspace");
+  const std::string what = "cannot write attribute '" + name + "'";
+  if (const auto* d = std::get_if<double>(&value)) {
+    const Handle a = check.handle(
+        H5Acreate2(object, name.c_str(), H5T_IEEE_F64LE, space.get(), H5P_DEFAULT, H5P_DEFAULT), H5Aclose, what);
+    check.status(H5Awrite(a.get(), H5T_NATIVE_DOUBLE, d), what);
+  } else if (const auto* i = std::get_if<std::int64_t>(&value)) {
+    const Handle a = check.handle(
+        H5Acreate2(object, name.c_str(), H5T_STD_I64LE, space.get(), H5P_DEFAULT, H5P_DEFAULT), H5Aclose, what);
+    check.status(H5Awrite(a.get(), H5T_NATIVE_INT64, i), what);
+  } else {
+    const std::string& s = std::get<std::string>(value);
+    const Handle type = check.handle(H5Tcopy(H5T_C_S1), H5Tclose, what);
+    check.status(H5Tset_size(type.get(), H5T_VARIABLE), what);
+    check.status(H5Tset_cset(type.get(), H5T_CSET_UTF8), what);
+    const Handle a = check.handle(
+        H5Acreate2(object, name.c_str(), type.get(), space.get(), H5P_DEFAULT, H5P_DEFAULT), H5Aclose, what);
+    const char* text = s.c_str();
+    check.status(H5Awrite(a.get(), type.get(), static_cast<const void*>(&text)), what);
+  }
+}
+
+void validate(const std::string& context, const NodeSet& nodes, const BackgroundCells& cells,
+              const FieldViews& fields, const OutputAttributes& attributes) {
+  const auto bad = [&](const std::string& what) { throw std::invalid_argument(context + ": " + what); };
+  if (nodes.dim < 1 || nodes.dim > 3) bad("node dimension must be 1, 2 or 3, got " + std::to_string(nodes.dim));
+  const std::size_t n = nodes.size();
+  if (n == 0) bad("the node set is empty");
+  if (n > static_cast<std::size_t>(std::numeric_limits<int>::max())) bad("too many nodes for int32 cell indices");
+  const int per_cell = nodes.dim + 1;
+  if (!cells.connectivity.empty()) {
+    if (cells.dim != nodes.dim) {
+      bad("cells of dimension " + std::to_string(cells.dim) + " over nodes of dimension " + std::to_string(nodes.dim));
+    }
+    if (cells.vertices_per_cell != per_cell) {
+      bad(std::to_string(cells.vertices_per_cell) + " vertices per cell, expected " + std::to_string(per_cell));
+    }
+    if (cells.connectivity.size() % static_cast<std::size_t>(per_cell) != 0) {
+      bad("connectivity length " + std::to_string(cells.connectivity.size()) + " is not a multiple of " +
+          std::to_string(per_cell));
+    }
+    const auto [lo, hi] = std::minmax_element(cells.connectivity.begin(), cells.connectivity.end());
+    if (*lo < 0 || static_cast<std::size_t>(*hi) >= n) {
+      bad("cell node index " + std::to_string(*lo < 0 ? *lo : *hi) + " outside [0, " + std::to_string(n) + ")");
+    }
+  }
+  for (const auto& [name, field] : fields) {
+    if (name.empty() || name == "." || name.find('/') != std::string::npos) {
+      bad("field name '" + name + "' is empty, '.' or contains '/'");
+    }
+    if (field.components < 1) bad("field '" + name + "' has " + std::to_string(field.components) + " components");
+    const std::size_t expected = n * static_cast<std::size_t>(field.components);
+    if (field.values.size() != expected) {
+      bad("field '" + name + "' has " + std::to_string(field.values.size()) + " values, expected " +
+          std::to_string(expected) + " (" + std::to_string(n) + " nodes x " + std::to_string(field.components) +
+          " components)");
+    }
+  }
+  for (const auto& entry : attributes) {
+    if (entry.first.empty()) bad("an attribute has an empty name");
+  }
+}
+
+void write_hdf5_file(const Checker& check, const std::filesystem::path& file, const NodeSet& nodes,
+                     const BackgroundCells& cells, const FieldViews& fields, const OutputAttributes& attributes) {
+  Handle h5 = check.handle(H5Fcreate(file.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT), H5Fclose,
+                           "cannot create '" + file.string() + "'");
+  {
+    const auto n = static_cast<hsize_t>(nodes.size());
+    const auto d = static_cast<hsize_t>(nodes.dim);
+    const auto per_cell = d + 1;
+    const auto m = static_cast<hsize_t>(cells.connectivity.size()) / per_cell;
+    write_dataset(check, h5.get(), "nodes", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, {n, d}, nodes.coords.data());
+    write_dataset(check, h5.get(), "cells", H5T_STD_I32LE, H5T_NATIVE_INT, {m, per_cell},
+                  cells.connectivity.data());
+    const Handle group = check.handle(H5Gcreate2(h5.get(), "fields", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT),
+                                      H5Gclose, "cannot create group /fields");
+    write_attribute(check, group.get(), "format", std::string(kFormatName));
+    write_attribute(check, group.get(), "version", kFormatVersion);
+    for (const auto& [name, field] : fields) {
+      std::vector<hsize_t> dims{n};
+      if (field.components > 1) dims.push_back(static_cast<hsize_t>(field.components));
+      write_dataset(check, group.get(), name, H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, dims, field.values.data());
+    }
+    for (const auto& [name, value] : attributes) write_attribute(check, h5.get(), name, value);
+  }
+  check.status(H5Fflush(h5.get(), H5F_SCOPE_GLOBAL), "cannot flush '" + file.string() + "'");
+  check.status(h5.close(), "cannot close '" + file.string() + "'");
+}
+
+// ---- reading -------------------------------------------------------------------------------------
+
+struct DatasetShape {
+  std::vector<hsize_t> dims;
+};
+
+DatasetShape shape_of(const Checker& check, hid_t set, const std::string& name) {
+  const Handle space = check.handle(H5Dget_space(set), H5Sclose, "cannot read the dataspace of " + name);
+  const int rank = H5Sget_simple_extent_ndims(space.get());
+  if (rank < 0) check.fail("cannot read the rank of " + name);
+  DatasetShape shape;
+  shape.dims.resize(static_cast<std::size_t>(rank));
+  if (rank > 0 && H5Sget_simple_extent_dims(space.get(), shape.dims.data(), nullptr) < 0) {
+    check.fail("cannot read the dimensions of " + name);
+  }
+  return shape;
+}
+
+bool link_exists(hid_t location, const char* name) {
+  const htri_t e = H5Lexists(location, name, H5P_DEFAULT);
+  return e > 0;
+}
+
+Handle open_dataset(const Checker& check, hid_t location, const std::string& name, const std::string& shown) {
+  if (!link_exists(location, name.c_str())) throw std::runtime_error(check.context + ": missing dataset " + shown);
+  return check.handle(H5Dopen2(location, name.c_str(), H5P_DEFAULT), H5Dclose, "cannot open dataset " + shown);
+}
+
+OutputAttribute read_attribute(const Checker& check, hid_t object, const std::string& name) {
+  const std::string what = "cannot read attribute '" + name + "'";
+  const Handle a = check.handle(H5Aopen(object, name.c_str(), H5P_DEFAULT), H5Aclose, what);
+  const Handle type = check.handle(H5Aget_type(a.get()), H5Tclose, what);
+  const Handle space = check.handle(H5Aget_space(a.get()), H5Sclose, what);
+  const hssize_t count = H5Sget_simple_extent_npoints(space.get());
+  if (count != 1) throw std::runtime_error(check.context + ": attribute '" + name + "' is not a scalar");
+  switch (H5Tget_class(type.get())) {
+    case H5T_FLOAT: {
+      double v = 0;
+      check.status(H5Aread(a.get(), H5T_NATIVE_DOUBLE, &v), what);
+      return v;
+    }
+    case H5T_INTEGER: {
+      std::int64_t v = 0;
+      check.status(H5Aread(a.get(), H5T_NATIVE_INT64, &v), what);
+      return v;
+    }
+    case H5T_STRING: {
+      if (H5Tis_variable_str(type.get()) > 0) {
+        const Handle mem = check.handle(H5Tcopy(H5T_C_S1), H5Tclose, what);
+        check.status(H5Tset_size(mem.get(), H5T_VARIABLE), what);
+        check.status(H5Tset_cset(mem.get(), H5Tget_cset(type.get())), what);
+        char* text = nullptr;
+        check.status(H5Aread(a.get(), mem.get(), static_cast<void*>(&text)), what);
+        std::string s = text != nullptr ? text : "";
+        H5free_memory(text);
+        return s;
+      }
+      const std::size_t size = H5Tget_size(type.get());
+      std::string s(size, '\0');
+      check.status(H5Aread(a.get(), type.get(), s.data()), what);
+      s.resize(std::strlen(s.c_str()));
+      return s;
+    }
+    default:
+      throw std::runtime_error(check.context + ": attribute '" + name + "' is neither a number nor a string");
+  }
+}
+
+herr_t collect_name(hid_t, const char* name, const H5A_info_t*, void* data) {
+  static_cast<std::vector<std::string>*>(data)->emplace_back(name);
+  return 0;
+}
+
+}  // namespace
+
+std::filesystem::path xdmf_sidecar_path(const std::filesystem::path& h5_path) {
+  std::filesystem::path xmf = h5_path;
+  xmf.replace_extension(".xmf");
+  return xmf;
+}
+
+void write_field_hdf5(const std::filesystem::path& path, const NodeSet& nodes, const BackgroundCells& cells,
+                      const FieldViews& fields, const OutputAttributes& attributes) {
+  const std::string context = "write_field_hdf5: " + path.string();
+  if (path.filename().empty() || path.extension() == ".xmf" || path.extension() == ".tmp") {
+    throw std::invalid_argument(context + ": expected a file name such as 'state.h5'");
+  }
+  validate(context, nodes, cells, fields, attributes);
+
+  const bool sidecar = nodes.dim >= 2;
+  const auto xmf = xdmf_sidecar_path(path);
+  const auto h5_tmp = io_detail::temporary_path(path);
+  const auto xmf_tmp = io_detail::temporary_path(xmf);
+  const QuietHdf5Errors quiet;
+  const Checker check{context};
+  bool xmf_renamed = false;
+  try {
+    write_hdf5_file(check, h5_tmp, nodes, cells, fields, attributes);
+    io_detail::sync_file(h5_tmp, context);
+    if (sidecar) {
+      std::vector<std::pair<std::string, int>> listed;
+      for (const auto& [name, field] : fields) listed.emplace_back(name, field.components);
+      const std::string xml = io_detail::xdmf_document(path.filename().string(), nodes.dim, nodes.size(),
+                                                       cells.connectivity.size() / static_cast<std::size_t>(nodes.dim + 1),
+                                                       listed);
+      io_detail::write_and_sync(xmf_tmp, xml, context);
+      // The sidecar first, the data last: whenever the new .h5 is in place, so is its .xmf.
+      io_detail::rename_into_place(xmf_tmp, xmf, context);
+      xmf_renamed = true;
+    }
+    io_detail::rename_into_place(h5_tmp, path, context);
+  } catch (...) {
+    io_detail::remove_quietly(h5_tmp);
+    io_detail::remove_quietly(xmf_tmp);
+    if (xmf_renamed) io_detail::remove_quietly(xmf);  // it would describe an .h5 that is not there
+    throw;
+  }
+  io_detail::sync_parent_directory(path);
+}
+
+FieldFile read_field_hdf5(const std::filesystem::path& path) {
+  const std::string context = "read_field_hdf5: " + path.string();
+  const QuietHdf5Errors quiet;
+  const Checker check{context};
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) throw std::runtime_error(context + ": no such file");
+  const htri_t is_hdf5 = H5Fis_hdf5(path.c_str());
+  if (is_hdf5 <= 0) throw std::runtime_error(context + ": not an HDF5 file");
+  const Handle h5 = check.handle(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose, "cannot open");
+
+  FieldFile out;
+  // /nodes: N x d
+  std::size_t n = 0;
+  {
+    const Handle set = open_dataset(check, h5.get(), "nodes", "/nodes");
+    const auto dims = shape_of(check, set.get(), "/nodes").dims;
+    if (dims.size() != 2 || dims[1] < 1 || dims[1] > 3) {
+      throw std::runtime_error(context + ": /nodes must be N x d with d in 1..3");
+    }
+    n = static_cast<std::size_t>(dims[0]);
+    const int d = static_cast<int>(dims[1]);
+    std::vector<double> coords(n * static_cast<std::size_t>(d));
+    if (!coords.empty()) {
+      check.status(H5Dread(set.get(), H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, coords.data()),
+                   "cannot read /nodes");
+    }
+    out.nodes = NodeSet(d, std::move(coords));
+  }
+  // /cells: M x (d+1)
+  {
+    const int d = out.nodes.dim;
+    const Handle set = open_dataset(check, h5.get(), "cells", "/cells");
+    const auto dims = shape_of(check, set.get(), "/cells").dims;
+    if (dims.size() != 2 || dims[1] != static_cast<hsize_t>(d + 1)) {
+      throw std::runtime_error(context + ": /cells must be M x " + std::to_string(d + 1));
+    }
+    out.cells.dim = d;
+    out.cells.vertices_per_cell = d + 1;
+    out.cells.connectivity.resize(static_cast<std::size_t>(dims[0] * dims[1]));
+    if (!out.cells.connectivity.empty()) {
+      check.status(H5Dread(set.get(), H5T_NATIVE_INT, H5S_ALL, H5S_ALL, H5P_DEFAULT, out.cells.connectivity.data()),
+                   "cannot read /cells");
+    }
+    for (const int v : out.cells.connectivity) {
+      if (v < 0 || static_cast<std::size_t>(v) >= n) {
+        throw std::runtime_error(context + ": /cells refers to node " + std::to_string(v) + " of " + std::to_string(n));
+      }
+    }
+    const std::size_t m = static_cast<std::size_t>(dims[0]);
+    out.cells.measures.resize(m);
+    for (std::size_t c = 0; c < m; ++c) out.cells.measures[c] = simplex_signed_measure(out.nodes, out.cells.cell(c));
+  }
+  // /fields/<name>
+  {
+    if (!link_exists(h5.get(), "fields")) throw std::runtime_error(context + ": missing group /fields");
+    const Handle group = check.handle(H5Gopen2(h5.get(), "fields", H5P_DEFAULT), H5Gclose, "cannot open /fields");
+    H5G_info_t info{};
+    check.status(H5Gget_info(group.get(), &info), "cannot list /fields");
+    for (hsize_t i = 0; i < info.nlinks; ++i) {
+      const ssize_t length =
+          H5Lget_name_by_idx(group.get(), ".", H5_INDEX_NAME, H5_ITER_INC, i, nullptr, 0, H5P_DEFAULT);
+      if (length < 0) check.fail("cannot list /fields");
+      std::string name(static_cast<std::size_t>(length) + 1, '\0');
+      if (H5Lget_name_by_idx(group.get(), ".", H5_INDEX_NAME, H5_ITER_INC, i, name.data(), name.size(),
+                             H5P_DEFAULT) < 0) {
+        check.fail("cannot list /fields");
+      }
+      name.resize(static_cast<std::size_t>(length));
+      const std::string shown = "/fields/" + name;
+      const Handle set = open_dataset(check, group.get(), name, shown);
+      const auto dims = shape_of(check, set.get(), shown).dims;
+      if (dims.empty() || dims.size() > 2 || dims[0] != n) {
+        throw std::runtime_error(context + ": " + shown + " must have " + std::to_string(n) +
+                                 " rows (one per node), with at most one more dimension");
+      }
+      FieldData field;
+      field.components = dims.size() == 2 ? static_cast<int>(dims[1]) : 1;
+      field.values.resize(n * static_cast<std::size_t>(field.components));
+      if (!field.values.empty()) {
+        check.status(H5Dread(set.get(), H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, field.values.data()),
+                     "cannot read " + shown);
+      }
+      out.fields.emplace(std::move(name), std::move(field));
+    }
+  }
+  // Root attributes.
+  {
+    std::vector<std::string> names;
+    hsize_t index = 0;
+    check.status(H5Aiterate2(h5.get(), H5_INDEX_NAME, H5_ITER_INC, &index, collect_name, &names),
+                 "cannot list the root attributes");
+    for (const auto& name : names) out.attributes.emplace(name, read_attribute(check, h5.get(), name));
+  }
+  return out;
+}
+
+}  // namespace lmeform
