@@ -75,7 +75,10 @@ int run(const Options& opt) {
     if (opt.json) files.emplace_back(fs::path(opt.out_dir) / (form.module + ".json"), gen.json);
     if (!opt.depfile.empty()) {
       std::string dep = make_escape(header.string()) + ":";
-      for (const auto& d : form.dependencies) dep += " " + make_escape(fs::absolute(d).lexically_normal().string());
+      for (const auto& d : form.dependencies) {
+        dep += ' ';  // appended separately: `" " + string` trips GCC 12's -Wrestrict false positive
+        dep += make_escape(fs::absolute(d).lexically_normal().string());
+      }
       files.emplace_back(opt.depfile, dep + "\n");
     }
     for (const auto& [p, t] : files) write_atomically(p, t);
