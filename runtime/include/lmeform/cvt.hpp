@@ -1,0 +1,125 @@
+// Adaptivity: node relocation by a centroidal Voronoi tessellation (CVT) with a density, the
+// phase-field density rho = 1 + f |grad phi|, nodal spacing statistics and the resolution check
+// eps >= 2 h_min of the seed (Appendix B, Table B.6). See docs/adaptivity.md.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "lmeform/node_set.hpp"
+#include "lmeform/node_sets.hpp"
+
+namespace lmeform {
+
+/// A density on the box: rho(x) > 0 and finite at every sample point (x has dim entries).
+using Density = std::function<double(std::span<const double>)>;
+
+struct CvtOptions {
+  int iterations = 50;            ///< maximum number of Lloyd iterations
+  double samples_per_node = 64;   ///< sample points per node (a stratified lattice over the box)
+  /// Stop when the mean node displacement of an iteration is below tolerance * h_bar, with
+  /// h_bar = (box volume / node count)^(1/dim) the spacing of a uniform set. 0 runs all iterations.
+  double tolerance = 1e-3;
+  std::uint64_t seed = 1;         ///< seeds the stratified jitter of the samples (deterministic)
+  /// Nodes closer than this (relative to the box diagonal) to a face of the box are boundary nodes.
+  double boundary_tolerance = 1e-10;
+};
+
+struct CvtIteration {
+  double mean_displacement = 0.0;
+  double max_displacement = 0.0;
+  std::size_t empty_cells = 0;    ///< nodes that received no sample (they stay where they are)
+};
+
+struct CvtReport {
+  std::vector<CvtIteration> iterations;
+  bool converged = false;         ///< the tolerance was met before the iteration limit
+  std::size_t samples = 0;        ///< sample points used
+  double h_bar = 0.0;             ///< (volume / nodes)^(1/dim), the scale of the tolerance
+};
+
+/// Lloyd iterations towards a CVT of the box with density rho, in 1, 2 or 3 dimensions.
+/// Voronoi cells are approximated by a fixed set of samples (one jittered point per cell of a fine
+/// lattice, weight rho(x_s) times the lattice cell volume) assigned to their nearest node (kd-tree);
+/// each node moves to the rho-weighted centroid of its samples.
+/// Boundary rule: a node on some faces of the box keeps those coordinates and moves only along the
+/// free ones (to the corresponding components of its weighted cell centroid), so corners are
+/// fixed, edge nodes slide along their edge and (3D) face nodes slide in their face. Node count,
+/// order and boundary membership are preserved. A node whose cell has no sample stays in place.
+/// Deterministic: the same input and seed give bit-identical nodes.
+/// Throws std::invalid_argument for a node outside the box, coincident nodes, a dimension
+/// mismatch, bad options, or a density that is not positive and finite at a sample.
+[[nodiscard]] NodeSet cvt_relocate(const NodeSet& nodes, const Box& box, const Density& density,
+                                   const CvtOptions& options = {}, CvtReport* report = nullptr);
+
+/// rho(x) = 1 + f * grad_norm(x) (seed Section 3.13). f >= 0; grad_norm(x) must be >= 0.
+[[nodiscard]] Density phase_field_density(double f, std::function<double(std::span<const double>)> grad_norm);
+
+/// rho from nodal values of |grad phi|: the values are interpolated piecewise linearly on the
+/// Delaunay cells of `nodes` (nearest node outside the hull). grad_norm_at_nodes has one entry per node.
+[[nodiscard]] Density phase_field_density(double f, const NodeSet& nodes, std::span<const double> grad_norm_at_nodes);
+
+// ---------------------------------------------------------------------------------------------
+// Nodal spacing and the resolution criterion eps >= 2 h_min (seed Appendix B).
+
+enum class SpacingMeasure {
+  /// Seed Appendix B: h_a = mean distance from x_a to its first ring of Voronoi neighbours, i.e. the
+  /// Delaunay neighbours whose Voronoi cells share a facet of positive measure (the diagonals of the
+  /// squares/cubes of a regular grid share only a vertex/edge and are left out).
+  voronoi_ring,
+  /// nodal_spacing() of neighbour_search.hpp: mean distance to the 2*dim nearest nodes.
+  nearest,
+};
+
+struct SpacingOptions {
+  SpacingMeasure measure = SpacingMeasure::voronoi_ring;
+  /// h_min is this quantile of the h_a (0 = the smallest h_a). The seed takes "the nodal spacing of
+  /// the left peak" of the histogram; a low quantile lies in that peak whenever the refined region
+  /// holds more than this fraction of the nodes, and is insensitive to a few isolated close nodes.
+  double h_min_quantile = 0.05;
+};
+
+struct SpacingSummary {
+  std::vector<double> h;          ///< h_a per node
+  double h_min = 0.0;             ///< the h_min_quantile quantile of h
+  double h_mean = 0.0;
+  double h_max = 0.0;
+  double eps_min = 0.0;           ///< 2 * h_min: the smallest admissible eps
+  SpacingSummary() = default;
+};
+
+/// Nodal spacing per node and its statistics. Throws std::invalid_argument for fewer than dim + 1
+/// nodes, coincident nodes, or a quantile outside [0, 1].
+[[nodiscard]] SpacingSummary spacing_summary(const NodeSet& nodes, const SpacingOptions& options = {});
+
+/// h_a by the Voronoi ring (see SpacingMeasure::voronoi_ring).
+[[nodiscard]] std::vector<double> voronoi_ring_spacing(const NodeSet& nodes);
+
+/// The smallest admissible eps for the node set: 2 * h_min.
+[[nodiscard]] double min_admissible_eps(const NodeSet& nodes, const SpacingOptions& options = {});
+
+/// Throws std::invalid_argument when eps < 2 h_min (under-resolved); the message gives eps, h_min
+/// and the smallest admissible eps. Also refuses eps that is not positive and finite.
+void check_resolution(double eps, const NodeSet& nodes, const SpacingOptions& options = {});
+void check_resolution(double eps, const SpacingSummary& spacing);
+
+// ---------------------------------------------------------------------------------------------
+// The progressive schedule of seed Table B.6: adapt the grid with a moderate f using the phase
+// field of the previous eps, then lower eps (f = 10, 100, 1000 in successive stages).
+
+struct ScheduleStage {
+  std::string grid;      ///< the adapted grid this stage produces (e.g. "O11")
+  double f = 0.0;        ///< amplification factor of rho = 1 + f |grad phi|
+  double eps_phi = 0.0;  ///< eps of the phase field Phi whose gradient drives the CVT
+};
+
+/// The stages of Table B.6 starting from the uniform grid `start` ("O1", "O2", "O3" or "P1").
+/// Throws std::invalid_argument for another name.
+[[nodiscard]] std::vector<ScheduleStage> table_b6_schedule(const std::string& start);
+
+}  // namespace lmeform

@@ -1,0 +1,249 @@
+// CVT node relocation, phase-field density, nodal spacing and the eps >= 2 h_min check.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <span>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "lmeform/cvt.hpp"
+#include "lmeform/neighbour_search.hpp"
+#include "lmeform/node_sets.hpp"
+
+namespace lmeform {
+namespace {
+
+constexpr double kR = 0.3;
+constexpr double kW = 0.03;
+
+double ring_distance(std::span<const double> x) {
+  return std::hypot(x[0] - 0.5, x[1] - 0.5) - kR;
+}
+
+// |grad phi| of phi = tanh(d / (sqrt(2) w)) up to a constant: 1 / cosh^2.
+double grad_norm(std::span<const double> x) {
+  const double c = std::cosh(ring_distance(x) / kW);
+  return 1.0 / (c * c);
+}
+
+std::size_t band_count(const NodeSet& nodes, double half_width) {
+  std::size_t k = 0;
+  for (std::size_t a = 0; a < nodes.size(); ++a) {
+    if (std::abs(ring_distance(nodes.point(a))) < half_width) ++k;
+  }
+  return k;
+}
+
+double min_distance(const NodeSet& nodes) {
+  const KdTree tree(nodes);
+  std::vector<int> idx;
+  std::vector<double> dist;
+  double m = std::numeric_limits<double>::infinity();
+  for (std::size_t a = 0; a < nodes.size(); ++a) {
+    tree.knn(nodes.point(a), 2, idx, &dist);
+    for (std::size_t j = 0; j < idx.size(); ++j) {
+      if (idx[j] != static_cast<int>(a)) m = std::min(m, dist[j]);
+    }
+  }
+  return m;
+}
+
+bool on_boundary(std::span<const double> x, const Box& box, std::size_t i) {
+  return x[i] == box.lo[i] || x[i] == box.hi[i];
+}
+
+CvtOptions test_options() {
+  CvtOptions o;
+  o.iterations = 40;
+  o.samples_per_node = 32;
+  o.tolerance = 1e-4;
+  o.seed = 7;
+  return o;
+}
+
+TEST(Cvt, UniformDensityKeepsUniformGrid) {
+  const Box box = Box::unit(2);
+  const NodeSet grid = uniform_grid(box, {21, 21, 1});
+  CvtReport report;
+  const NodeSet out = cvt_relocate(grid, box, [](std::span<const double>) { return 1.0; }, test_options(), &report);
+  ASSERT_EQ(out.size(), grid.size());
+  double max_move = 0.0, mean_move = 0.0;
+  for (std::size_t a = 0; a < grid.size(); ++a) {
+    const double m = std::hypot(out.point(a)[0] - grid.point(a)[0], out.point(a)[1] - grid.point(a)[1]);
+    max_move = std::max(max_move, m);
+    mean_move += m / static_cast<double>(grid.size());
+  }
+  const double h = 1.0 / 20.0;
+  const SpacingSummary su = spacing_summary(out);
+  std::printf("uniform: iterations %zu, mean move %.3g h, max move %.3g h, samples %zu, h_min %.4g h_max %.4g\n",
+              report.iterations.size(), mean_move / h, max_move / h, report.samples, su.h_min, su.h_max);
+  // A square grid is a CVT of the uniform density; the sampled cells perturb it only slightly.
+  EXPECT_LT(mean_move, 0.1 * h);
+  EXPECT_LT(max_move, 0.35 * h);
+  EXPECT_GT(min_distance(out), 0.6 * h);
+  ASSERT_FALSE(report.iterations.empty());
+  EXPECT_EQ(report.iterations.front().empty_cells, 0u);
+  EXPECT_NEAR(su.h_min, h, 0.1 * h);
+}
+
+TEST(Cvt, CircleDensityConcentratesNodes) {
+  const Box box = Box::unit(2);
+  const NodeSet grid = uniform_grid(box, {30, 30, 1});
+  const SpacingSummary s0 = spacing_summary(grid);
+  const std::size_t band0 = band_count(grid, 0.05);
+  double prev_hmin = s0.h_min, prev_ratio = s0.h_max / s0.h_min;
+  std::size_t prev_band = band0;
+  std::printf("f = 0: band %zu, h_min %.4g, h_max/h_min %.3g, eps_min %.4g\n", band0, s0.h_min, s0.h_max / s0.h_min,
+              s0.eps_min);
+  for (double f : {10.0, 100.0}) {
+    CvtReport report;
+    const NodeSet out = cvt_relocate(grid, box, phase_field_density(f, grad_norm), test_options(), &report);
+    ASSERT_EQ(out.size(), grid.size());
+    const SpacingSummary s = spacing_summary(out);
+    const std::size_t band = band_count(out, 0.05);
+    const double ratio = s.h_max / s.h_min;
+    std::printf("f = %g: band %zu, h_min %.4g, h_max/h_min %.3g, eps_min %.4g, iterations %zu, last mean/max move "
+                "%.3g/%.3g\n",
+                f, band, s.h_min, ratio, s.eps_min, report.iterations.size(), report.iterations.back().mean_displacement,
+                report.iterations.back().max_displacement);
+    EXPECT_GT(band, prev_band);
+    EXPECT_LT(s.h_min, prev_hmin);
+    EXPECT_GT(ratio, prev_ratio);
+    EXPECT_GT(min_distance(out), 0.0);
+    // Lloyd decreases the displacement overall.
+    EXPECT_LT(report.iterations.back().mean_displacement, report.iterations.front().mean_displacement);
+    prev_band = band;
+    prev_hmin = s.h_min;
+    prev_ratio = ratio;
+  }
+}
+
+TEST(Cvt, BoundaryNodesStayOnTheirFaces) {
+  const Box box{2, {0.0, 0.0, 0.0}, {1.5, 2.0, 0.0}};
+  const NodeSet grid = uniform_grid(box, {16, 21, 1});
+  const NodeSet out = cvt_relocate(grid, box, phase_field_density(100.0, [](std::span<const double> x) {
+                                     const double c = std::cosh((std::hypot(x[0], x[1] - 1.0) - 0.6) / 0.05);
+                                     return 1.0 / (c * c);
+                                   }),
+                                   test_options());
+  ASSERT_EQ(out.size(), grid.size());
+  std::size_t moved_on_edge = 0;
+  for (std::size_t a = 0; a < grid.size(); ++a) {
+    const auto p = grid.point(a);
+    const auto q = out.point(a);
+    int faces = 0;
+    for (std::size_t i = 0; i < 2; ++i) {
+      EXPECT_GE(q[i], box.lo[i]);
+      EXPECT_LE(q[i], box.hi[i]);
+      if (on_boundary(p, box, i)) {
+        ++faces;
+        EXPECT_EQ(q[i], p[i]) << "node " << a << " left its face";
+      } else {
+        EXPECT_FALSE(on_boundary(q, box, i)) << "interior node " << a << " reached the boundary";
+      }
+    }
+    if (faces == 2) {
+      EXPECT_EQ(q[0], p[0]);
+      EXPECT_EQ(q[1], p[1]);
+    }
+    if (faces == 1 && (q[0] != p[0] || q[1] != p[1])) ++moved_on_edge;
+  }
+  EXPECT_GT(moved_on_edge, 0u);  // edge nodes slide (the circle meets the side x = 0)
+  EXPECT_GT(min_distance(out), 0.0);
+}
+
+TEST(Cvt, DeterministicForASeed) {
+  const Box box = Box::unit(2);
+  const NodeSet grid = uniform_grid(box, {20, 20, 1});
+  CvtOptions o = test_options();
+  o.iterations = 10;
+  const auto rho = phase_field_density(50.0, grad_norm);
+  const NodeSet a = cvt_relocate(grid, box, rho, o);
+  const NodeSet b = cvt_relocate(grid, box, rho, o);
+  EXPECT_EQ(a.coords, b.coords);
+  o.seed = 8;
+  const NodeSet c = cvt_relocate(grid, box, rho, o);
+  EXPECT_NE(a.coords, c.coords);
+}
+
+TEST(Cvt, ThreeDimensions) {
+  const Box box = Box::unit(3);
+  const NodeSet grid = uniform_grid(box, {8, 8, 8});
+  CvtOptions o = test_options();
+  o.iterations = 15;
+  o.samples_per_node = 16;
+  const auto rho = phase_field_density(20.0, [](std::span<const double> x) {
+    const double c = std::cosh((std::hypot(x[0] - 0.5, x[1] - 0.5, x[2] - 0.5) - 0.3) / 0.05);
+    return 1.0 / (c * c);
+  });
+  const NodeSet out = cvt_relocate(grid, box, rho, o);
+  ASSERT_EQ(out.size(), grid.size());
+  EXPECT_GT(min_distance(out), 0.0);
+  EXPECT_LT(spacing_summary(out).h_min, spacing_summary(grid).h_min);
+}
+
+TEST(Cvt, RefusesBadInput) {
+  const Box box = Box::unit(2);
+  const NodeSet grid = uniform_grid(box, {5, 5, 1});
+  EXPECT_THROW((void)cvt_relocate(grid, box, [](std::span<const double>) { return 0.0; }), std::invalid_argument);
+  NodeSet dup = grid;
+  dup.coords.insert(dup.coords.end(), {0.5, 0.5});
+  EXPECT_THROW((void)cvt_relocate(dup, box, [](std::span<const double>) { return 1.0; }), std::invalid_argument);
+  NodeSet outside = grid;
+  outside.coords.insert(outside.coords.end(), {1.5, 0.5});
+  EXPECT_THROW((void)cvt_relocate(outside, box, [](std::span<const double>) { return 1.0; }), std::invalid_argument);
+  EXPECT_THROW((void)phase_field_density(-1.0, grad_norm), std::invalid_argument);
+}
+
+TEST(Spacing, VoronoiRingOfAUniformGridIsTheGridStep) {
+  const NodeSet grid = uniform_grid(Box::unit(2), {11, 11, 1});
+  for (double h : voronoi_ring_spacing(grid)) EXPECT_NEAR(h, 0.1, 1e-12);
+  const NodeSet cube = uniform_grid(Box::unit(3), {5, 5, 5});
+  for (double h : voronoi_ring_spacing(cube)) EXPECT_NEAR(h, 0.25, 1e-12);
+  SpacingOptions nearest;
+  nearest.measure = SpacingMeasure::nearest;
+  EXPECT_NEAR(spacing_summary(grid, nearest).h_min, 0.1, 1e-12);
+  EXPECT_NEAR(min_admissible_eps(grid), 0.2, 1e-12);
+}
+
+TEST(Spacing, CheckResolutionMessage) {
+  const NodeSet grid = uniform_grid(Box::unit(2), {41, 41, 1});  // h = 0.025, eps_min = 0.05
+  EXPECT_NO_THROW(check_resolution(0.05, grid));
+  EXPECT_NO_THROW(check_resolution(0.08, grid));
+  try {
+    check_resolution(0.03, grid);
+    FAIL() << "eps = 0.03 should be refused";
+  } catch (const std::invalid_argument& e) {
+    const std::string msg = e.what();
+    std::printf("message: %s\n", msg.c_str());
+    EXPECT_NE(msg.find("h_min = 0.025"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("admissible eps is 2 h_min = 0.05"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("eps = 0.03"), std::string::npos) << msg;
+  }
+  EXPECT_THROW(check_resolution(-1.0, grid), std::invalid_argument);
+}
+
+TEST(Density, NodalValuesInterpolateLinearly) {
+  const NodeSet grid = uniform_grid(Box::unit(2), {6, 6, 1});
+  std::vector<double> g(grid.size());
+  for (std::size_t a = 0; a < grid.size(); ++a) g[a] = 2.0 * grid.point(a)[0] + grid.point(a)[1];
+  const Density rho = phase_field_density(3.0, grid, g);
+  const double x[2] = {0.37, 0.61};
+  EXPECT_NEAR(rho(x), 1.0 + 3.0 * (2.0 * 0.37 + 0.61), 1e-12);
+}
+
+TEST(Schedule, TableB6) {
+  const auto s = table_b6_schedule("O1");
+  ASSERT_EQ(s.size(), 3u);
+  EXPECT_EQ(s[2].grid, "O13");
+  EXPECT_EQ(s[2].f, 1000.0);
+  EXPECT_EQ(s[2].eps_phi, 0.025);
+  EXPECT_THROW((void)table_b6_schedule("O7"), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace lmeform
