@@ -79,10 +79,10 @@ struct Helfrich {
   }
 };
 
-/// Phase-field area density f_A [eps/2 |grad phi|^2 + (phi^2-1)^2/(4 eps)]; constants: eps.
+/// Phase-field area density f_A [eps/2 |grad phi|^2 + (phi^2-1)^2/(4 eps)]; constants: eps, A0 (target, unused).
 template <int D>
 struct Area {
-  static constexpr int dim = D, components = 1, order = 1, n_constants = 1, qdata_per_point = 0;
+  static constexpr int dim = D, components = 1, order = 1, n_constants = 2, qdata_per_point = 0;
   static double eval(const double* J, const double*, const double*, const double* k, double* dJ, double* d2J) {
     constexpr int nJ = jet_size(D, 1);
     const double eps = k[0], u = J[0];

@@ -85,7 +85,7 @@ TEST(FormCheckHarness, AreaNonlinear) {
   const fc::Cell cell = fc::make_cell(fx.cloud, fc::triangle_near(fx.cloud, 0.6, 0.5), fx.basis, 1);
   fc::State s;
   s.unknowns = fc::phase_field(cell, 0.45, 0.45, 0.2, 0.08, 0.05, fx.rng);
-  s.constants = {0.08};
+  s.constants = {0.08, 1.0};
   const auto rep = run(fc::make_form<hand::Area<2>>("area"), cell, s, fc::random_vector(cell.n, 1.0, fx.rng),
                        fc::Options{}, "hand area");
   EXPECT_TRUE(rep.ok()) << rep.summary("area");
