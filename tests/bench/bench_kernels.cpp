@@ -159,8 +159,11 @@ int main(int argc, char** argv) {
       while (std::getline(h, line)) ++r.generated_lines;
     }
     const fs::path tu = dir / "tu.cpp";
-    std::ofstream(tu) << "#include \"" << header.string() << "\"\nint lmeform_bench_tu() { return " << r.form
-                      << "_n_kernels; }\n";
+    // The TU must odr-use every kernel (through <module>_all_kernels), else the inline kernels are
+    // only parsed and never compiled.
+    std::ofstream(tu) << "#include \"" << header.string()
+                      << "\"\nconst lmeform::kernel::FormKernels* const* lmeform_bench_tu() { return " << r.form
+                      << "_all_kernels; }\n";
     t0 = now();
     const std::string cxx = std::string("\"") + LMEFORM_CXX + "\" " + LMEFORM_CXX_FLAGS + inc_flags + " -c \"" +
                             tu.string() + "\" -o \"" + (dir / "tu.o").string() + "\" > \"" +
