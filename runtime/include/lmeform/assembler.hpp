@@ -65,6 +65,12 @@ class Assembler {
   /// Hessian / Jacobian / bilinear form, overwriting `out` (which must come from create_matrix()).
   void matrix(Vec u, Mat out);
 
+  /// out += scale * (this form's vector / matrix): combinations such as ∇²E − Σ σ_i ∇²C_i are
+  /// accumulated into one matrix (any matrix from an Assembler of the same discretization and
+  /// block size) without temporaries.
+  void add_vector(Vec u, Vec out, double scale);
+  void add_matrix(Vec u, Mat out, double scale);
+
   [[nodiscard]] const AssemblyTimes& times() const noexcept { return times_; }
 
  private:

@@ -248,17 +248,24 @@ double Assembler::value(Vec u) {
 }
 
 void Assembler::vector(Vec u, Vec out) {
+  LMEFORM_PETSC_CHECK(VecZeroEntries(out));
+  add_vector(u, out, 1.0);
+}
+
+void Assembler::add_vector(Vec u, Vec out, double scale) {
   if (form_->vector == nullptr) throw std::logic_error(describe() + ": has no vector kernel");
   const auto start = std::chrono::steady_clock::now();
   const bool zero_communication = disc_->options().off_process == OffProcessMode::ZeroCommunication;
   const int bs = form_->dofs_per_node;
-  LMEFORM_PETSC_CHECK(VecZeroEntries(out));
   LMEFORM_PETSC_CHECK(VecSetOption(out, VEC_IGNORE_OFF_PROC_ENTRIES, zero_communication ? PETSC_TRUE : PETSC_FALSE));
   element_loop(u, /*owned_only=*/!zero_communication, [&](int e, const kernel::CellInputs& in) {
     const auto nodes = disc_->element_nodes(e);
     const std::size_t m = nodes.size() * static_cast<std::size_t>(bs);
     std::fill_n(local_.begin(), m, 0.0);
     form_->vector(in, local_.data());
+    if (scale != 1.0) {
+      for (std::size_t i = 0; i < m; ++i) local_[i] *= scale;
+    }
     for (std::size_t a = 0; a < nodes.size(); ++a) {
       // Negative indices are skipped by PETSc: a rank keeps only its own rows.
       rows_[a] = (!zero_communication || disc_->owns(nodes[a])) ? nodes[a] : -1;
@@ -271,11 +278,15 @@ void Assembler::vector(Vec u, Vec out) {
 }
 
 void Assembler::matrix(Vec u, Mat out) {
+  LMEFORM_PETSC_CHECK(MatZeroEntries(out));
+  add_matrix(u, out, 1.0);
+}
+
+void Assembler::add_matrix(Vec u, Mat out, double scale) {
   if (form_->matrix == nullptr) throw std::logic_error(describe() + ": has no matrix kernel");
   const auto start = std::chrono::steady_clock::now();
   const bool zero_communication = disc_->options().off_process == OffProcessMode::ZeroCommunication;
   const int bs = form_->dofs_per_node;
-  LMEFORM_PETSC_CHECK(MatZeroEntries(out));
   double kernel_seconds = 0.0;
   element_loop(u, /*owned_only=*/!zero_communication, [&](int e, const kernel::CellInputs& in) {
     const auto kernel_start = std::chrono::steady_clock::now();
@@ -283,6 +294,9 @@ void Assembler::matrix(Vec u, Mat out) {
     const std::size_t m = nodes.size() * static_cast<std::size_t>(bs);
     std::fill_n(local_.begin(), m * m, 0.0);
     form_->matrix(in, local_.data());
+    if (scale != 1.0) {
+      for (std::size_t i = 0; i < m * m; ++i) local_[i] *= scale;
+    }
     kernel_seconds += seconds_since(kernel_start);
     for (std::size_t a = 0; a < nodes.size(); ++a) {
       cols_[a] = nodes[a];

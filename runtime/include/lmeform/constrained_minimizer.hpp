@@ -1,0 +1,94 @@
+// Minimize an energy E(u) subject to scalar constraints C_i(u) = c_i and Dirichlet values
+// (seed 3.9–3.12): first an augmented Lagrangian
+//     L_A(u; ν) = E − Σ ν_i (C_i − c_i) + 1/(2μ) Σ (C_i − c_i)²
+// minimized in u by Newton with a backtracking line search for frozen ν, with explicit
+// multiplier updates ν_i ← ν_i − (C_i − c_i)/μ, to a coarse tolerance; then Newton on the KKT
+// system in (u, ν). The dense rank-k terms are never assembled: the penalty's Σ ∇C_i ∇C_iᵀ/μ
+// is handled by the Woodbury identity and the KKT system by a Schur complement on the k×k
+// multiplier block, both reusing one sparse LU factorization of ∇²E − Σ σ_i ∇²C_i per iteration.
+#pragma once
+
+#include <iosfwd>
+#include <string>
+#include <vector>
+
+#include "lmeform/assembler.hpp"
+#include "lmeform/petsc.hpp"
+
+namespace lmeform {
+
+struct ScalarConstraint {
+  std::string name;        ///< e.g. "area"
+  Assembler* functional;   ///< value / gradient / Hessian of C_i(u)
+  double target = 0;       ///< c_i
+  double scale = 1;        ///< |C_i − c_i| / scale is the relative residual
+};
+
+struct ConstrainedMinimizerOptions {
+  double penalty = 1e-3;                ///< initial μ of the augmented Lagrangian (lowered ×0.1 when constraints stall)
+  double augmented_tolerance = 1e-3;    ///< stage 1 ends when every relative constraint residual is below
+  double inner_tolerance = 1e-6;        ///< stage 1 inner Newton: relative gradient norm of L_A
+  int max_outer_iterations = 40;
+  int max_inner_iterations = 25;
+  double newton_tolerance = 1e-9;       ///< stage 2: KKT residual relative to its first value
+  double constraint_tolerance = 1e-10;  ///< stage 2: relative constraint residuals
+  int max_newton_iterations = 25;
+  bool skip_augmented_stage = false;
+  std::ostream* log = nullptr;          ///< progress lines (rank 0); nullptr: silent
+};
+
+struct ConstrainedIterate {
+  std::string stage;        ///< "AL" or "KKT"
+  int iteration = 0;
+  double energy = 0;
+  double gradient_norm = 0;     ///< of L_A (AL) or of the KKT residual (KKT)
+  double constraint_norm = 0;   ///< max relative constraint residual
+  double seconds = 0;           ///< since the start
+};
+
+struct ConstrainedResult {
+  bool converged = false;
+  std::string message;                  ///< why it stopped
+  double energy = 0;
+  std::vector<double> multipliers;      ///< ν_i (e.g. tension for area, pressure for volume)
+  std::vector<double> constraint_values;
+  std::vector<double> relative_residuals;
+  int augmented_iterations = 0;         ///< Newton steps in stage 1
+  int outer_iterations = 0;             ///< multiplier updates
+  int newton_iterations = 0;            ///< KKT steps
+  std::vector<ConstrainedIterate> history;
+  double seconds_augmented = 0, seconds_newton = 0;
+};
+
+class ConstrainedMinimizer {
+ public:
+  ConstrainedMinimizer(Assembler& energy, std::vector<ScalarConstraint> constraints,
+                       ConstrainedMinimizerOptions options = {});
+
+  /// Dofs held at their current values in u (owned, global, renumbered).
+  void set_fixed_dofs(std::vector<PetscInt> dofs) { fixed_ = std::move(dofs); }
+
+  /// Minimizes from the state in u (which also holds the Dirichlet values); u is overwritten.
+  /// `multipliers` (optional) are the starting ν. Never throws for non-convergence: the result
+  /// says what failed and u holds the last state.
+  ConstrainedResult minimize(Vec u, std::vector<double> multipliers = {});
+
+ private:
+  struct Evaluation;
+  void evaluate(Vec u, const std::vector<double>& sigma, bool with_matrix, Evaluation& ev);
+  void assemble_hessian(Vec u, const std::vector<double>& sigma);
+  void factor(Mat A);
+  void solve(Vec b, Vec x);
+  void zero_fixed(Vec v);
+  void log_iterate(const ConstrainedIterate& it);
+
+  Assembler* energy_;
+  std::vector<ScalarConstraint> constraints_;
+  ConstrainedMinimizerOptions options_;
+  std::vector<PetscInt> fixed_;
+  PetscMatrix hessian_;
+  PetscLinearSolver ksp_;
+  double start_time_ = 0;
+};
+
+}  // namespace lmeform

@@ -1,0 +1,270 @@
+#include "lmeform/constrained_minimizer.hpp"
+
+#include <Eigen/Dense>
+
+#include <algorithm>
+#include <cmath>
+#include <iomanip>
+#include <limits>
+#include <ostream>
+#include <sstream>
+#include <stdexcept>
+
+namespace lmeform {
+
+struct ConstrainedMinimizer::Evaluation {
+  double energy = 0;
+  std::vector<double> values;     // C_i
+  std::vector<double> residuals;  // C_i − c_i
+  PetscVector energy_gradient;
+  std::vector<PetscVector> gradients;  // ∇C_i, fixed dofs zeroed
+};
+
+ConstrainedMinimizer::ConstrainedMinimizer(Assembler& energy, std::vector<ScalarConstraint> constraints,
+                                           ConstrainedMinimizerOptions options)
+    : energy_(&energy), constraints_(std::move(constraints)), options_(options) {
+  for (const auto& c : constraints_) {
+    if (c.functional == nullptr) throw std::invalid_argument("constraint '" + c.name + "' has no functional");
+    if (c.functional->block_size() != energy.block_size()) {
+      throw std::invalid_argument("constraint '" + c.name + "' has " + std::to_string(c.functional->block_size()) +
+                                  " dofs per node, the energy " + std::to_string(energy.block_size()));
+    }
+    if (!(c.scale > 0)) throw std::invalid_argument("constraint '" + c.name + "' needs a positive scale");
+  }
+  if (!(options_.penalty > 0)) throw std::invalid_argument("augmented Lagrangian penalty must be positive");
+  hessian_ = energy.create_matrix();
+  LMEFORM_PETSC_CHECK(KSPCreate(energy.discretization().comm(), ksp_.out()));
+  LMEFORM_PETSC_CHECK(KSPSetType(ksp_, KSPPREONLY));
+  PC pc = nullptr;
+  LMEFORM_PETSC_CHECK(KSPGetPC(ksp_, &pc));
+  LMEFORM_PETSC_CHECK(PCSetType(pc, PCLU));
+  // MUMPS pivots, so indefinite Hessians (far from a minimum) factor too; PETSc's own LU does not.
+  LMEFORM_PETSC_CHECK(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
+  LMEFORM_PETSC_CHECK(KSPSetOptionsPrefix(ksp_, "constrained_"));
+  LMEFORM_PETSC_CHECK(KSPSetFromOptions(ksp_));
+}
+
+void ConstrainedMinimizer::zero_fixed(Vec v) {
+  if (fixed_.empty()) return;
+  std::vector<PetscScalar> zeros(fixed_.size(), 0.0);
+  LMEFORM_PETSC_CHECK(VecSetValues(v, static_cast<PetscInt>(fixed_.size()), fixed_.data(), zeros.data(), INSERT_VALUES));
+  LMEFORM_PETSC_CHECK(VecAssemblyBegin(v));
+  LMEFORM_PETSC_CHECK(VecAssemblyEnd(v));
+}
+
+void ConstrainedMinimizer::evaluate(Vec u, const std::vector<double>& sigma, bool with_matrix, Evaluation& ev) {
+  const std::size_t k = constraints_.size();
+  if (!ev.energy_gradient) {
+    ev.energy_gradient = energy_->create_vector();
+    ev.gradients.clear();
+    for (std::size_t i = 0; i < k; ++i) ev.gradients.push_back(energy_->create_vector());
+  }
+  ev.energy = energy_->value(u);
+  energy_->vector(u, ev.energy_gradient);
+  zero_fixed(ev.energy_gradient);
+  ev.values.resize(k);
+  ev.residuals.resize(k);
+  for (std::size_t i = 0; i < k; ++i) {
+    ev.values[i] = constraints_[i].functional->value(u);
+    ev.residuals[i] = ev.values[i] - constraints_[i].target;
+    constraints_[i].functional->vector(u, ev.gradients[i]);
+    zero_fixed(ev.gradients[i]);
+  }
+  if (with_matrix) assemble_hessian(u, sigma);
+}
+
+void ConstrainedMinimizer::assemble_hessian(Vec u, const std::vector<double>& sigma) {
+  const std::size_t k = constraints_.size();
+  {
+    energy_->matrix(u, hessian_);
+    for (std::size_t i = 0; i < k; ++i) constraints_[i].functional->add_matrix(u, hessian_, -sigma[i]);
+    // Fixed dofs: identity rows and columns, so the Newton step leaves them alone.
+    LMEFORM_PETSC_CHECK(MatZeroRowsColumns(hessian_, static_cast<PetscInt>(fixed_.size()), fixed_.data(), 1.0, nullptr, nullptr));
+  }
+}
+
+void ConstrainedMinimizer::factor(Mat A) {
+  LMEFORM_PETSC_CHECK(KSPSetOperators(ksp_, A, A));
+  LMEFORM_PETSC_CHECK(KSPSetUp(ksp_));
+}
+
+void ConstrainedMinimizer::solve(Vec b, Vec x) {
+  LMEFORM_PETSC_CHECK(KSPSolve(ksp_, b, x));
+  KSPConvergedReason reason;
+  LMEFORM_PETSC_CHECK(KSPGetConvergedReason(ksp_, &reason));
+  if (reason < 0) {
+    throw std::runtime_error(std::string("constrained minimizer: the linear solve failed (") + KSPConvergedReasons[reason] +
+                             "): the Hessian is singular at this state");
+  }
+}
+
+void ConstrainedMinimizer::log_iterate(const ConstrainedIterate& it) {
+  if (options_.log == nullptr || energy_->discretization().rank() != 0) return;
+  std::ostringstream line;
+  line << std::setw(4) << it.stage << std::setw(5) << it.iteration << "  E " << std::setprecision(10) << std::setw(16)
+       << it.energy << "  |grad| " << std::setprecision(3) << std::scientific << it.gradient_norm << "  |C| "
+       << it.constraint_norm << std::defaultfloat << "  t " << std::fixed << std::setprecision(2) << it.seconds << " s";
+  *options_.log << line.str() << std::endl;
+}
+
+ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> multipliers) {
+  const std::size_t k = constraints_.size();
+  if (multipliers.empty()) multipliers.assign(k, 0.0);
+  if (multipliers.size() != k) throw std::invalid_argument("constrained minimizer: wrong number of starting multipliers");
+  start_time_ = MPI_Wtime();
+  ConstrainedResult result;
+  std::vector<double>& nu = multipliers;
+  double mu = options_.penalty;
+
+  Evaluation ev;
+  PetscVector step = energy_->create_vector(), rhs = energy_->create_vector(), trial = energy_->create_vector();
+  std::vector<PetscVector> Z;
+  for (std::size_t i = 0; i < k; ++i) Z.push_back(energy_->create_vector());
+
+  auto relative_residual = [&](const Evaluation& e) {
+    double m = 0;
+    for (std::size_t i = 0; i < k; ++i) m = std::max(m, std::abs(e.residuals[i]) / constraints_[i].scale);
+    return m;
+  };
+  auto lagrangian_gradient = [&](const Evaluation& e, const std::vector<double>& sigma, Vec out) {
+    LMEFORM_PETSC_CHECK(VecCopy(e.energy_gradient, out));
+    for (std::size_t i = 0; i < k; ++i) LMEFORM_PETSC_CHECK(VecAXPY(out, -sigma[i], e.gradients[i]));
+  };
+  auto norm = [](Vec v) {
+    PetscReal n = 0;
+    LMEFORM_PETSC_CHECK(VecNorm(v, NORM_2, &n));
+    return static_cast<double>(n);
+  };
+  auto dot = [](Vec a, Vec b) {
+    PetscScalar d = 0;
+    LMEFORM_PETSC_CHECK(VecDot(a, b, &d));
+    return static_cast<double>(d);
+  };
+  auto augmented_value = [&](Vec state) {
+    double value = energy_->value(state);
+    for (std::size_t i = 0; i < k; ++i) {
+      const double r = constraints_[i].functional->value(state) - constraints_[i].target;
+      value += -nu[i] * r + r * r / (2 * mu);
+    }
+    return value;
+  };
+  auto record = [&](const char* stage, int iteration, const Evaluation& e, double gradient_norm) {
+    ConstrainedIterate it{stage, iteration, e.energy, gradient_norm, relative_residual(e), MPI_Wtime() - start_time_};
+    result.history.push_back(it);
+    log_iterate(it);
+  };
+
+  // ---- Stage 1: augmented Lagrangian --------------------------------------------------------
+  bool stage1_done = options_.skip_augmented_stage;
+  std::vector<double> sigma(nu);
+  double previous_residual = std::numeric_limits<double>::infinity();
+  for (int outer = 0; !stage1_done && outer < options_.max_outer_iterations; ++outer) {
+    ++result.outer_iterations;
+    for (int inner = 0; inner < options_.max_inner_iterations; ++inner) {
+      evaluate(u, sigma, false, ev);
+      for (std::size_t i = 0; i < k; ++i) sigma[i] = nu[i] - ev.residuals[i] / mu;
+      lagrangian_gradient(ev, sigma, rhs);
+      const double gnorm = norm(rhs);
+      record("AL", result.augmented_iterations, ev, gnorm);
+      if (gnorm <= options_.inner_tolerance * std::max(1.0, norm(ev.energy_gradient))) break;
+      assemble_hessian(u, sigma);
+      factor(hessian_);
+      // Woodbury: (A + U Uᵀ)⁻¹ b with U_i = ∇C_i/√μ.
+      LMEFORM_PETSC_CHECK(VecScale(rhs, -1.0));
+      solve(rhs, step);
+      Eigen::MatrixXd M = Eigen::MatrixXd::Identity(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k));
+      Eigen::VectorXd uty(static_cast<Eigen::Index>(k));
+      for (std::size_t i = 0; i < k; ++i) {
+        solve(ev.gradients[i], Z[i]);
+        uty[static_cast<Eigen::Index>(i)] = dot(ev.gradients[i], step) / mu;
+        for (std::size_t j = 0; j < k; ++j) M(static_cast<Eigen::Index>(j), static_cast<Eigen::Index>(i)) += dot(ev.gradients[j], Z[i]) / mu;
+      }
+      const Eigen::VectorXd coeff = M.lu().solve(uty);
+      for (std::size_t i = 0; i < k; ++i) LMEFORM_PETSC_CHECK(VecAXPY(step, -coeff[static_cast<Eigen::Index>(i)], Z[i]));
+      double slope = -dot(rhs, step);  // rhs holds −∇L_A
+      if (!(slope < 0)) {
+        // Not a descent direction (the Hessian is indefinite here): take steepest descent.
+        LMEFORM_PETSC_CHECK(VecCopy(rhs, step));
+        slope = -dot(rhs, rhs);
+      }
+      const double base = augmented_value(u);
+      double alpha = 1.0;
+      bool accepted = false;
+      for (int backtrack = 0; backtrack < 30; ++backtrack, alpha *= 0.5) {
+        LMEFORM_PETSC_CHECK(VecWAXPY(trial, alpha, step, u));
+        const double value = augmented_value(trial);
+        if (std::isfinite(value) && value <= base + 1e-4 * alpha * slope) {
+          accepted = true;
+          break;
+        }
+      }
+      ++result.augmented_iterations;
+      if (!accepted) break;  // no decrease possible along the step: at the inner minimum to round-off
+      LMEFORM_PETSC_CHECK(VecCopy(trial, u));
+    }
+    evaluate(u, nu, false, ev);
+    for (std::size_t i = 0; i < k; ++i) nu[i] -= ev.residuals[i] / mu;
+    const double residual = relative_residual(ev);
+    if (residual < options_.augmented_tolerance) stage1_done = true;
+    // Multiplier updates converge linearly at a rate set by μ: when the constraints stall,
+    // stiffen the penalty (the Woodbury solve keeps the rank-k term exact however large 1/μ).
+    if (residual > 0.25 * previous_residual) mu = std::max(mu * 0.1, 1e-12);
+    previous_residual = residual;
+  }
+  result.seconds_augmented = MPI_Wtime() - start_time_;
+  if (!stage1_done) {
+    evaluate(u, nu, false, ev);
+    result.message = "augmented Lagrangian stage did not reach the constraint tolerance " +
+                     std::to_string(options_.augmented_tolerance) + " in " +
+                     std::to_string(options_.max_outer_iterations) + " multiplier updates";
+  }
+
+  // ---- Stage 2: Newton on the KKT system, Schur complement on the multipliers ------------------
+  const double stage2_start = MPI_Wtime();
+  if (stage1_done) {
+    for (int it = 0; it <= options_.max_newton_iterations; ++it) {
+      evaluate(u, nu, true, ev);
+      lagrangian_gradient(ev, nu, rhs);
+      const double gnorm = norm(rhs);
+      record("KKT", it, ev, gnorm);
+      const double scale = std::max(1.0, norm(ev.energy_gradient));
+      if (gnorm <= options_.newton_tolerance * scale && relative_residual(ev) <= options_.constraint_tolerance) {
+        result.converged = true;
+        result.message = "converged";
+        break;
+      }
+      if (it == options_.max_newton_iterations) {
+        result.message = "KKT Newton did not converge in " + std::to_string(options_.max_newton_iterations) +
+                         " iterations (|grad L| = " + std::to_string(gnorm) + ")";
+        break;
+      }
+      factor(hessian_);
+      solve(rhs, step);  // a = H⁻¹ r1
+      Eigen::MatrixXd S(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k));
+      Eigen::VectorXd b(static_cast<Eigen::Index>(k));
+      for (std::size_t i = 0; i < k; ++i) {
+        solve(ev.gradients[i], Z[i]);
+        b[static_cast<Eigen::Index>(i)] = -ev.residuals[i] + dot(ev.gradients[i], step);
+        for (std::size_t j = 0; j < k; ++j) S(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j)) = dot(ev.gradients[i], Z[j]);
+      }
+      const Eigen::VectorXd dnu = k > 0 ? Eigen::VectorXd(S.fullPivLu().solve(b)) : Eigen::VectorXd();
+      // dφ = −a + Z dν
+      LMEFORM_PETSC_CHECK(VecScale(step, -1.0));
+      for (std::size_t i = 0; i < k; ++i) {
+        LMEFORM_PETSC_CHECK(VecAXPY(step, dnu[static_cast<Eigen::Index>(i)], Z[i]));
+        nu[i] += dnu[static_cast<Eigen::Index>(i)];
+      }
+      LMEFORM_PETSC_CHECK(VecAXPY(u, 1.0, step));
+      ++result.newton_iterations;
+    }
+  }
+  result.seconds_newton = MPI_Wtime() - stage2_start;
+  result.energy = ev.energy;
+  result.multipliers = nu;
+  result.constraint_values = ev.values;
+  result.relative_residuals.resize(k);
+  for (std::size_t i = 0; i < k; ++i) result.relative_residuals[i] = std::abs(ev.residuals[i]) / constraints_[i].scale;
+  return result;
+}
+
+}  // namespace lmeform
