@@ -239,21 +239,39 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
         break;
       }
       factor(hessian_);
-      solve(rhs, step);  // a = H⁻¹ r1
+      // Schur complement on the multipliers: dφ = H⁻¹(−r1 + G dν), (Gᵀ H⁻¹ G) dν = −r + Gᵀ H⁻¹ r1.
+      // The Hessian is badly scaled (ε/h⁴, 1/r near the axis), so the step is refined against the
+      // true residual of the KKT system with the same factorization: without it Newton stalls at
+      // a linear rate set by the solve error.
+      for (std::size_t i = 0; i < k; ++i) solve(ev.gradients[i], Z[i]);
       Eigen::MatrixXd S(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k));
-      Eigen::VectorXd b(static_cast<Eigen::Index>(k));
       for (std::size_t i = 0; i < k; ++i) {
-        solve(ev.gradients[i], Z[i]);
-        b[static_cast<Eigen::Index>(i)] = -ev.residuals[i] + dot(ev.gradients[i], step);
         for (std::size_t j = 0; j < k; ++j) S(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j)) = dot(ev.gradients[i], Z[j]);
       }
-      const Eigen::VectorXd dnu = k > 0 ? Eigen::VectorXd(S.fullPivLu().solve(b)) : Eigen::VectorXd();
-      // dφ = −a + Z dν
-      LMEFORM_PETSC_CHECK(VecScale(step, -1.0));
-      for (std::size_t i = 0; i < k; ++i) {
-        LMEFORM_PETSC_CHECK(VecAXPY(step, dnu[static_cast<Eigen::Index>(i)], Z[i]));
-        nu[i] += dnu[static_cast<Eigen::Index>(i)];
+      const auto S_lu = S.fullPivLu();
+      // Solves H dφ − G dν = −f1, Gᵀ dφ = −f2 for (dφ, dν), accumulating into (step, dnu).
+      LMEFORM_PETSC_CHECK(VecZeroEntries(step));
+      Eigen::VectorXd dnu = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(k));
+      PetscVector f1 = energy_->create_vector(), a = energy_->create_vector(), Hstep = energy_->create_vector();
+      LMEFORM_PETSC_CHECK(VecCopy(rhs, f1));
+      Eigen::VectorXd f2(static_cast<Eigen::Index>(k));
+      for (std::size_t i = 0; i < k; ++i) f2[static_cast<Eigen::Index>(i)] = ev.residuals[i];
+      for (int refinement = 0; refinement < 3; ++refinement) {
+        solve(f1, a);
+        Eigen::VectorXd b(static_cast<Eigen::Index>(k));
+        for (std::size_t i = 0; i < k; ++i) b[static_cast<Eigen::Index>(i)] = -f2[static_cast<Eigen::Index>(i)] + dot(ev.gradients[i], a);
+        const Eigen::VectorXd delta_nu = k > 0 ? Eigen::VectorXd(S_lu.solve(b)) : Eigen::VectorXd();
+        LMEFORM_PETSC_CHECK(VecAXPY(step, -1.0, a));
+        for (std::size_t i = 0; i < k; ++i) LMEFORM_PETSC_CHECK(VecAXPY(step, delta_nu[static_cast<Eigen::Index>(i)], Z[i]));
+        dnu += delta_nu;
+        // Residual of the linear system at (step, dnu): f1 = r1 + H step − G dnu, f2 = r + Gᵀ step.
+        LMEFORM_PETSC_CHECK(MatMult(hessian_, step, Hstep));
+        LMEFORM_PETSC_CHECK(VecWAXPY(f1, 1.0, rhs, Hstep));
+        for (std::size_t i = 0; i < k; ++i) LMEFORM_PETSC_CHECK(VecAXPY(f1, -dnu[static_cast<Eigen::Index>(i)], ev.gradients[i]));
+        for (std::size_t i = 0; i < k; ++i) f2[static_cast<Eigen::Index>(i)] = ev.residuals[i] + dot(ev.gradients[i], step);
+        if (norm(f1) <= 1e-14 * std::max(norm(rhs), 1e-300)) break;
       }
+      for (std::size_t i = 0; i < k; ++i) nu[i] += dnu[static_cast<Eigen::Index>(i)];
       LMEFORM_PETSC_CHECK(VecAXPY(u, 1.0, step));
       ++result.newton_iterations;
     }
