@@ -69,7 +69,7 @@ class ConstrainedMinimizer {
   void set_fixed_dofs(std::vector<PetscInt> dofs) { fixed_ = std::move(dofs); }
 
   /// Minimizes from the state in u (which also holds the Dirichlet values); u is overwritten.
-  /// `multipliers` (optional) are the starting ν. Never throws for non-convergence: the result
+  /// `multipliers` (optional) are the starting ν, in the scaled units ν_i·scale_i. Never throws for non-convergence: the result
   /// says what failed and u holds the last state.
   ConstrainedResult minimize(Vec u, std::vector<double> multipliers = {});
 

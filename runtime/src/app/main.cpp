@@ -193,8 +193,7 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
     if (write_png) {
       const auto png = out_dir / (scene.name + ".png");
       const std::string command = "/usr/bin/python3 " LMEFORM_SOURCE_DIR "/scripts/plot_vesicle.py '" + h5.string() +
-                                  "' '" + png.string() + "' --mirror --title '" + scene.name + ", eps " +
-                                  json_number(last.eps) + ", E " + json_number(r.solve.energy) + "'";
+                                  "' '" + png.string() + "' --mirror > /dev/null";
       if (std::system(command.c_str()) == 0) png_name = png.string();
       else std::cerr << "lmeform: warning: the plot script failed (" << command << ")\n";
     }

@@ -65,9 +65,13 @@ void ConstrainedMinimizer::evaluate(Vec u, const std::vector<double>& sigma, boo
   ev.values.resize(k);
   ev.residuals.resize(k);
   for (std::size_t i = 0; i < k; ++i) {
+    // Constraints are solved in scaled form (C_i − c_i)/scale_i, so that one penalty μ fits
+    // constraints of very different sizes (an area ~ 1, a volume ~ 0.1, a moment ~ 0).
+    const double scale = constraints_[i].scale;
     ev.values[i] = constraints_[i].functional->value(u);
-    ev.residuals[i] = ev.values[i] - constraints_[i].target;
+    ev.residuals[i] = (ev.values[i] - constraints_[i].target) / scale;
     constraints_[i].functional->vector(u, ev.gradients[i]);
+    LMEFORM_PETSC_CHECK(VecScale(ev.gradients[i], 1.0 / scale));
     zero_fixed(ev.gradients[i]);
   }
   if (with_matrix) assemble_hessian(u, sigma);
@@ -77,7 +81,7 @@ void ConstrainedMinimizer::assemble_hessian(Vec u, const std::vector<double>& si
   const std::size_t k = constraints_.size();
   {
     energy_->matrix(u, hessian_);
-    for (std::size_t i = 0; i < k; ++i) constraints_[i].functional->add_matrix(u, hessian_, -sigma[i]);
+    for (std::size_t i = 0; i < k; ++i) constraints_[i].functional->add_matrix(u, hessian_, -sigma[i] / constraints_[i].scale);
     // Fixed dofs: identity rows and columns, so the Newton step leaves them alone.
     LMEFORM_PETSC_CHECK(MatZeroRowsColumns(hessian_, static_cast<PetscInt>(fixed_.size()), fixed_.data(), 1.0, nullptr, nullptr));
   }
@@ -123,7 +127,7 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
 
   auto relative_residual = [&](const Evaluation& e) {
     double m = 0;
-    for (std::size_t i = 0; i < k; ++i) m = std::max(m, std::abs(e.residuals[i]) / constraints_[i].scale);
+    for (std::size_t i = 0; i < k; ++i) m = std::max(m, std::abs(e.residuals[i]));
     return m;
   };
   auto lagrangian_gradient = [&](const Evaluation& e, const std::vector<double>& sigma, Vec out) {
@@ -143,7 +147,7 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
   auto augmented_value = [&](Vec state) {
     double value = energy_->value(state);
     for (std::size_t i = 0; i < k; ++i) {
-      const double r = constraints_[i].functional->value(state) - constraints_[i].target;
+      const double r = (constraints_[i].functional->value(state) - constraints_[i].target) / constraints_[i].scale;
       value += -nu[i] * r + r * r / (2 * mu);
     }
     return value;
@@ -278,10 +282,13 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
   }
   result.seconds_newton = MPI_Wtime() - stage2_start;
   result.energy = ev.energy;
-  result.multipliers = nu;
   result.constraint_values = ev.values;
+  result.multipliers.resize(k);
   result.relative_residuals.resize(k);
-  for (std::size_t i = 0; i < k; ++i) result.relative_residuals[i] = std::abs(ev.residuals[i]) / constraints_[i].scale;
+  for (std::size_t i = 0; i < k; ++i) {
+    result.multipliers[i] = nu[i] / constraints_[i].scale;  // back to physical units
+    result.relative_residuals[i] = std::abs(ev.residuals[i]);
+  }
   return result;
 }
 
