@@ -272,6 +272,28 @@ TEST(WeakKronecker, VertexFunctionIsOneAtItsVertex) {
   }
 }
 
+// Derivatives at a vertex of the hull are undefined (J vanishes there): an error, never garbage.
+TEST(WeakKronecker, DerivativesAtAVertexAreAClearError) {
+  for (int dim = 1; dim <= 3; ++dim) {
+    const NodeSet nodes = set_for(dim);
+    const LmeBasis basis(nodes, std::vector<double>{0.8});
+    std::vector<double> corner(static_cast<std::size_t>(dim), 1.0);
+    const auto nbrs = basis.neighbours(corner);
+    for (const int order : {1, 2}) {
+      try {
+        (void)basis.evaluate(corner, nbrs, order);
+        FAIL() << dim << "D order " << order << ": expected an error at the vertex";
+      } catch (const LmeEvaluationError& e) {
+        EXPECT_EQ(e.reason(), LmeFailure::singular_jacobian) << e.what();
+        EXPECT_NE(std::string(e.what()).find("vertex of the convex hull"), std::string::npos) << e.what();
+      }
+    }
+    // Slightly inside, derivatives are defined again.
+    std::vector<double> inside(static_cast<std::size_t>(dim), 1.0 - 1e-3);
+    EXPECT_NO_THROW((void)basis.evaluate(inside, basis.neighbours(inside), 2)) << dim << "D";
+  }
+}
+
 // ---- hard cases -------------------------------------------------------------------------------
 
 TEST(HardCases, StronglyGradedNodeSet) {

@@ -322,6 +322,16 @@ struct Lme {
     }
     M jinv = M::Zero();
     double rc = 0.0;
+    // At a vertex of the hull J vanishes in every direction (the vertex's own function is 1), so
+    // its condition number says nothing; J is formed in coordinates scaled by the local spacing,
+    // so an absolute bound on its trace is unit-free.
+    if (!(jac.trace() > 1e-10)) {
+      std::ostringstream os;
+      os.precision(3);
+      os << "trace(J) = " << std::scientific << jac.trace()
+         << " (scaled by the local spacing): x is at a vertex of the convex hull, where derivatives are undefined";
+      throw LmeEvaluationError(LmeFailure::singular_jacobian, x, static_cast<std::size_t>(n), kNaN, os.str());
+    }
     if (!spd_inverse(jac, jinv, rc)) rc = 0.0;
     if (!(rc >= min_rcond)) {
       std::ostringstream os;
