@@ -30,7 +30,7 @@ struct AssemblyTimes {
   double value = 0;
   double vector = 0;
   double matrix = 0;         ///< element loop + MatAssemblyBegin/End
-  double matrix_kernel = 0;  ///< of which: tabulation + kernel (no PETSc insertion)
+  double matrix_kernel = 0;  ///< of which: the kernel calls alone (no tabulation, no PETSc insertion)
 };
 
 class Assembler {
