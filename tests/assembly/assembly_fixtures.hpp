@@ -46,6 +46,32 @@ inline double max_abs_difference(const std::vector<double>& a, const std::vector
   return m;
 }
 
+/// Energy, gradient and Hessian of a form at u (original node order), gathered in the original
+/// numbering on every rank.
+struct Assembled {
+  double energy = 0;
+  std::vector<double> gradient;
+  std::vector<double> hessian;
+};
+
+inline Assembled assemble_all(const Discretization& disc, const kernel::FormKernels& form,
+                              const std::vector<double>& u_original, std::span<const double> constants = {}) {
+  Assembler assembler(disc, form);
+  if (!constants.empty()) assembler.set_constants(constants);
+  const int bs = form.dofs_per_node;
+  PetscVector u = assembler.create_vector();
+  PetscVector g = assembler.create_vector();
+  set_from_original(disc, u_original, bs, u);
+  PetscMatrix H = assembler.create_matrix();
+  Assembled out;
+  out.energy = assembler.value(u);
+  assembler.vector(u, g);
+  assembler.matrix(u, H);
+  out.gradient = to_original(disc, g, bs);
+  out.hessian = dense_original(disc, H, bs);
+  return out;
+}
+
 /// Solves A x = b with a direct solver (MUMPS in parallel, PETSc LU serially).
 inline void solve_direct(Mat A, Vec b, Vec x) {
   PetscLinearSolver ksp;

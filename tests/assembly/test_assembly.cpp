@@ -48,29 +48,7 @@ DiscretizationOptions options(double gamma, int points, NeighbourhoodStrategy st
   return o;
 }
 
-struct Assembled {
-  double energy;
-  std::vector<double> gradient;
-  std::vector<double> hessian;
-};
-
-Assembled assemble_all(const Discretization& disc, const kernel::FormKernels& form, const std::vector<double>& u_original,
-                       std::span<const double> constants = {}) {
-  Assembler assembler(disc, form);
-  if (!constants.empty()) assembler.set_constants(constants);
-  const int bs = form.dofs_per_node;
-  PetscVector u = assembler.create_vector();
-  PetscVector g = assembler.create_vector();
-  set_from_original(disc, u_original, bs, u);
-  PetscMatrix H = assembler.create_matrix();
-  Assembled out;
-  out.energy = assembler.value(u);
-  assembler.vector(u, g);
-  assembler.matrix(u, H);
-  out.gradient = to_original(disc, g, bs);
-  out.hessian = testing::dense_original(disc, H, bs);
-  return out;
-}
+using testing::assemble_all;
 
 TEST(Assembly, PatternCoversEveryKernelContribution) {
   // A dense reference assembled element by element must equal the PETSc matrix, which was

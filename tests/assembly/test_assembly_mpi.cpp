@@ -30,26 +30,12 @@ std::vector<double> deterministic_values(std::size_t n, std::uint64_t seed) {
   return v;
 }
 
-struct Result {
-  double energy;
-  std::vector<double> gradient, hessian;
-};
+using Result = testing::Assembled;
 
 Result assemble(MPI_Comm comm, const NodeSet& nodes, const DiscretizationOptions& opts, const kernel::FormKernels& form,
                 const std::vector<double>& u_original) {
   const Discretization disc(comm, nodes, opts);
-  Assembler assembler(disc, form);
-  const int bs = form.dofs_per_node;
-  PetscVector u = assembler.create_vector(), g = assembler.create_vector();
-  PetscMatrix H = assembler.create_matrix();
-  set_from_original(disc, u_original, bs, u);
-  Result r;
-  r.energy = assembler.value(u);
-  assembler.vector(u, g);
-  assembler.matrix(u, H);
-  r.gradient = to_original(disc, g, bs);
-  r.hessian = testing::dense_original(disc, H, bs);
-  return r;
+  return testing::assemble_all(disc, form, u_original);
 }
 
 void expect_same(const Result& parallel, const Result& serial, const std::string& what) {

@@ -135,7 +135,9 @@ void check_spatial(const std::string& expr, bool second) {
           EXPECT_NEAR(hij, fd2, 1e-6 * (1 + std::abs(fd2))) << "d2/dx" << j << "dx" << i;
         }
       }
-      if (second) EXPECT_NEAR(eval_minus_u(form, dim, output(form, "L", dim), F, x), 0.0, 1e-10);
+      if (second) {
+        EXPECT_NEAR(eval_minus_u(form, dim, output(form, "L", dim), F, x), 0.0, 1e-10);
+      }
     }
   }
 }

@@ -47,7 +47,6 @@ constexpr double kR = 0.3;     // circle / sphere radius
 constexpr double kCy = 0.45;
 
 bool axisymmetric(const FormKernels& f) { return std::string(f.module).find("axisymmetric") != std::string::npos; }
-bool lagrangian(const FormKernels& f) { return std::string(f.module).find("lagrangian") != std::string::npos; }
 
 double constant_value(const std::string& name) {
   static const std::map<std::string, double> values = {
@@ -163,7 +162,9 @@ TEST(GeneratedForms, UseTheRealLmeBasis) {
 TEST_P(GeneratedForm, DerivativesMatchFiniteDifferencesAndTaylorOrders) {
   const FormKernels& f = *GetParam();
   ASSERT_TRUE(f.value && f.vector) << f.module << "::" << f.name << " lacks value/gradient kernels";
-  if (f.kind == lmeform::kernel::FunctionalKind::Energy) ASSERT_TRUE(f.matrix) << "energy without Hessian";
+  if (f.kind == lmeform::kernel::FunctionalKind::Energy) {
+    ASSERT_TRUE(f.matrix) << "energy without Hessian";
+  }
   std::mt19937_64 rng(12345);
   int k = 0;
   for (const fc::Cell& cell : cells_for(f)) {

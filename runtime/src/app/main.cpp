@@ -79,23 +79,6 @@ app::VesicleSetup setup_from(const Scene& scene, const NodeSet& nodes, double ep
   return s;
 }
 
-// φ_h of a finished stage at new points (values only): the starting field on an adapted grid.
-std::vector<double> transfer_phi(const NodeSet& old_nodes, const std::vector<double>& phi, double gamma,
-                                 const NodeSet& new_nodes) {
-  const std::vector<double> gammas(old_nodes.size(), gamma);
-  const LmeBasis basis(old_nodes, gammas);
-  std::vector<double> out(new_nodes.size());
-  for (std::size_t a = 0; a < new_nodes.size(); ++a) {
-    const auto x = new_nodes.point(a);
-    const auto list = basis.neighbours(x);
-    const auto p = basis.evaluate(x, list, 0);
-    double v = 0;
-    for (std::size_t m = 0; m < list.size(); ++m) v += p[m] * phi[static_cast<std::size_t>(list[m])];
-    out[a] = v;
-  }
-  return out;
-}
-
 double h_min_of(const NodeSet& nodes) {
   const auto summary = spacing_summary(nodes);
   return summary.h_min;
@@ -133,7 +116,6 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
   std::vector<StageRecord> stages;
   NodeSet nodes = initial_nodes(scene);
   std::vector<double> carried_phi;
-  std::vector<double> carried_grad;
   NodeSet carried_nodes;
   const int n_stages = 1 + (scene.adaptivity ? static_cast<int>(scene.adaptivity->stages.size()) : 0);
   for (int stage = 0; stage < n_stages; ++stage) {
@@ -144,10 +126,8 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
     if (stage > 0) {
       const auto& st = scene.adaptivity->stages[static_cast<std::size_t>(stage - 1)];
       if (st.lloyd_iterations > 0) {
-        CvtOptions cvt;
-        cvt.iterations = st.lloyd_iterations;
-        const auto density = phase_field_density(st.f, carried_nodes, carried_grad);
-        nodes = cvt_relocate(carried_nodes, scene.domain, density, cvt);
+        nodes = app::adapt_nodes(stages.back().result, {scene.domain.lo[0], scene.domain.lo[1]},
+                                 {scene.domain.hi[0], scene.domain.hi[1]}, st.f, st.lloyd_iterations);
       }
       rec.adapt_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     }
@@ -155,7 +135,7 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
     // An under-resolved interface is refused before any work (seed App. B: ε ≥ 2 h_min).
     check_resolution(rec.eps, rec.h_min, scene.nodes.resolution_factor, rec.grid + " grid");
     app::VesicleSetup setup = setup_from(scene, nodes, rec.eps);
-    if (stage > 0) setup.initial_phi = transfer_phi(carried_nodes, carried_phi, scene.nodes.gamma, nodes);
+    if (stage > 0) setup.initial_phi = app::transfer_phi(carried_nodes, carried_phi, scene.nodes.gamma, nodes);
     setup.solver.log = log;
     if (log != nullptr) {
       *log << "== stage " << stage << " (" << rec.grid << "): " << nodes.size() << " nodes, eps " << rec.eps
@@ -166,7 +146,6 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
     rec.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     carried_nodes = rec.result.nodes;
     carried_phi = rec.result.phi;
-    carried_grad = rec.result.grad_phi_norm;
     stages.push_back(std::move(rec));
     if (!stages.back().result.solve.converged) break;
   }

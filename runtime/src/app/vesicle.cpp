@@ -8,6 +8,7 @@
 #include "area_axisymmetric_kernels.hpp"
 #include "helfrich_axisymmetric_kernels.hpp"
 #include "lmeform/assembler.hpp"
+#include "lmeform/cvt.hpp"
 #include "lmeform/discretization.hpp"
 #include "lmeform/node_sets.hpp"
 #include "moment_axisymmetric_kernels.hpp"
@@ -150,6 +151,34 @@ VesicleResult solve_vesicle(MPI_Comm comm, const VesicleSetup& setup) {
   }
   result.cells = delaunay(nodes);
   return result;
+}
+
+std::vector<double> transfer_phi(const NodeSet& old_nodes, std::span<const double> phi, double gamma,
+                                 const NodeSet& new_nodes) {
+  const std::vector<double> gammas(old_nodes.size(), gamma);
+  const LmeBasis basis(old_nodes, gammas);
+  std::vector<double> out(new_nodes.size());
+  for (std::size_t a = 0; a < new_nodes.size(); ++a) {
+    const auto x = new_nodes.point(a);
+    const auto list = basis.neighbours(x);
+    const auto p = basis.evaluate(x, list, 0);
+    double v = 0;
+    for (std::size_t m = 0; m < list.size(); ++m) v += p[m] * phi[static_cast<std::size_t>(list[m])];
+    out[a] = v;
+  }
+  return out;
+}
+
+NodeSet adapt_nodes(const VesicleResult& solved, std::array<double, 2> lower, std::array<double, 2> upper, double f,
+                    int lloyd_iterations) {
+  Box box;
+  box.dim = 2;
+  box.lo = {lower[0], lower[1], 0};
+  box.hi = {upper[0], upper[1], 0};
+  CvtOptions cvt;
+  cvt.iterations = lloyd_iterations;
+  const auto density = phase_field_density(f, solved.nodes, solved.grad_phi_norm);
+  return cvt_relocate(solved.nodes, box, density, cvt);
 }
 
 }  // namespace lmeform::app

@@ -6,6 +6,7 @@
 #include <array>
 #include <iosfwd>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -52,6 +53,15 @@ VesicleFunctionals evaluate_vesicle(MPI_Comm comm, const VesicleSetup& setup);
 
 /// Builds the discretization and forms for the setup and minimizes. Collective over `comm`.
 VesicleResult solve_vesicle(MPI_Comm comm, const VesicleSetup& setup);
+
+/// φ_h of a finished solve evaluated at new points (values only): the starting field on an
+/// adapted grid.
+[[nodiscard]] std::vector<double> transfer_phi(const NodeSet& old_nodes, std::span<const double> phi, double gamma,
+                                               const NodeSet& new_nodes);
+
+/// One CVT adaptation of a solved state: Lloyd iterations with density ρ = 1 + f·|∇φ| on the box.
+[[nodiscard]] NodeSet adapt_nodes(const VesicleResult& solved, std::array<double, 2> lower, std::array<double, 2> upper,
+                                  double f, int lloyd_iterations);
 
 /// tanh(d / (√2 ε)) with d ≈ the signed distance to the ellipse (a_r, a_z) centred at (0, z_c).
 [[nodiscard]] double ellipsoid_profile(double r, double z, std::array<double, 2> semi_axes, double z_center, double eps);
