@@ -68,6 +68,7 @@ int main(int argc, char** argv) {
     else if (std::strcmp(argv[i], "--out") == 0 && i + 1 < argc) out = argv[++i];
   }
   PetscSession session(&argc, &argv);
+  std::setvbuf(stdout, nullptr, _IOLBF, 0);  // progress lines as they come, also into a log file
   std::filesystem::create_directories(out);
   std::vector<Record> records;
   // Uniform ladder: ε = 2h.

@@ -158,9 +158,16 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
     log_iterate(it);
   };
 
-  // ---- Stage 1: augmented Lagrangian --------------------------------------------------------
-  bool stage1_done = options_.skip_augmented_stage;
+  // Newton on the KKT system has no globalization: when it diverges from where the augmented
+  // Lagrangian stopped, the state is restored and the augmented Lagrangian resumes with a 100x
+  // tighter tolerance (twice at most).
+  double al_tolerance = options_.augmented_tolerance;
+  PetscVector u_saved = energy_->create_vector();
   std::vector<double> sigma(nu);
+  double seconds_newton = 0;
+  for (int attempt = 0; attempt < 3; ++attempt) {
+  // ---- Stage 1: augmented Lagrangian --------------------------------------------------------
+  bool stage1_done = attempt == 0 && options_.skip_augmented_stage;
   double previous_residual = std::numeric_limits<double>::infinity();
   for (int outer = 0; !stage1_done && outer < options_.max_outer_iterations; ++outer) {
     ++result.outer_iterations;
@@ -209,28 +216,38 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
     evaluate(u, nu, false, ev);
     for (std::size_t i = 0; i < k; ++i) nu[i] -= ev.residuals[i] / mu;
     const double residual = relative_residual(ev);
-    if (residual < options_.augmented_tolerance) stage1_done = true;
+    if (residual < al_tolerance) stage1_done = true;
     // Multiplier updates converge linearly at a rate set by μ: when the constraints stall,
     // stiffen the penalty (the Woodbury solve keeps the rank-k term exact however large 1/μ).
     if (residual > 0.25 * previous_residual) mu = std::max(mu * 0.1, 1e-12);
     previous_residual = residual;
   }
-  result.seconds_augmented = MPI_Wtime() - start_time_;
+  result.seconds_augmented = MPI_Wtime() - start_time_ - seconds_newton;
   if (!stage1_done) {
     evaluate(u, nu, false, ev);
     result.message = "augmented Lagrangian stage did not reach the constraint tolerance " +
-                     std::to_string(options_.augmented_tolerance) + " in " +
-                     std::to_string(options_.max_outer_iterations) + " multiplier updates";
+                     std::to_string(al_tolerance) + " in " + std::to_string(options_.max_outer_iterations) +
+                     " multiplier updates";
+    break;
   }
+  LMEFORM_PETSC_CHECK(VecCopy(u, u_saved));
+  const std::vector<double> nu_saved = nu;
+  bool diverged = false;
+  double first_gnorm = 0;
 
   // ---- Stage 2: Newton on the KKT system, Schur complement on the multipliers ------------------
   const double stage2_start = MPI_Wtime();
-  if (stage1_done) {
+  {
     for (int it = 0; it <= options_.max_newton_iterations; ++it) {
       evaluate(u, nu, true, ev);
       lagrangian_gradient(ev, nu, rhs);
       const double gnorm = norm(rhs);
       record("KKT", it, ev, gnorm);
+      if (it == 0) first_gnorm = gnorm;
+      if (!std::isfinite(ev.energy) || !std::isfinite(gnorm) || (it > 0 && gnorm > 1e3 * std::max(first_gnorm, 1e-8))) {
+        diverged = true;
+        break;
+      }
       const double scale = std::max(1.0, norm(ev.energy_gradient));
       if (gnorm <= options_.newton_tolerance * scale && relative_residual(ev) <= options_.constraint_tolerance) {
         result.converged = true;
@@ -280,7 +297,19 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
       ++result.newton_iterations;
     }
   }
-  result.seconds_newton = MPI_Wtime() - stage2_start;
+  seconds_newton += MPI_Wtime() - stage2_start;
+  if (!diverged) break;
+  LMEFORM_PETSC_CHECK(VecCopy(u_saved, u));
+  nu = nu_saved;
+  sigma = nu;
+  evaluate(u, nu, false, ev);
+  al_tolerance *= 0.01;
+  result.message = "KKT Newton diverged from the augmented Lagrangian's state";
+  if (options_.log != nullptr && energy_->discretization().rank() == 0) {
+    *options_.log << "KKT Newton diverged: back to the augmented Lagrangian with tolerance " << al_tolerance << std::endl;
+  }
+  }
+  result.seconds_newton = seconds_newton;
   result.energy = ev.energy;
   result.constraint_values = ev.values;
   result.multipliers.resize(k);
