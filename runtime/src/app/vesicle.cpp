@@ -11,17 +11,17 @@
 #include "lmeform/cvt.hpp"
 #include "lmeform/discretization.hpp"
 #include "lmeform/node_sets.hpp"
+#include "lmeform/scene.hpp"
 #include "moment_axisymmetric_kernels.hpp"
 #include "volume_axisymmetric_kernels.hpp"
 
 namespace lmeform::app {
 
 double ellipsoid_profile(double r, double z, std::array<double, 2> semi_axes, double z_center, double eps) {
-  const double a = semi_axes[0], b = semi_axes[1];
-  const double rho = std::sqrt((r / a) * (r / a) + ((z - z_center) / b) * ((z - z_center) / b));
-  // A scaled level set, exact for a sphere: a starting guess, the minimizer does the rest.
-  const double distance = std::min(a, b) * (1.0 - rho);
-  return std::tanh(distance / (std::sqrt(2.0) * eps));
+  // The exact signed distance to the ellipse (positive inside), as the scenes use it.
+  const std::array<double, 2> x{r, z}, center{0.0, z_center};
+  const double inside = ellipsoid_signed_distance(x, center, semi_axes);
+  return std::tanh(inside / (std::sqrt(2.0) * eps));
 }
 
 VesicleFunctionals evaluate_vesicle(MPI_Comm comm, const VesicleSetup& setup) {
