@@ -22,18 +22,19 @@ namespace {
 struct Options {
   std::string form;
   std::string out_dir = ".";
-  bool json = false;
+  bool json = true;
   bool print_ir = false;
   std::vector<std::string> include_dirs;
   std::string depfile;
 };
 
 const char* kUsage =
-    "lmeformc FILE.form -o DIR [--json] [--print-ir] [-I DIR]... [--depfile FILE]\n"
+    "lmeformc FILE.form -o DIR [--no-json] [--print-ir] [-I DIR]... [--depfile FILE]\n"
     "  Compiles a lmeform form file into DIR/<module>_kernels.hpp (C++ kernels: value, gradient,\n"
-    "  Hessian / residual, Jacobian) and, with --json, DIR/<module>.json (metadata).\n"
+    "  Hessian / residual, Jacobian) and DIR/<module>.json (metadata).\n"
     "  -o, --output DIR   output directory (created if missing; default .)\n"
-    "  --json             also write the JSON description\n"
+    "  --json             write the JSON description (the default)\n"
+    "  --no-json          write only the header\n"
     "  --print-ir         print the IR after differentiation to stdout (for debugging a form)\n"
     "  -I DIR             add an include search directory (after the including file's own directory)\n"
     "  --depfile FILE     write a Makefile dependency file (the form and every included file)\n"
@@ -104,12 +105,15 @@ int main(int argc, char** argv) {
   CLI::App app{"lmeformc: compiles a .form file into C++ kernels for the lmeform runtime"};
   app.add_option("form", opt.form, "the .form file")->required();
   app.add_option("-o,--output", opt.out_dir, "output directory");
-  app.add_flag("--json", opt.json, "also write <module>.json");
+  bool json_flag = false, no_json = false;
+  app.add_flag("--json", json_flag, "write <module>.json (the default)");
+  app.add_flag("--no-json", no_json, "write only the header");
   app.add_flag("--print-ir", opt.print_ir, "print the IR after differentiation");
   app.add_option("-I", opt.include_dirs, "include search directory")->allow_extra_args(false);
   app.add_option("--depfile", opt.depfile, "write a Makefile dependency file");
   app.footer(kUsage);
   CLI11_PARSE(app, argc, argv);
+  opt.json = !no_json;
 #else
   std::vector<std::string> args(argv + 1, argv + argc);
   for (std::size_t i = 0; i < args.size(); ++i) {
@@ -121,6 +125,7 @@ int main(int argc, char** argv) {
     if (a == "-h" || a == "--help") { std::cout << kUsage; return 0; }
     else if (a == "-o" || a == "--output") opt.out_dir = value();
     else if (a == "--json") opt.json = true;
+    else if (a == "--no-json") opt.json = false;
     else if (a == "--print-ir") opt.print_ir = true;
     else if (a == "-I") opt.include_dirs.push_back(value());
     else if (a.rfind("-I", 0) == 0) opt.include_dirs.push_back(a.substr(2));
