@@ -72,6 +72,21 @@ inline Assembled assemble_all(const Discretization& disc, const kernel::FormKern
   return out;
 }
 
+/// The linear system K x = b of a quadratic energy: K its Hessian, b = −∇E(0). `x` is a zero
+/// vector of the same layout, ready for Dirichlet values and the solution.
+struct LinearSystem {
+  PetscMatrix K;
+  PetscVector b, x;
+};
+
+inline LinearSystem assemble_linear_system(Assembler& assembler) {
+  LinearSystem system{assembler.create_matrix(), assembler.create_vector(), assembler.create_vector()};
+  assembler.matrix(system.x, system.K);
+  assembler.vector(system.x, system.b);
+  LMEFORM_PETSC_CHECK(VecScale(system.b, -1.0));
+  return system;
+}
+
 /// Solves A x = b with a direct solver (MUMPS in parallel, PETSc LU serially).
 inline void solve_direct(Mat A, Vec b, Vec x) {
   PetscLinearSolver ksp;

@@ -204,11 +204,7 @@ TEST(Assembly, DirichletRowsAndColumnsAreIdentity) {
   const auto form = JetKernel<Poisson<false>>::descriptor("poisson", kSourceConstant, 1);
   Assembler assembler(disc, form);
   assembler.set_constant("source", 1.0);
-  PetscVector u = assembler.create_vector(), b = assembler.create_vector(), x = assembler.create_vector();
-  PetscMatrix K = assembler.create_matrix();
-  assembler.matrix(u, K);
-  assembler.vector(u, b);
-  LMEFORM_PETSC_CHECK(VecScale(b, -1.0));
+  auto [K, b, x] = testing::assemble_linear_system(assembler);
   const auto boundary = hull_boundary_nodes(nodes);
   std::vector<double> prescribed(nodes.size(), 0.0);
   for (const int a : boundary) prescribed[static_cast<std::size_t>(a)] = 1.0 + nodes.coords[2 * static_cast<std::size_t>(a)];
@@ -271,13 +267,8 @@ ErrorNorms solve_manufactured(int per_axis, double gamma) {
   const auto form = JetKernel<Poisson<true>>::descriptor("manufactured", kSourceConstant, 1);
   Assembler assembler(disc, form);
   assembler.set_constant("source", 1.0);
-  PetscVector T = assembler.create_vector(), b = assembler.create_vector(), zero = assembler.create_vector();
-  PetscMatrix K = assembler.create_matrix();
-  assembler.matrix(T, K);
-  assembler.vector(T, b);
-  LMEFORM_PETSC_CHECK(VecScale(b, -1.0));
-  const auto dofs = owned_dofs_of_nodes(disc, hull_boundary_nodes(nodes), 1);
-  apply_dirichlet(K, b, zero, dofs);
+  auto [K, b, T] = testing::assemble_linear_system(assembler);
+  apply_dirichlet(K, b, T, owned_dofs_of_nodes(disc, hull_boundary_nodes(nodes), 1));  // T = 0 on the boundary
   testing::solve_direct(K, b, T);
   const auto l2_form = JetKernel<ManufacturedError<false>>::descriptor("l2", nullptr, 0);
   const auto h1_form = JetKernel<ManufacturedError<true>>::descriptor("h1", nullptr, 0);

@@ -89,12 +89,8 @@ std::vector<double> solve_poisson(MPI_Comm comm, const NodeSet& nodes, OffProces
   const auto form = JetKernel<testing::Poisson<false>>::descriptor("heat", kSourceConstant, 1);
   Assembler assembler(disc, form);
   assembler.set_constant("source", 1.0);
-  PetscVector T = assembler.create_vector(), b = assembler.create_vector(), zero = assembler.create_vector();
-  PetscMatrix K = assembler.create_matrix();
-  assembler.matrix(T, K);
-  assembler.vector(T, b);
-  LMEFORM_PETSC_CHECK(VecScale(b, -1.0));
-  apply_dirichlet(K, b, zero, owned_dofs_of_nodes(disc, hull_boundary_nodes(nodes), 1));
+  auto [K, b, T] = testing::assemble_linear_system(assembler);
+  apply_dirichlet(K, b, T, owned_dofs_of_nodes(disc, hull_boundary_nodes(nodes), 1));  // T = 0 on the boundary
   testing::solve_direct(K, b, T);
   return to_original(disc, T, 1);
 }
