@@ -227,6 +227,22 @@ TEST(Spacing, CheckResolutionMessage) {
   EXPECT_THROW(check_resolution(-1.0, grid), std::invalid_argument);
 }
 
+TEST(Spacing, CheckResolutionWithAFactor) {
+  EXPECT_NO_THROW(check_resolution(0.05, 0.024));
+  EXPECT_NO_THROW(check_resolution(0.048, 0.024));
+  EXPECT_NO_THROW(check_resolution(0.04, 0.024, 1.6));
+  try {
+    check_resolution(0.01, 0.012, 2.0, "adaptivity stage 2");
+    FAIL() << "eps = 0.01 should be refused";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_STREQ(e.what(),
+                 "adaptivity stage 2: eps = 0.01 is under-resolved: h_min = 0.012, the smallest admissible eps is 2 "
+                 "h_min = 0.024 (criterion eps >= 2 h_min, seed Appendix B); refine or adapt the nodes, or raise eps");
+  }
+  EXPECT_THROW(check_resolution(0.05, 0.0), std::invalid_argument);
+  EXPECT_THROW(check_resolution(0.05, 0.024, -1.0), std::invalid_argument);
+}
+
 TEST(Density, NodalValuesInterpolateLinearly) {
   const NodeSet grid = uniform_grid(Box::unit(2), {6, 6, 1});
   std::vector<double> g(grid.size());

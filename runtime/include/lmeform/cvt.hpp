@@ -9,6 +9,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "lmeform/node_set.hpp"
@@ -19,9 +20,25 @@ namespace lmeform {
 /// A density on the box: rho(x) > 0 and finite at every sample point (x has dim entries).
 using Density = std::function<double(std::span<const double>)>;
 
+/// Where the Lloyd iterations start.
+enum class CvtStart {
+  /// From the given nodes (seed Table B.6: "CVT starting from grid O1"). Lloyd moves nodes about
+  /// one cell per iteration, so a strong grading needs many iterations from a uniform start.
+  given,
+  /// From nodes re-placed with the asymptotic CVT node density, proportional to rho^(dim/(dim+2)):
+  /// interior nodes by systematic sampling along a Morton order of a fine lattice, nodes on an
+  /// edge of the box (one free coordinate) by equidistributing rho^(1/(dim+2)) along the edge.
+  /// Corners, and 3D face nodes, keep their places. Lloyd then only smooths locally.
+  density,
+};
+
 struct CvtOptions {
   int iterations = 50;            ///< maximum number of Lloyd iterations
-  double samples_per_node = 64;   ///< sample points per node (a stratified lattice over the box)
+  /// Sample points per node. Samples are drawn from a lattice over the box with probability
+  /// proportional to rho^(dim/(dim+2)) (the node density of a CVT) and weighted by rho over that
+  /// proposal, so every Voronoi cell receives about this many samples however strong the grading.
+  double samples_per_node = 64;
+  CvtStart start = CvtStart::given;
   /// Stop when the mean node displacement of an iteration is below tolerance * h_bar, with
   /// h_bar = (box volume / node count)^(1/dim) the spacing of a uniform set. 0 runs all iterations.
   double tolerance = 1e-3;
@@ -40,6 +57,7 @@ struct CvtReport {
   std::vector<CvtIteration> iterations;
   bool converged = false;         ///< the tolerance was met before the iteration limit
   std::size_t samples = 0;        ///< sample points used
+  std::size_t replaced = 0;       ///< nodes re-placed by CvtStart::density (0 for CvtStart::given)
   double h_bar = 0.0;             ///< (volume / nodes)^(1/dim), the scale of the tolerance
 };
 
@@ -103,10 +121,13 @@ struct SpacingSummary {
 /// The smallest admissible eps for the node set: 2 * h_min.
 [[nodiscard]] double min_admissible_eps(const NodeSet& nodes, const SpacingOptions& options = {});
 
-/// Throws std::invalid_argument when eps < 2 h_min (under-resolved); the message gives eps, h_min
-/// and the smallest admissible eps. Also refuses eps that is not positive and finite.
+/// The one resolution check of the project (seed Appendix B): throws std::invalid_argument when
+/// eps < factor * h_min; the message gives eps, h_min and the smallest admissible eps, prefixed by
+/// `what` (e.g. "stage 2") when not empty. Also refuses eps or h_min that is not positive and finite.
+void check_resolution(double eps, double h_min, double factor = 2.0, std::string_view what = {});
+/// The same with h_min from spacing_summary (factor 2, as the seed).
 void check_resolution(double eps, const NodeSet& nodes, const SpacingOptions& options = {});
-void check_resolution(double eps, const SpacingSummary& spacing);
+void check_resolution(double eps, const SpacingSummary& spacing, double factor = 2.0, std::string_view what = {});
 
 // ---------------------------------------------------------------------------------------------
 // The progressive schedule of seed Table B.6: adapt the grid with a moderate f using the phase

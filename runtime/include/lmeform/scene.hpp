@@ -146,10 +146,6 @@ struct Scene {
 /// the reduced volume V0 / V_max.
 void check_feasible(double A0, double V0, int dim = 3);
 
-/// Throws SceneError unless eps >= factor * h_min; the message gives h_min and the smallest
-/// admissible eps. `what` (e.g. "adaptivity stage 2") prefixes the message when not empty.
-void check_resolution(double eps, double h_min, double factor = 2.0, std::string_view what = {});
-
 /// Signed distance from x to the ellipsoid with the given center and semi-axes (dim 1-3), > 0 inside.
 [[nodiscard]] double ellipsoid_signed_distance(std::span<const double> x, std::span<const double> center,
                                                std::span<const double> semi_axes);

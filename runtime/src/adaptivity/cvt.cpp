@@ -6,6 +6,8 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <map>
+#include <numeric>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -80,6 +82,163 @@ std::array<double, 3> circumcentre(const NodeSet& nodes, std::span<const int> v)
   return x;
 }
 
+double checked_density(const Density& density, const std::array<double, 3>& x, std::size_t du, const char* who) {
+  const double rho = density(std::span<const double>(x.data(), du));
+  if (!(rho > 0.0) || !std::isfinite(rho)) {
+    std::string where = "(";
+    for (std::size_t i = 0; i < du; ++i) where += (i ? ", " : "") + fmt(x[i]);
+    throw std::invalid_argument(std::string(who) + ": the density must be positive and finite, got " + fmt(rho) +
+                                " at " + where + ")");
+  }
+  return rho;
+}
+
+// A regular lattice of cells over the box (x fastest), with about `target` cells.
+class Lattice {
+ public:
+  Lattice(const Box& box, double target) : box_(box), du_(static_cast<std::size_t>(box.dim)) {
+    double volume = 1.0;
+    for (std::size_t i = 0; i < du_; ++i) volume *= box.hi[i] - box.lo[i];
+    const double s = std::pow(volume / target, 1.0 / box.dim);
+    for (std::size_t i = 0; i < du_; ++i) {
+      const double L = box.hi[i] - box.lo[i];
+      counts_[i] = static_cast<std::size_t>(std::max(1.0, std::ceil(L / s)));
+      width_[i] = L / static_cast<double>(counts_[i]);
+      size_ *= counts_[i];
+    }
+    cell_volume_ = volume / static_cast<double>(size_);
+  }
+  std::size_t size() const { return size_; }
+  double cell_volume() const { return cell_volume_; }
+  std::array<std::size_t, 3> index(std::size_t c) const {
+    std::array<std::size_t, 3> k{};
+    for (std::size_t i = 0; i < du_; ++i) {
+      k[i] = c % counts_[i];
+      c /= counts_[i];
+    }
+    return k;
+  }
+  void centre(std::size_t c, std::array<double, 3>& x) const {
+    const auto k = index(c);
+    for (std::size_t i = 0; i < du_; ++i) x[i] = box_.lo[i] + (static_cast<double>(k[i]) + 0.5) * width_[i];
+  }
+  void random_point(std::size_t c, SplitMix64& rng, std::array<double, 3>& x) const {
+    const auto k = index(c);
+    for (std::size_t i = 0; i < du_; ++i) x[i] = box_.lo[i] + (static_cast<double>(k[i]) + rng.uniform()) * width_[i];
+  }
+  // Cells sorted by the Morton (Z-order) code of their indices: consecutive cells are close in
+  // space, so systematic sampling along this order spreads draws evenly in every direction.
+  std::vector<std::size_t> morton_order() const {
+    std::vector<std::pair<std::uint64_t, std::size_t>> keyed(size_);
+    for (std::size_t c = 0; c < size_; ++c) {
+      const auto k = index(c);
+      std::uint64_t code = 0;
+      for (unsigned bit = 0; bit < 21; ++bit) {
+        for (std::size_t i = 0; i < du_; ++i) {
+          code |= ((static_cast<std::uint64_t>(k[i]) >> bit) & 1ULL) << (bit * du_ + i);
+        }
+      }
+      keyed[c] = {code, c};
+    }
+    std::sort(keyed.begin(), keyed.end());
+    std::vector<std::size_t> order(size_);
+    for (std::size_t c = 0; c < size_; ++c) order[c] = keyed[c].second;
+    return order;
+  }
+
+ private:
+  Box box_;
+  std::size_t du_;
+  std::array<std::size_t, 3> counts_{1, 1, 1};
+  std::array<double, 3> width_{};
+  std::size_t size_ = 1;
+  double cell_volume_ = 0.0;
+};
+
+// CvtStart::density: re-place the interior nodes by systematic sampling of the lattice proposal
+// (rho^(dim/(dim+2)) per cell) along Morton order, and the nodes on each edge of the box (one free
+// coordinate) by equidistributing rho^(1/(dim+2)) along the edge - the linear node density of a CVT
+// whose spacing is proportional to rho^(-1/(dim+2)). Corners and 3D face nodes keep their places.
+// Node order and boundary membership are preserved. Returns the number of nodes re-placed.
+std::size_t place_by_density(NodeSet& nodes, const std::vector<char>& fixed, const Box& box, const Lattice& lattice,
+                             const std::vector<double>& proposal, const Density& density, SplitMix64& rng,
+                             const char* who) {
+  const std::size_t du = static_cast<std::size_t>(nodes.dim);
+  const std::size_t n = nodes.size();
+  std::vector<std::size_t> interior;
+  std::map<std::vector<double>, std::vector<std::size_t>> edges;  // key: free axis, then the fixed coordinates
+  for (std::size_t a = 0; a < n; ++a) {
+    std::size_t free_count = 0, free_axis = 0;
+    for (std::size_t i = 0; i < du; ++i) {
+      if (!fixed[a * du + i]) {
+        ++free_count;
+        free_axis = i;
+      }
+    }
+    if (free_count == du && du > 1) {
+      interior.push_back(a);
+    } else if (free_count == 1) {
+      std::vector<double> key{static_cast<double>(free_axis)};
+      for (std::size_t i = 0; i < du; ++i) key.push_back(i == free_axis ? 0.0 : nodes.coords[a * du + i]);
+      edges[key].push_back(a);
+    }
+  }
+  std::size_t replaced = 0;
+  // Edges: nodes keep their order along the edge; positions at equal steps of the cumulative
+  // rho^(1/(dim+2)) between the edge's ends (the corners, which stay).
+  const double edge_exponent = 1.0 / static_cast<double>(du + 2);
+  for (auto& [key, members] : edges) {
+    const auto axis = static_cast<std::size_t>(key[0]);
+    std::sort(members.begin(), members.end(), [&](std::size_t p, std::size_t q) {
+      return nodes.coords[p * du + axis] < nodes.coords[q * du + axis];
+    });
+    const double lo = box.lo[axis], hi = box.hi[axis];
+    const std::size_t k = 64 * (members.size() + 1);
+    std::vector<double> cumulative(k + 1, 0.0);
+    std::array<double, 3> x{};
+    for (std::size_t i = 0; i < du; ++i) x[i] = nodes.coords[members.front() * du + i];
+    auto g = [&](double t) {
+      x[axis] = lo + t * (hi - lo);
+      return std::pow(checked_density(density, x, du, who), edge_exponent);
+    };
+    double previous = g(0.0);
+    for (std::size_t j = 1; j <= k; ++j) {
+      const double current = g(static_cast<double>(j) / static_cast<double>(k));
+      cumulative[j] = cumulative[j - 1] + 0.5 * (previous + current);
+      previous = current;
+    }
+    const double total = cumulative[k];
+    for (std::size_t m = 0; m < members.size(); ++m) {
+      const double level = total * static_cast<double>(m + 1) / static_cast<double>(members.size() + 1);
+      const auto it = std::lower_bound(cumulative.begin(), cumulative.end(), level);
+      const auto j = static_cast<std::size_t>(std::max<std::ptrdiff_t>(1, it - cumulative.begin()));
+      const double t = (static_cast<double>(j - 1) + (level - cumulative[j - 1]) / (cumulative[j] - cumulative[j - 1])) /
+                       static_cast<double>(k);
+      nodes.coords[members[m] * du + axis] = lo + t * (hi - lo);
+      ++replaced;
+    }
+  }
+  // Interior: systematic sampling along Morton order, one uniform point in each drawn cell.
+  if (!interior.empty()) {
+    const double total = std::accumulate(proposal.begin(), proposal.end(), 0.0);
+    const double step = total / static_cast<double>(interior.size());
+    double next = rng.uniform() * step, cumulative = 0.0;
+    std::size_t placed = 0;
+    std::array<double, 3> x{};
+    for (const std::size_t c : lattice.morton_order()) {
+      cumulative += proposal[c];
+      while (next < cumulative && placed < interior.size()) {
+        lattice.random_point(c, rng, x);
+        for (std::size_t i = 0; i < du; ++i) nodes.coords[interior[placed] * du + i] = x[i];
+        ++placed;
+        next += step;
+      }
+    }
+    replaced += placed;
+  }
+  return replaced;
+}
+
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
@@ -134,41 +293,57 @@ NodeSet cvt_relocate(const NodeSet& nodes, const Box& box, const Density& densit
   }
   check_coincident(KdTree(current), who);
 
-  // Samples: one jittered point per cell of a lattice with about samples_per_node * n cells.
+  // The lattice: about samples_per_node * n cells over the box.
   const double target = options.samples_per_node * static_cast<double>(n);
-  const double s = std::pow(volume / target, 1.0 / d);
-  std::array<std::size_t, 3> counts{1, 1, 1};
-  std::array<double, 3> cell{};
-  std::size_t m = 1;
-  for (std::size_t i = 0; i < du; ++i) {
-    const double L = box.hi[i] - box.lo[i];
-    counts[i] = static_cast<std::size_t>(std::max(1.0, std::ceil(L / s)));
-    cell[i] = L / static_cast<double>(counts[i]);
-    m *= counts[i];
-  }
-  const double cell_volume = volume / static_cast<double>(m);
-  std::vector<double> samples(m * du);
-  std::vector<double> weight(m);
+  const Lattice lattice(box, target);
   SplitMix64 rng(options.seed);
-  std::array<double, 3> x{};
-  for (std::size_t q = 0; q < m; ++q) {
-    std::size_t rest = q;
-    for (std::size_t i = 0; i < du; ++i) {  // x varies fastest
-      const std::size_t k = rest % counts[i];
-      rest /= counts[i];
-      x[i] = box.lo[i] + (static_cast<double>(k) + rng.uniform()) * cell[i];
-      samples[q * du + i] = x[i];
+
+  // The proposal: rho^(dim/(dim+2)) at the cell centres, the node density of a CVT of rho.
+  const double node_exponent = static_cast<double>(d) / static_cast<double>(d + 2);
+  std::vector<double> proposal(lattice.size());
+  {
+    std::array<double, 3> x{};
+    for (std::size_t c = 0; c < lattice.size(); ++c) {
+      lattice.centre(c, x);
+      proposal[c] = std::pow(checked_density(density, x, du, who), node_exponent);
     }
-    const double rho = density(std::span<const double>(x.data(), du));
-    if (!(rho > 0.0) || !std::isfinite(rho)) {
-      throw std::invalid_argument(std::string(who) + ": the density must be positive and finite, got " + fmt(rho) +
-                                  " at sample " + std::to_string(q));
-    }
-    weight[q] = rho * cell_volume;
   }
 
   CvtReport local;
-  local.samples = m;
+  if (options.start == CvtStart::density) {
+    local.replaced = place_by_density(current, fixed, box, lattice, proposal, density, rng, who);
+    check_coincident(KdTree(current), who);
+  }
+
+  // Samples: systematic sampling of the lattice cells along Morton order with probability
+  // proportional to the proposal, one uniform point in the cell per draw, importance weight
+  // rho(x) / proposal density. Computed once: each Lloyd step is a fixed-point step of one
+  // sampled CVT energy, and the run is deterministic.
+  const std::size_t m = static_cast<std::size_t>(std::ceil(target));
+  std::vector<double> samples;
+  std::vector<double> weight;
+  samples.reserve(m * du);
+  weight.reserve(m);
+  {
+    const double total = std::accumulate(proposal.begin(), proposal.end(), 0.0);
+    const double step = total / static_cast<double>(m);
+    double next = rng.uniform() * step, cumulative = 0.0;
+    std::array<double, 3> x{};
+    for (const std::size_t c : lattice.morton_order()) {
+      cumulative += proposal[c];
+      while (next < cumulative && weight.size() < m) {
+        lattice.random_point(c, rng, x);
+        const double rho = checked_density(density, x, du, who);
+        // Expected draws in cell c are proposal[c] / step; the cell's mass is rho * volume.
+        weight.push_back(rho * lattice.cell_volume() * step / proposal[c]);
+        for (std::size_t i = 0; i < du; ++i) samples.push_back(x[i]);
+        next += step;
+      }
+    }
+  }
+  const std::size_t samples_drawn = weight.size();
+
+  local.samples = samples_drawn;
   local.h_bar = std::pow(volume / static_cast<double>(n), 1.0 / d);
 
   std::vector<double> wsum(n), xsum(n * du);
@@ -177,7 +352,7 @@ NodeSet cvt_relocate(const NodeSet& nodes, const Box& box, const Density& densit
     const KdTree tree(current);
     std::fill(wsum.begin(), wsum.end(), 0.0);
     std::fill(xsum.begin(), xsum.end(), 0.0);
-    for (std::size_t q = 0; q < m; ++q) {
+    for (std::size_t q = 0; q < samples_drawn; ++q) {
       tree.knn(std::span<const double>(samples.data() + q * du, du), 1, idx);
       const auto a = static_cast<std::size_t>(idx[0]);
       wsum[a] += weight[q];
@@ -439,16 +614,26 @@ double min_admissible_eps(const NodeSet& nodes, const SpacingOptions& options) {
   return spacing_summary(nodes, options).eps_min;
 }
 
-void check_resolution(double eps, const SpacingSummary& spacing) {
+void check_resolution(double eps, double h_min, double factor, std::string_view what) {
+  const std::string prefix = what.empty() ? std::string() : std::string(what) + ": ";
   if (!(eps > 0.0) || !std::isfinite(eps)) {
-    throw std::invalid_argument("check_resolution: eps must be positive and finite, got " + fmt(eps));
+    throw std::invalid_argument(prefix + "eps must be positive and finite, got " + fmt(eps));
   }
-  if (eps < spacing.eps_min * (1.0 - 1e-12)) {
-    throw std::invalid_argument("eps = " + fmt(eps) + " is under-resolved by this node set (" +
-                                std::to_string(spacing.h.size()) + " nodes): h_min = " + fmt(spacing.h_min) +
-                                ", the smallest admissible eps is 2 h_min = " + fmt(spacing.eps_min) +
-                                " (criterion eps >= 2 h_min, seed Appendix B); refine or adapt the nodes, or raise eps");
+  if (!(h_min > 0.0) || !std::isfinite(h_min) || !(factor > 0.0) || !std::isfinite(factor)) {
+    throw std::invalid_argument(prefix + "h_min = " + fmt(h_min) + " and factor = " + fmt(factor) +
+                                " must be positive and finite");
   }
+  if (eps >= factor * h_min * (1.0 - 1e-12)) return;
+  throw std::invalid_argument(prefix + "eps = " + fmt(eps) + " is under-resolved: h_min = " + fmt(h_min) +
+                              ", the smallest admissible eps is " + fmt(factor) + " h_min = " + fmt(factor * h_min) +
+                              " (criterion eps >= " + fmt(factor) +
+                              " h_min, seed Appendix B); refine or adapt the nodes, or raise eps");
+}
+
+void check_resolution(double eps, const SpacingSummary& spacing, double factor, std::string_view what) {
+  const std::string context = std::string(what.empty() ? std::string_view("node set") : what) + " (" +
+                              std::to_string(spacing.h.size()) + " nodes)";
+  check_resolution(eps, spacing.h_min, factor, context);
 }
 
 void check_resolution(double eps, const NodeSet& nodes, const SpacingOptions& options) {

@@ -79,11 +79,6 @@ app::VesicleSetup setup_from(const Scene& scene, const NodeSet& nodes, double ep
   return s;
 }
 
-double h_min_of(const NodeSet& nodes) {
-  const auto summary = spacing_summary(nodes);
-  return summary.h_min;
-}
-
 std::string json_number(double v) {
   if (!std::isfinite(v)) return "null";
   std::ostringstream os;
@@ -131,9 +126,10 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
       }
       rec.adapt_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     }
-    rec.h_min = h_min_of(nodes);
+    const SpacingSummary spacing = spacing_summary(nodes);
+    rec.h_min = spacing.h_min;
     // An under-resolved interface is refused before any work (seed App. B: ε ≥ 2 h_min).
-    check_resolution(rec.eps, rec.h_min, scene.nodes.resolution_factor, rec.grid + " grid");
+    check_resolution(rec.eps, spacing, scene.nodes.resolution_factor, rec.grid + " grid");
     app::VesicleSetup setup = setup_from(scene, nodes, rec.eps);
     if (stage > 0) setup.initial_phi = app::transfer_phi(carried_nodes, carried_phi, scene.nodes.gamma, nodes);
     setup.solver.log = log;

@@ -13,6 +13,7 @@
 
 #include <toml++/toml.h>
 
+#include "lmeform/cvt.hpp"
 #include "lmeform/quadrature.hpp"
 
 namespace lmeform {
@@ -456,7 +457,7 @@ void read_model(const Section& root, Scene& s) {
   if (const auto h = s.uniform_min_spacing()) {
     try {
       check_resolution(m.eps, *h, s.nodes.resolution_factor, "key 'model.eps'");
-    } catch (const SceneError& e) {
+    } catch (const std::invalid_argument& e) {
       fail(t.context(), t.at("eps"), std::string(e.what()) + " (the uniform grid of [nodes]; lower " +
                                          "nodes.spacing or raise model.eps)");
     }
@@ -683,14 +684,6 @@ void check_feasible(double A0, double V0, int dim) {
     throw SceneError("infeasible targets: " + std::string(volume) + " V0 = " + fmt(V0) + " exceeds V_max = " +
                      fmt(vmax) + ", the " + volume + " of the " + sphere + " with " + area + " A0 = " + fmt(A0) +
                      " (reduced volume " + fmt(V0 / vmax) + " > 1)");
-}
-
-void check_resolution(double eps, double h_min, double factor, std::string_view what) {
-  if (eps >= factor * h_min * (1 - 1e-12)) return;
-  std::string msg = what.empty() ? std::string() : std::string(what) + ": ";
-  msg += "eps = " + fmt(eps) + " is under-resolved: the smallest nodal spacing is h_min = " + fmt(h_min) +
-         ", so eps must be at least " + fmt(factor) + " h_min = " + fmt(factor * h_min);
-  throw SceneError(msg);
 }
 
 double ellipsoid_signed_distance(std::span<const double> x, std::span<const double> center,
