@@ -504,6 +504,7 @@ GeneratedModule generate(const CompiledForm& form, const std::string& source_nam
     if (k.has_value) h << "  k.value = &" << d << k.symbol << "_value;\n";
     if (k.has_vector) h << "  k.vector = &" << d << k.symbol << "_vector;\n";
     if (k.has_matrix) h << "  k.matrix = &" << d << k.symbol << "_matrix;\n";
+    if (k.has_matrix && k.n_blocks == 0) h << "  k.matrix_structurally_zero = true;\n";
     if (p.output->kind == OutputKind::Constraint)
       h << "  k.target_constant = " << p.output->target_constant << ";\n  k.target_value = " << literal(p.output->target_value) << ";\n";
     auto total = [](const FlopModel& f) { return f.per_point + f.per_node_point + f.per_node_pair_point; };

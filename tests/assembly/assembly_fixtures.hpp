@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <vector>
 
 #include "lmeform/assembler.hpp"
@@ -55,14 +56,15 @@ struct Assembled {
 };
 
 inline Assembled assemble_all(const Discretization& disc, const kernel::FormKernels& form,
-                              const std::vector<double>& u_original, std::span<const double> constants = {}) {
+                              const std::vector<double>& u_original, std::span<const double> constants = {},
+                              Assembler::MatrixInsertion insertion = Assembler::MatrixInsertion::Direct) {
   Assembler assembler(disc, form);
   if (!constants.empty()) assembler.set_constants(constants);
   const int bs = form.dofs_per_node;
   PetscVector u = assembler.create_vector();
   PetscVector g = assembler.create_vector();
   set_from_original(disc, u_original, bs, u);
-  PetscMatrix H = assembler.create_matrix();
+  PetscMatrix H = assembler.create_matrix(insertion);
   Assembled out;
   out.energy = assembler.value(u);
   assembler.vector(u, g);
@@ -102,6 +104,43 @@ inline void solve_direct(Mat A, Vec b, Vec x) {
   MPI_Comm_size(comm, &size);
   if (size > 1) LMEFORM_PETSC_CHECK(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
   LMEFORM_PETSC_CHECK(KSPSolve(ksp, b, x));
+}
+
+/// Values written straight into the AIJ arrays must reach a solver that factored the matrix
+/// before: the fill must leave the matrix marked changed, so that KSPSetUp refactors. Solves
+/// H x1 = b, then assembles 2H into the same matrix and checks the new solve gives x1 / 2.
+inline void expect_solver_refactors_after_direct_fill(const Discretization& disc, const kernel::FormKernels& form) {
+  Assembler assembler(disc, form);
+  PetscVector u = assembler.create_vector(), b = assembler.create_vector(), x1 = assembler.create_vector(),
+              x2 = assembler.create_vector();
+  std::vector<double> state(static_cast<std::size_t>(disc.n_nodes()));
+  for (std::size_t a = 0; a < state.size(); ++a) state[a] = 0.3 * std::sin(1.7 * static_cast<double>(a));
+  set_from_original(disc, state, 1, u);
+  LMEFORM_PETSC_CHECK(VecSet(b, 1.0));
+  PetscMatrix H = assembler.create_matrix();
+  assembler.matrix(u, H);
+  PetscLinearSolver ksp;
+  LMEFORM_PETSC_CHECK(KSPCreate(disc.comm(), ksp.out()));
+  LMEFORM_PETSC_CHECK(KSPSetType(ksp, KSPPREONLY));
+  PC pc = nullptr;
+  LMEFORM_PETSC_CHECK(KSPGetPC(ksp, &pc));
+  LMEFORM_PETSC_CHECK(PCSetType(pc, PCLU));
+  if (disc.ranks() > 1) LMEFORM_PETSC_CHECK(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
+  LMEFORM_PETSC_CHECK(KSPSetOperators(ksp, H, H));
+  LMEFORM_PETSC_CHECK(KSPSetUp(ksp));
+  LMEFORM_PETSC_CHECK(KSPSolve(ksp, b, x1));
+  const Assembler::MatrixTerm twice{&assembler, 2.0};
+  assembler.matrix_sum(u, {&twice, 1}, H);
+  LMEFORM_PETSC_CHECK(KSPSetOperators(ksp, H, H));
+  LMEFORM_PETSC_CHECK(KSPSetUp(ksp));
+  LMEFORM_PETSC_CHECK(KSPSolve(ksp, b, x2));
+  LMEFORM_PETSC_CHECK(VecScale(x2, 2.0));
+  LMEFORM_PETSC_CHECK(VecAXPY(x2, -1.0, x1));
+  PetscReal diff = 0, size = 0;
+  LMEFORM_PETSC_CHECK(VecNorm(x2, NORM_INFINITY, &diff));
+  LMEFORM_PETSC_CHECK(VecNorm(x1, NORM_INFINITY, &size));
+  ASSERT_GT(size, 0.0);
+  EXPECT_LE(diff, 1e-10 * size);
 }
 
 }  // namespace lmeform::testing

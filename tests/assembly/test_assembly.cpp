@@ -128,6 +128,69 @@ TEST(Assembly, CellBasedAndPerPointAssembleTheSameOperator) {
   }
 }
 
+TEST(Assembly, DirectAndSetValuesInsertionGiveTheSameMatrix) {
+  const NodeSet nodes = jittered_grid(10, 0.3, 21);
+  const auto scalar = JetKernel<Nonlinear>::descriptor("nonlinear", nullptr, 0);
+  const auto vector = JetKernel<VectorField>::descriptor("vector", nullptr, 0);
+  const Discretization disc(PETSC_COMM_SELF, nodes, options(0.8, 6, NeighbourhoodStrategy::CellBased));
+  for (const auto* form : {&scalar, &vector}) {
+    const auto u = random_values(nodes.size() * static_cast<std::size_t>(form->dofs_per_node), 13);
+    const auto direct = assemble_all(disc, *form, u, {}, Assembler::MatrixInsertion::Direct);
+    const auto reference = assemble_all(disc, *form, u, {}, Assembler::MatrixInsertion::SetValues);
+    ASSERT_GT(testing::max_abs(reference.hessian), 0.0);
+    EXPECT_LE(testing::max_abs_difference(direct.hessian, reference.hessian), 1e-14 * testing::max_abs(reference.hessian))
+        << form->name;
+  }
+}
+
+TEST(Assembly, SolverRefactorsAfterADirectFill) {
+  const NodeSet nodes = jittered_grid(9, 0.3, 4);
+  const Discretization disc(PETSC_COMM_SELF, nodes, options(1.6, 6, NeighbourhoodStrategy::CellBased));
+  testing::expect_solver_refactors_after_direct_fill(disc, JetKernel<Nonlinear>::descriptor("nonlinear", nullptr, 0));
+}
+
+TEST(Assembly, MatrixSumEqualsSeparateAssemblies) {
+  // A second-order form (Nonlinear) summed with a fourth-order one (Bilaplacian): the sum is
+  // tabulated once at order 2, and the first form must read that tabulation correctly.
+  const NodeSet nodes = jittered_grid(9, 0.3, 6);
+  const Discretization disc(PETSC_COMM_SELF, nodes,
+                            options(1.6, 6, NeighbourhoodStrategy::CellBased, BasisStorage::Full, 2));
+  const auto first = JetKernel<Nonlinear>::descriptor("nonlinear", nullptr, 0);
+  const auto second = JetKernel<Bilaplacian>::descriptor("bilaplacian", nullptr, 0);
+  Assembler a(disc, first), b(disc, second);
+  PetscVector u = a.create_vector();
+  set_from_original(disc, random_values(nodes.size(), 8, 0.5), 1, u);
+  PetscMatrix sum = a.create_matrix();
+  const std::vector<Assembler::MatrixTerm> terms{{&a, 1.5}, {&b, -0.7}};
+  a.matrix_sum(u, terms, sum);
+  PetscMatrix separate = a.create_matrix(Assembler::MatrixInsertion::SetValues);
+  a.matrix(u, separate);
+  LMEFORM_PETSC_CHECK(MatScale(separate, 1.5));
+  b.add_matrix(u, separate, -0.7);
+  const auto s = testing::dense_original(disc, sum, 1), r = testing::dense_original(disc, separate, 1);
+  ASSERT_GT(testing::max_abs(r), 0.0);
+  EXPECT_LE(testing::max_abs_difference(s, r), 1e-13 * testing::max_abs(r));
+}
+
+TEST(Assembly, StructurallyZeroMatrixIsSkipped) {
+  const NodeSet nodes = jittered_grid(8, 0.3, 2);
+  const Discretization disc(PETSC_COMM_SELF, nodes, options(1.6, 3, NeighbourhoodStrategy::CellBased));
+  auto form = JetKernel<Nonlinear>::descriptor("nonlinear", nullptr, 0);
+  Assembler real(disc, form);
+  auto flagged_form = form;
+  flagged_form.matrix_structurally_zero = true;  // its kernel would add something: the flag must win
+  Assembler flagged(disc, flagged_form);
+  PetscVector u = real.create_vector();
+  set_from_original(disc, random_values(nodes.size(), 1, 0.5), 1, u);
+  PetscMatrix H = real.create_matrix();
+  real.matrix(u, H);
+  const auto before = testing::dense_original(disc, H, 1);
+  flagged.add_matrix(u, H, 3.0);
+  EXPECT_EQ(testing::max_abs_difference(testing::dense_original(disc, H, 1), before), 0.0);
+  flagged.matrix(u, H);
+  EXPECT_EQ(testing::max_abs(testing::dense_original(disc, H, 1)), 0.0);
+}
+
 TEST(Assembly, CompressedAndFullStorageAgree) {
   const NodeSet nodes = jittered_grid(9, 0.3, 8);
   const auto form = JetKernel<Bilaplacian>::descriptor("bilaplacian", nullptr, 0);

@@ -33,9 +33,10 @@ std::vector<double> deterministic_values(std::size_t n, std::uint64_t seed) {
 using Result = testing::Assembled;
 
 Result assemble(MPI_Comm comm, const NodeSet& nodes, const DiscretizationOptions& opts, const kernel::FormKernels& form,
-                const std::vector<double>& u_original) {
+                const std::vector<double>& u_original,
+                Assembler::MatrixInsertion insertion = Assembler::MatrixInsertion::Direct) {
   const Discretization disc(comm, nodes, opts);
-  return testing::assemble_all(disc, form, u_original);
+  return testing::assemble_all(disc, form, u_original, {}, insertion);
 }
 
 void expect_same(const Result& parallel, const Result& serial, const std::string& what) {
@@ -60,8 +61,12 @@ TEST(AssemblyMpi, OneRankEqualsTwoRanks) {
         opts.strategy = strategy;
         opts.off_process = mode;
         const Result serial = assemble(PETSC_COMM_SELF, nodes, opts, *form, u);
-        const Result parallel = assemble(PETSC_COMM_WORLD, nodes, opts, *form, u);
-        expect_same(parallel, serial, std::string(form->name) + " " + to_string(strategy) + " " + to_string(mode));
+        const std::string what = std::string(form->name) + " " + to_string(strategy) + " " + to_string(mode);
+        // Direct addition into the MPIAIJ diagonal and off-diagonal blocks, and MatSetValues.
+        for (const auto insertion : {Assembler::MatrixInsertion::Direct, Assembler::MatrixInsertion::SetValues}) {
+          const Result parallel = assemble(PETSC_COMM_WORLD, nodes, opts, *form, u, insertion);
+          expect_same(parallel, serial, what + (insertion == Assembler::MatrixInsertion::Direct ? " direct" : " MatSetValues"));
+        }
       }
     }
   }
@@ -93,6 +98,14 @@ std::vector<double> solve_poisson(MPI_Comm comm, const NodeSet& nodes, OffProces
   apply_dirichlet(K, b, T, owned_dofs_of_nodes(disc, hull_boundary_nodes(nodes), 1));  // T = 0 on the boundary
   testing::solve_direct(K, b, T);
   return to_original(disc, T, 1);
+}
+
+TEST(AssemblyMpi, SolverRefactorsAfterADirectFill) {
+  DiscretizationOptions opts;
+  opts.gamma = {1.6};
+  opts.quadrature_points = 3;
+  const Discretization disc(PETSC_COMM_WORLD, test_nodes(), opts);
+  testing::expect_solver_refactors_after_direct_fill(disc, JetKernel<testing::Nonlinear>::descriptor("nonlinear", nullptr, 0));
 }
 
 TEST(AssemblyMpi, HeatSolutionIsTheSameOnOneAndTwoRanks) {

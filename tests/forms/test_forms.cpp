@@ -183,6 +183,25 @@ TEST_P(GeneratedForm, DerivativesMatchFiniteDifferencesAndTaylorOrders) {
   }
 }
 
+TEST_P(GeneratedForm, StructurallyZeroFlagMatchesTheHessian) {
+  // The runtime skips assembling a matrix flagged structurally zero, so the flag must be exact:
+  // set exactly when the Hessian vanishes identically (a functional linear in its unknowns).
+  const FormKernels& f = *GetParam();
+  if (!f.matrix) GTEST_SKIP() << "no matrix kernel";
+  std::mt19937_64 rng(777);
+  double largest = 0;
+  for (const fc::Cell& cell : cells_for(f)) {
+    Case c = make_case(f, cell, rng);
+    fc::Evaluator e(f, c.cell, c.state);
+    for (const double h : e.hessian(c.state.unknowns)) largest = std::max(largest, std::abs(h));
+  }
+  if (f.matrix_structurally_zero) {
+    EXPECT_EQ(largest, 0.0) << f.module << "::" << f.name << " is flagged structurally zero";
+  } else {
+    EXPECT_GT(largest, 0.0) << f.module << "::" << f.name << " has a zero Hessian but is not flagged";
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(AllForms, GeneratedForm, ::testing::ValuesIn(all_2d()),
                          [](const ::testing::TestParamInfo<const FormKernels*>& p) {
                            return std::string(p.param->module) + "_" + p.param->name;

@@ -54,14 +54,21 @@ class Assembler {
 
   [[nodiscard]] PetscVector create_vector() const;
   [[nodiscard]] PetscVector create_coefficient_vector() const;
-  /// A matrix preallocated exactly from the discretization's pattern; inserting outside it is an
-  /// error (MAT_NEW_NONZERO_ALLOCATION_ERR).
-  [[nodiscard]] PetscMatrix create_matrix();
+  /// A matrix whose nonzero structure is the discretization's pattern, set once (explicit zeros);
+  /// inserting outside it is an error. With MatrixInsertion::Direct (the default), assemblies add
+  /// element blocks straight into the AIJ value arrays (one binary search and a merge walk per
+  /// element row) instead of MatSetValues — about 10x faster to fill, same values; it applies to
+  /// MATSEQAIJ / MATMPIAIJ (other types chosen with -mat_type use MatSetValues) and to owned rows
+  /// (zero-communication mode, or one rank).
+  enum class MatrixInsertion { Direct, SetValues };
+  [[nodiscard]] PetscMatrix create_matrix(MatrixInsertion insertion = MatrixInsertion::Direct);
 
   /// Energy or constraint value (summed over ranks).
   [[nodiscard]] double value(Vec u);
   /// Gradient / residual / linear form, overwriting `out`.
   void vector(Vec u, Vec out);
+  /// value(u) and vector(u, out) in one pass over the elements (one basis tabulation).
+  [[nodiscard]] double value_and_vector(Vec u, Vec out);
   /// Hessian / Jacobian / bilinear form, overwriting `out` (which must come from create_matrix()).
   void matrix(Vec u, Mat out);
 
@@ -71,11 +78,27 @@ class Assembler {
   void add_vector(Vec u, Vec out, double scale);
   void add_matrix(Vec u, Mat out, double scale);
 
+  /// One weighted form of a sum (see matrix_sum).
+  struct MatrixTerm {
+    Assembler* form;
+    double weight;
+  };
+  /// out = Σ weight_i · (matrix of form i), e.g. the Lagrangian Hessian ∇²E − Σ σ_i ∇²C_i, in one
+  /// pass over the elements: each element is tabulated once (at the highest order the terms need)
+  /// and its summed block inserted once. The forms share this discretization and block size;
+  /// only this Assembler's form may have coefficients. Terms whose matrix is structurally zero
+  /// cost nothing.
+  void matrix_sum(Vec u, std::span<const MatrixTerm> terms, Mat out);
+
   [[nodiscard]] const AssemblyTimes& times() const noexcept { return times_; }
 
  private:
+  void check_ready() const;  // constants, coefficients and data set
   template <class PerElement>
   void element_loop(Vec u, bool owned_only, PerElement&& per_element);
+  template <class PerElement>
+  void element_loop(Vec u, bool owned_only, int order, PerElement&& per_element);
+  void add_matrix_terms(Vec u, std::span<const MatrixTerm> terms, Mat out);
   void gather_ghosted(Vec source, Vec ghosted);
 
   const Discretization* disc_;
@@ -96,6 +119,8 @@ class Assembler {
   std::vector<double> local_;
   std::vector<PetscInt> rows_;
   std::vector<PetscInt> cols_;
+  std::vector<PetscInt> scalar_rows_;  // element dofs (node * block size + component)
+  std::vector<PetscInt> scalar_cols_;
   LmeWorkspace lme_ws_;
   AssemblyTimes times_;
 };

@@ -28,9 +28,13 @@ struct ConstrainedMinimizerOptions {
   double penalty = 1e-3;                ///< initial μ of the augmented Lagrangian (lowered ×0.1 when constraints stall)
   double augmented_tolerance = 1e-3;    ///< stage 1 ends when every relative constraint residual is below
   double inner_tolerance = 1e-6;        ///< stage 1 inner Newton: relative gradient norm of L_A
+  /// Inexact inner solves: the inner Newton also stops once |∇L_A| / max(1, |∇E|) is below
+  /// inexact_inner · max_i |r_i| — solving the inner problem more accurately than the constraints
+  /// currently hold is wasted, and the bound tightens as they converge. 0: always inner_tolerance.
+  double inexact_inner = 0.1;
   int max_outer_iterations = 40;
   int max_inner_iterations = 25;
-  double newton_tolerance = 1e-9;       ///< stage 2: KKT residual relative to its first value
+  double newton_tolerance = 1e-9;       ///< stage 2: |∇L| / max(1, |∇E|)
   double constraint_tolerance = 1e-10;  ///< stage 2: relative constraint residuals
   int max_newton_iterations = 25;
   bool skip_augmented_stage = false;

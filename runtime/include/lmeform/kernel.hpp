@@ -138,6 +138,9 @@ struct FormKernels {
   };
   FlopModel flop_model_value{}, flop_model_vector{}, flop_model_matrix{};
   const char* source = "";             ///< the .form file the kernels were generated from
+  /// The matrix kernel adds nothing (a functional linear in its unknowns, e.g. a volume):
+  /// the runtime skips its assembly.
+  bool matrix_structurally_zero = false;
 };
 
 // ---- Contraction helpers used by generated kernels (added by the compiler, issue 3) ------------

@@ -4,8 +4,11 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <stdexcept>
 #include <string>
+
+#include "aij_direct_add.hpp"
 
 namespace lmeform {
 
@@ -62,6 +65,8 @@ Assembler::Assembler(const Discretization& discretization, const kernel::FormKer
   local_.resize(n_max * n_max * static_cast<std::size_t>(bs * bs));
   rows_.resize(n_max);
   cols_.resize(n_max);
+  scalar_rows_.resize(n_max * static_cast<std::size_t>(bs));
+  scalar_cols_.resize(n_max * static_cast<std::size_t>(bs));
 }
 
 std::string Assembler::describe() const {
@@ -137,7 +142,7 @@ PetscVector Assembler::create_coefficient_vector() const {
   return v;
 }
 
-PetscMatrix Assembler::create_matrix() {
+PetscMatrix Assembler::create_matrix(MatrixInsertion insertion) {
   const auto start = std::chrono::steady_clock::now();
   const int bs = form_->dofs_per_node;
   const SparsityPattern& pattern = disc_->pattern();
@@ -152,8 +157,33 @@ PetscMatrix Assembler::create_matrix() {
   std::vector<PetscInt> o_nnz(pattern.off_diagonal_counts.begin(), pattern.off_diagonal_counts.end());
   LMEFORM_PETSC_CHECK(MatXAIJSetPreallocation(A, bs, d_nnz.data(), o_nnz.data(), nullptr, nullptr));
   LMEFORM_PETSC_CHECK(MatSetOption(A, MAT_NEW_NONZERO_ALLOCATION_ERR, PETSC_TRUE));
-  if (disc_->options().off_process == OffProcessMode::ZeroCommunication) {
-    LMEFORM_PETSC_CHECK(MatSetOption(A, MAT_NO_OFF_PROC_ENTRIES, PETSC_TRUE));
+  const bool zero_communication = disc_->options().off_process == OffProcessMode::ZeroCommunication;
+  if (zero_communication) LMEFORM_PETSC_CHECK(MatSetOption(A, MAT_NO_OFF_PROC_ENTRIES, PETSC_TRUE));
+  // The structure is the pattern, inserted once as explicit zeros: every later assembly only
+  // adds values, and (AIJ, owned rows only) can add them straight into PETSc's arrays.
+  {
+    std::vector<PetscInt> columns;
+    std::vector<PetscScalar> zeros;
+    for (int i = 0; i < pattern.n_rows(); ++i) {
+      const auto row = pattern.row(i);
+      columns.clear();
+      for (const int b : row) {
+        for (int d = 0; d < bs; ++d) columns.push_back(static_cast<PetscInt>(b) * bs + d);
+      }
+      zeros.assign(columns.size(), 0.0);
+      for (int c = 0; c < bs; ++c) {
+        const PetscInt r = static_cast<PetscInt>(pattern.row_begin + i) * bs + c;
+        LMEFORM_PETSC_CHECK(MatSetValues(A, 1, &r, static_cast<PetscInt>(columns.size()), columns.data(), zeros.data(),
+                                         INSERT_VALUES));
+      }
+    }
+  }
+  LMEFORM_PETSC_CHECK(MatAssemblyBegin(A, MAT_FINAL_ASSEMBLY));
+  LMEFORM_PETSC_CHECK(MatAssemblyEnd(A, MAT_FINAL_ASSEMBLY));
+  LMEFORM_PETSC_CHECK(MatSetOption(A, MAT_NEW_NONZERO_LOCATION_ERR, PETSC_TRUE));
+  LMEFORM_PETSC_CHECK(MatSetOption(A, MAT_KEEP_NONZERO_PATTERN, PETSC_TRUE));
+  if (insertion == MatrixInsertion::Direct && (zero_communication || disc_->ranks() == 1)) {
+    (void)detail::AijDirectAdd::attach(A);
   }
   times_.create_matrix = seconds_since(start);
   return A;
@@ -165,8 +195,7 @@ void Assembler::gather_ghosted(Vec source, Vec ghosted) {
   LMEFORM_PETSC_CHECK(VecGhostUpdateEnd(ghosted, INSERT_VALUES, SCATTER_FORWARD));
 }
 
-template <class PerElement>
-void Assembler::element_loop(Vec u, bool owned_only, PerElement&& per_element) {
+void Assembler::check_ready() const {
   for (int i = 0; i < form_->n_constants; ++i) {
     if (std::isnan(constants_[static_cast<std::size_t>(i)])) {
       throw std::invalid_argument(describe() + ": constant '" + form_->constants[i] +
@@ -179,6 +208,17 @@ void Assembler::element_loop(Vec u, bool owned_only, PerElement&& per_element) {
   if (form_->qdata_per_point > 0 && qdata_.empty()) {
     throw std::invalid_argument(describe() + ": its quadrature data were not set (set_qdata)");
   }
+}
+
+template <class PerElement>
+void Assembler::element_loop(Vec u, bool owned_only, PerElement&& per_element) {
+  element_loop(u, owned_only, std::max(form_->basis_order, form_->coefficient_basis_order),
+               std::forward<PerElement>(per_element));
+}
+
+template <class PerElement>
+void Assembler::element_loop(Vec u, bool owned_only, int order, PerElement&& per_element) {
+  check_ready();
   gather_ghosted(u, u_ghosted_);
   Vec u_local = nullptr;
   Vec c_local = nullptr;
@@ -193,11 +233,14 @@ void Assembler::element_loop(Vec u, bool owned_only, PerElement&& per_element) {
 
   const int bs = form_->dofs_per_node;
   const int cs = form_->coefficient_components_per_node;
-  const int order = std::max(form_->basis_order, form_->coefficient_basis_order);
   const int dim = disc_->dim();
   const CellQuadrature& quadrature = disc_->quadrature();
   kernel::CellInputs in;
   in.basis_order = order;
+  const std::size_t tabulation_size = static_cast<std::size_t>(disc_->max_element_points()) *
+                                      static_cast<std::size_t>(kernel::jet_size(disc_->dim(), order)) *
+                                      static_cast<std::size_t>(disc_->max_element_nodes());
+  if (tabulation_.size() < tabulation_size) tabulation_.resize(tabulation_size);
   in.constants = constants_.data();
   in.workspace = workspace_.data();
   in.basis = tabulation_.data();
@@ -247,6 +290,36 @@ double Assembler::value(Vec u) {
   return total;
 }
 
+double Assembler::value_and_vector(Vec u, Vec out) {
+  if (form_->value == nullptr || form_->vector == nullptr) {
+    throw std::logic_error(describe() + ": value_and_vector needs both a value and a vector kernel");
+  }
+  const auto start = std::chrono::steady_clock::now();
+  const bool zero_communication = disc_->options().off_process == OffProcessMode::ZeroCommunication;
+  const int bs = form_->dofs_per_node;
+  LMEFORM_PETSC_CHECK(VecZeroEntries(out));
+  LMEFORM_PETSC_CHECK(VecSetOption(out, VEC_IGNORE_OFF_PROC_ENTRIES, zero_communication ? PETSC_TRUE : PETSC_FALSE));
+  double local_sum = 0.0;
+  // One tabulation per element for both kernels; the value counts owned elements only.
+  element_loop(u, /*owned_only=*/!zero_communication, [&](int e, const kernel::CellInputs& in) {
+    if (disc_->element_owned(e)) local_sum += form_->value(in);
+    const auto nodes = disc_->element_nodes(e);
+    const std::size_t m = nodes.size() * static_cast<std::size_t>(bs);
+    std::fill_n(local_.begin(), m, 0.0);
+    form_->vector(in, local_.data());
+    for (std::size_t a = 0; a < nodes.size(); ++a) {
+      rows_[a] = (!zero_communication || disc_->owns(nodes[a])) ? nodes[a] : -1;
+    }
+    LMEFORM_PETSC_CHECK(VecSetValuesBlocked(out, static_cast<PetscInt>(nodes.size()), rows_.data(), local_.data(), ADD_VALUES));
+  });
+  LMEFORM_PETSC_CHECK(VecAssemblyBegin(out));
+  LMEFORM_PETSC_CHECK(VecAssemblyEnd(out));
+  double total = 0.0;
+  MPI_Allreduce(&local_sum, &total, 1, MPI_DOUBLE, MPI_SUM, disc_->comm());
+  times_.vector = seconds_since(start);
+  return total;
+}
+
 void Assembler::vector(Vec u, Vec out) {
   LMEFORM_PETSC_CHECK(VecZeroEntries(out));
   add_vector(u, out, 1.0);
@@ -283,30 +356,107 @@ void Assembler::matrix(Vec u, Mat out) {
 }
 
 void Assembler::add_matrix(Vec u, Mat out, double scale) {
-  if (form_->matrix == nullptr) throw std::logic_error(describe() + ": has no matrix kernel");
+  const MatrixTerm self{this, scale};
+  add_matrix_terms(u, {&self, 1}, out);
+}
+
+void Assembler::matrix_sum(Vec u, std::span<const MatrixTerm> terms, Mat out) {
+  LMEFORM_PETSC_CHECK(MatZeroEntries(out));
+  add_matrix_terms(u, terms, out);
+}
+
+void Assembler::add_matrix_terms(Vec u, std::span<const MatrixTerm> all_terms, Mat out) {
+  // The terms that add something; each must be a form on this discretization and block size.
+  std::vector<MatrixTerm> terms;
+  int order = 0;
+  for (const MatrixTerm& t : all_terms) {
+    if (t.form == nullptr) throw std::invalid_argument(describe() + ": a matrix term has no form");
+    const kernel::FormKernels& f = t.form->form();
+    if (f.matrix == nullptr) throw std::logic_error(t.form->describe() + ": has no matrix kernel");
+    if (&t.form->discretization() != disc_ || f.dofs_per_node != form_->dofs_per_node) {
+      throw std::invalid_argument(t.form->describe() + ": a matrix term must share the discretization and the " +
+                                  std::to_string(form_->dofs_per_node) + " dofs per node of " + describe());
+    }
+    if (t.form != this && f.coefficient_components_per_node > 0) {
+      throw std::invalid_argument(t.form->describe() + ": forms with coefficients can only be summed as the first term");
+    }
+    t.form->check_ready();
+    if (f.matrix_structurally_zero || t.weight == 0.0) continue;  // linear in the unknowns: adds nothing
+    terms.push_back(t);
+    order = std::max({order, f.basis_order, f.coefficient_basis_order});
+  }
+  if (terms.empty()) return;
+  if (terms.front().form != this) {
+    // The loop runs on this Assembler's scratch and coefficients: put it first.
+    const auto self = std::find_if(terms.begin(), terms.end(), [this](const MatrixTerm& t) { return t.form == this; });
+    if (self != terms.end()) std::iter_swap(terms.begin(), self);
+  }
+
   const auto start = std::chrono::steady_clock::now();
   const bool zero_communication = disc_->options().off_process == OffProcessMode::ZeroCommunication;
   const int bs = form_->dofs_per_node;
   double kernel_seconds = 0.0;
-  element_loop(u, /*owned_only=*/!zero_communication, [&](int e, const kernel::CellInputs& in) {
+  // Matrices from create_matrix() carry a map of their structure: element blocks are added
+  // straight into the AIJ arrays. Others (another type chosen by options) go through MatSetValues.
+  detail::AijDirectAdd* direct =
+      (zero_communication || disc_->ranks() == 1) ? detail::AijDirectAdd::find(out) : nullptr;
+  std::optional<detail::AijDirectAdd::Fill> fill;
+  if (direct != nullptr) fill.emplace(*direct, out);
+
+  element_loop(u, /*owned_only=*/!zero_communication, order, [&](int e, const kernel::CellInputs& in) {
     const auto kernel_start = std::chrono::steady_clock::now();
     const auto nodes = disc_->element_nodes(e);
     const std::size_t m = nodes.size() * static_cast<std::size_t>(bs);
     std::fill_n(local_.begin(), m * m, 0.0);
-    form_->matrix(in, local_.data());
-    if (scale != 1.0) {
-      for (std::size_t i = 0; i < m * m; ++i) local_[i] *= scale;
+    bool first = true;
+    for (const MatrixTerm& t : terms) {
+      Assembler& a = *t.form;
+      if (first && &a == this) {
+        form_->matrix(in, local_.data());
+        if (t.weight != 1.0) {
+          for (std::size_t i = 0; i < m * m; ++i) local_[i] *= t.weight;
+        }
+      } else {
+        // Same element, same tabulation; the other form's constants, data and scratch.
+        kernel::CellInputs other = in;
+        other.constants = a.constants_.data();
+        other.workspace = a.workspace_.data();
+        other.coefficients = nullptr;
+        other.qdata = a.qdata_.empty() ? nullptr
+                                       : a.qdata_.data() + static_cast<std::size_t>(disc_->element_first_point(e)) *
+                                                               static_cast<std::size_t>(a.form_->qdata_per_point);
+        std::fill_n(a.local_.begin(), m * m, 0.0);
+        a.form_->matrix(other, a.local_.data());
+        for (std::size_t i = 0; i < m * m; ++i) local_[i] += t.weight * a.local_[i];
+      }
+      first = false;
     }
     kernel_seconds += seconds_since(kernel_start);
-    for (std::size_t a = 0; a < nodes.size(); ++a) {
-      cols_[a] = nodes[a];
-      rows_[a] = (!zero_communication || disc_->owns(nodes[a])) ? nodes[a] : -1;
+    if (fill) {
+      for (std::size_t a = 0; a < nodes.size(); ++a) {
+        const bool mine = !zero_communication || disc_->owns(nodes[a]);
+        for (int c = 0; c < bs; ++c) {
+          const PetscInt dof = static_cast<PetscInt>(nodes[a]) * bs + c;
+          scalar_cols_[a * static_cast<std::size_t>(bs) + static_cast<std::size_t>(c)] = dof;
+          scalar_rows_[a * static_cast<std::size_t>(bs) + static_cast<std::size_t>(c)] = mine ? dof : -1;
+        }
+      }
+      fill->add({scalar_rows_.data(), m}, {scalar_cols_.data(), m}, local_.data(), 1.0);
+    } else {
+      for (std::size_t a = 0; a < nodes.size(); ++a) {
+        cols_[a] = nodes[a];
+        rows_[a] = (!zero_communication || disc_->owns(nodes[a])) ? nodes[a] : -1;
+      }
+      const auto count = static_cast<PetscInt>(nodes.size());
+      LMEFORM_PETSC_CHECK(MatSetValuesBlocked(out, count, rows_.data(), count, cols_.data(), local_.data(), ADD_VALUES));
     }
-    const auto count = static_cast<PetscInt>(nodes.size());
-    LMEFORM_PETSC_CHECK(MatSetValuesBlocked(out, count, rows_.data(), count, cols_.data(), local_.data(), ADD_VALUES));
   });
-  LMEFORM_PETSC_CHECK(MatAssemblyBegin(out, MAT_FINAL_ASSEMBLY));
-  LMEFORM_PETSC_CHECK(MatAssemblyEnd(out, MAT_FINAL_ASSEMBLY));
+  if (fill) {
+    fill->finish();
+  } else {
+    LMEFORM_PETSC_CHECK(MatAssemblyBegin(out, MAT_FINAL_ASSEMBLY));
+    LMEFORM_PETSC_CHECK(MatAssemblyEnd(out, MAT_FINAL_ASSEMBLY));
+  }
   times_.matrix = seconds_since(start);
   times_.matrix_kernel = kernel_seconds;
 }
