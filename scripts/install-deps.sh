@@ -11,6 +11,9 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libtomlplusplus-dev libcli11-dev
   python3-matplotlib python3-numpy python3-h5py
+  # An optimized BLAS/LAPACK behind libblas.so.3 (Debian alternatives): MUMPS factorizes with it.
+  # Serial flavour: ranks are the parallelism; threads would oversubscribe the cores.
+  libopenblas0-serial
 )
 
 missing=()
