@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "lmeform/cvt.hpp"
+#include "lmeform/delaunay.hpp"
 #include "lmeform/neighbour_search.hpp"
 #include "lmeform/node_sets.hpp"
 
@@ -156,18 +157,88 @@ TEST(Cvt, BoundaryNodesStayOnTheirFaces) {
   EXPECT_GT(min_distance(out), 0.0);
 }
 
+TEST(Cvt, UniformCvtHasTheCountAndIsNearlyHexagonal) {
+  // The seed's uniform grid O1: 6124 nodes on [0, 1.5] x [0, 2], mean spacing 0.024.
+  Box box;
+  box.dim = 2;
+  box.lo = {0.0, 0.0, 0.0};
+  box.hi = {1.5, 2.0, 0.0};
+  CvtOptions o;
+  o.iterations = 100;
+  CvtReport report;
+  const NodeSet nodes = uniform_cvt(box, 6124, o, &report);
+  ASSERT_EQ(nodes.size(), 6124u);
+  const BackgroundCells cells = delaunay(nodes);
+  std::vector<std::vector<int>> neighbours(nodes.size());
+  for (std::size_t c = 0; c < cells.size(); ++c) {
+    const auto v = cells.cell(c);
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) {
+        if (i != j) neighbours[static_cast<std::size_t>(v[i])].push_back(v[j]);
+      }
+    }
+  }
+  std::size_t interior = 0, six = 0;
+  for (std::size_t a = 0; a < nodes.size(); ++a) {
+    const auto x = nodes.point(a);
+    if (x[0] < 0.1 || x[0] > 1.4 || x[1] < 0.1 || x[1] > 1.9) continue;
+    auto& l = neighbours[a];
+    std::sort(l.begin(), l.end());
+    l.erase(std::unique(l.begin(), l.end()), l.end());
+    ++interior;
+    six += l.size() == 6 ? 1 : 0;
+  }
+  const SpacingSummary sp = spacing_summary(nodes);
+  std::printf("uniform CVT: %zu iterations, %.1f %% of %zu interior nodes 6-valent, h_mean %.4f, h_min %.4f\n",
+              report.iterations.size(), 100.0 * static_cast<double>(six) / static_cast<double>(interior), interior,
+              sp.h_mean, sp.h_min);
+  EXPECT_GT(static_cast<double>(six), 0.97 * static_cast<double>(interior));  // a random start gives ~78 %
+  EXPECT_NEAR(sp.h_mean, 0.024, 0.001);
+  EXPECT_GT(sp.h_min, 0.85 * sp.h_mean);
+  for (std::size_t a = 0; a < nodes.size(); ++a) {
+    for (int i = 0; i < 2; ++i) {
+      EXPECT_GE(nodes.point(a)[static_cast<std::size_t>(i)], box.lo[static_cast<std::size_t>(i)]);
+      EXPECT_LE(nodes.point(a)[static_cast<std::size_t>(i)], box.hi[static_cast<std::size_t>(i)]);
+    }
+  }
+  EXPECT_THROW((void)uniform_cvt(Box::unit(3), 1000), std::invalid_argument);
+  EXPECT_THROW((void)uniform_cvt(Box::unit(2), 5), std::invalid_argument);
+}
+
+TEST(Cvt, VoronoiCentroidsOfAUniformDensityFixASquareGrid) {
+  // Every Voronoi cell of a square grid is a square (half/quarter at the edges) centred on its
+  // node: exact centroids leave the grid in place to round-off.
+  const Box box = Box::unit(2);
+  const NodeSet grid = uniform_grid(box, {11, 11, 1});
+  CvtOptions o;
+  o.iterations = 3;
+  o.tolerance = 0;
+  CvtReport report;
+  const NodeSet out = cvt_relocate(grid, box, [](std::span<const double>) { return 1.0; }, o, &report);
+  double move = 0;
+  for (std::size_t k = 0; k < grid.coords.size(); ++k) move = std::max(move, std::abs(out.coords[k] - grid.coords[k]));
+  EXPECT_LT(move, 1e-12);
+  EXPECT_EQ(report.iterations.size(), 3u);
+}
+
 TEST(Cvt, DeterministicForASeed) {
   const Box box = Box::unit(2);
   const NodeSet grid = uniform_grid(box, {20, 20, 1});
   CvtOptions o = test_options();
   o.iterations = 10;
   const auto rho = phase_field_density(50.0, grad_norm);
-  const NodeSet a = cvt_relocate(grid, box, rho, o);
-  const NodeSet b = cvt_relocate(grid, box, rho, o);
-  EXPECT_EQ(a.coords, b.coords);
-  o.seed = 8;
-  const NodeSet c = cvt_relocate(grid, box, rho, o);
-  EXPECT_NE(a.coords, c.coords);
+  for (const auto centroids : {CvtCentroids::voronoi, CvtCentroids::sampled}) {
+    o.centroids = centroids;
+    o.seed = 1;
+    const NodeSet a = cvt_relocate(grid, box, rho, o);
+    const NodeSet b = cvt_relocate(grid, box, rho, o);
+    EXPECT_EQ(a.coords, b.coords);
+    o.seed = 8;
+    const NodeSet c = cvt_relocate(grid, box, rho, o);
+    // Only the sampled centroids depend on the seed; the exact Voronoi ones do not.
+    if (centroids == CvtCentroids::sampled) EXPECT_NE(a.coords, c.coords);
+    else EXPECT_EQ(a.coords, c.coords);
+  }
 }
 
 TEST(Cvt, ThreeDimensions) {

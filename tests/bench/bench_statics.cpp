@@ -86,7 +86,9 @@ int main(int argc, char** argv) {
   double f = 10.0;
   for (int stage = 0; stage < stages; ++stage, f *= 2) {
     const auto t0 = std::chrono::steady_clock::now();
-    const NodeSet adapted = app::adapt_nodes(previous, {0.0, 0.0}, {1.5, 2.0}, f, 40);
+    CvtOptions cvt;
+    cvt.iterations = 40;
+    const NodeSet adapted = app::adapt_nodes(previous, {0.0, 0.0}, {1.5, 2.0}, f, cvt);
     const double eps = std::ceil(min_admissible_eps(adapted) * 1000.0) / 1000.0;
     app::VesicleSetup s = discocyte(0.0, eps);
     s.nodes = adapted;

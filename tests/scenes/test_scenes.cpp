@@ -193,6 +193,28 @@ TEST(Scene, FullSceneLoadsEveryField) {
   EXPECT_NEAR(*s.uniform_min_spacing(), 1.5 / 63, 1e-15);
 }
 
+TEST(Scene, UniformCvtNodeCountAndAdaptivityStart) {
+  const Scene s = parse_scene(edit(kFull, "spacing = 0.024", "count = 6124\nlloyd_iterations = 40"), "cvt.toml");
+  EXPECT_EQ(s.nodes.kind, SceneNodes::Kind::count);
+  EXPECT_EQ(s.nodes.count, 6124);
+  EXPECT_EQ(s.nodes.lloyd_iterations, 40);
+  EXPECT_FALSE(s.uniform_min_spacing());  // checked by the run once the CVT exists
+  EXPECT_FALSE(s.adaptivity->start_from_density);
+  EXPECT_EQ(s.adaptivity->samples_per_node, 64);
+  const Scene d = parse_scene(edit(kFull, "lloyd_iterations = 30\n", "lloyd_iterations = 30\nstart = \"density\"\nsamples_per_node = 16\n"),
+                              "density.toml");
+  EXPECT_TRUE(d.adaptivity->start_from_density);
+  EXPECT_EQ(d.adaptivity->samples_per_node, 16);
+  expect_error(edit(kFull, "spacing = 0.024", "spacing = 0.024\ncount = 6124"),
+               {"key 'nodes.count' cannot be combined with 'nodes.spacing'"});
+  expect_error(edit(kFull, "spacing = 0.024", "count = 10"), {"key 'nodes.count' must be at least 16"});
+  expect_error(edit(kFull, "spacing = 0.024", "count = 6124.5"), {"key 'nodes.count' must be an integer"});
+  expect_error(edit(kFull, "spacing = 0.024", "spacing = 0.024\nlloyd_iterations = 5"),
+               {"key 'nodes.lloyd_iterations' belongs to 'nodes.count'"});
+  expect_error(edit(kFull, "lloyd_iterations = 30\n", "lloyd_iterations = 30\nstart = \"densty\"\n"),
+               {"key 'adaptivity.start' must be one of", "did you mean 'density'?"});
+}
+
 TEST(Scene, AbsentSectionsMeanNotUsed) {
   const Scene s = parse_scene(kMinimal, "minimal.toml");
   EXPECT_EQ(s.coordinates, Coordinates::cartesian);
@@ -244,7 +266,7 @@ TEST(Scene, MissingKey) {
                       "missing key 'model.eps' in [model]"});
   expect_error(edit(kMinimal, "[model]\neps = 0.1\n", ""), {"scenes/broken.toml", "missing table [model]"});
   expect_error(edit(kMinimal, "counts = [41, 41]\n", ""),
-               {"broken.toml", "'nodes.spacing', 'nodes.counts' or 'nodes.file'"});
+               {"broken.toml", "'nodes.spacing', 'nodes.counts', 'nodes.count' or 'nodes.file'"});
   expect_error(edit(kFull, "area = { target = 2.0106192982974678 }", "area = {}"),
                {"broken.toml", "missing key in 'constraints.area'", "'target'", "'radius'"});
 }

@@ -32,8 +32,21 @@ enum class CvtStart {
   density,
 };
 
+/// How the rho-weighted centroids of the Voronoi cells are computed.
+enum class CvtCentroids {
+  /// 2D: the exact Voronoi cell of each node clipped to the box (the box cut by the bisectors with
+  /// its Delaunay neighbours), fanned into triangles from its first vertex, each split into
+  /// `voronoi_subdivision`^2 triangles integrated with a 7-point rule. No sampling noise: Lloyd
+  /// converges to a CVT (a uniform density gives a near-hexagonal grid). Other dimensions: sampled.
+  voronoi,
+  /// Monte Carlo: a fixed set of samples (see samples_per_node) assigned to their nearest node.
+  sampled,
+};
+
 struct CvtOptions {
   int iterations = 50;            ///< maximum number of Lloyd iterations
+  CvtCentroids centroids = CvtCentroids::voronoi;
+  int voronoi_subdivision = 2;    ///< CvtCentroids::voronoi: each fan triangle split into this^2
   /// Sample points per node. Samples are drawn from a lattice over the box with probability
   /// proportional to rho^(dim/(dim+2)) (the node density of a CVT) and weighted by rho over that
   /// proposal, so every Voronoi cell receives about this many samples however strong the grading.
@@ -56,15 +69,15 @@ struct CvtIteration {
 struct CvtReport {
   std::vector<CvtIteration> iterations;
   bool converged = false;         ///< the tolerance was met before the iteration limit
-  std::size_t samples = 0;        ///< sample points used
+  std::size_t samples = 0;        ///< sample points (sampled), density evaluations per iteration (voronoi)
   std::size_t replaced = 0;       ///< nodes re-placed by CvtStart::density (0 for CvtStart::given)
   double h_bar = 0.0;             ///< (volume / nodes)^(1/dim), the scale of the tolerance
 };
 
-/// Lloyd iterations towards a CVT of the box with density rho, in 1, 2 or 3 dimensions.
-/// Voronoi cells are approximated by a fixed set of samples (one jittered point per cell of a fine
-/// lattice, weight rho(x_s) times the lattice cell volume) assigned to their nearest node (kd-tree);
-/// each node moves to the rho-weighted centroid of its samples.
+/// Lloyd iterations towards a CVT of the box with density rho, in 1, 2 or 3 dimensions: each node
+/// moves to the rho-weighted centroid of its Voronoi cell, computed exactly by quadrature on the
+/// clipped cell in 2D (CvtCentroids::voronoi) or from a fixed set of samples assigned to their
+/// nearest node (CvtCentroids::sampled, and 1D/3D).
 /// Boundary rule: a node on some faces of the box keeps those coordinates and moves only along the
 /// free ones (to the corresponding components of its weighted cell centroid), so corners are
 /// fixed, edge nodes slide along their edge and (3D) face nodes slide in their face. Node count,
@@ -74,6 +87,16 @@ struct CvtReport {
 /// mismatch, bad options, or a density that is not positive and finite at a sample.
 [[nodiscard]] NodeSet cvt_relocate(const NodeSet& nodes, const Box& box, const Density& density,
                                    const CvtOptions& options = {}, CvtReport* report = nullptr);
+
+/// A uniform CVT of exactly `count` nodes in a 2D box, the seed's "uniform" grids (O1: 6124 nodes,
+/// mean spacing 0.024, "almost perfectly uniform" but not a lattice): nodes on the four edges at
+/// the spacing of a hexagonal lattice of that density, h = sqrt(2 A / (sqrt(3) count)) (corners
+/// included), the others on a hexagonal lattice stretched to the box (the few surplus lattice
+/// points removed evenly), relaxed by Lloyd iterations (options; edge nodes slide along their
+/// edge). Throws std::invalid_argument for a box that is not 2D or a count too small to hold the
+/// edge nodes and one interior node.
+[[nodiscard]] NodeSet uniform_cvt(const Box& box, std::size_t count, const CvtOptions& options = {},
+                                  CvtReport* report = nullptr);
 
 /// rho(x) = 1 + f * grad_norm(x) (seed Section 3.13). f >= 0; grad_norm(x) must be >= 0.
 [[nodiscard]] Density phase_field_density(double f, std::function<double(std::span<const double>)> grad_norm);

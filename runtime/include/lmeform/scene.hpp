@@ -32,12 +32,14 @@ enum class Coordinates { cartesian, axisymmetric };
 
 [[nodiscard]] const char* to_string(Coordinates c) noexcept;
 
-/// [nodes]: exactly one of spacing / counts / file.
+/// [nodes]: exactly one of spacing / counts / count / file.
 struct SceneNodes {
-  enum class Kind { spacing, counts, file };
+  enum class Kind { spacing, counts, count, file };
   Kind kind = Kind::spacing;
   double spacing = 0;                  ///< Kind::spacing: target spacing (uniform_grid(box, spacing))
   std::array<int, 3> counts{};         ///< Kind::counts: nodes per axis, both ends included
+  int count = 0;                       ///< Kind::count: a uniform CVT of exactly this many nodes (uniform_cvt, 2D)
+  int lloyd_iterations = 100;          ///< Kind::count: Lloyd iterations of that CVT
   std::filesystem::path file;          ///< Kind::file: read_points() file, resolved against the scene's folder
   double gamma = 0.8;                  ///< LME locality gamma (seed: 0.8)
   int quadrature_points = 6;           ///< points of the simplex rule per background cell
@@ -98,6 +100,10 @@ struct AdaptivityStage {
 
 struct SceneAdaptivity {
   std::vector<AdaptivityStage> stages;  ///< non-empty, eps non-increasing
+  /// Where each stage's Lloyd iterations start: from the current nodes (the seed: "CVT starting
+  /// from grid O1") or from nodes re-placed with the CVT node density of rho (CvtStart::density).
+  bool start_from_density = false;
+  double samples_per_node = 64;          ///< CVT samples per node
 };
 
 struct SceneOutput {
@@ -124,7 +130,8 @@ struct Scene {
   [[nodiscard]] bool axisymmetric() const noexcept { return coordinates == Coordinates::axisymmetric; }
   /// eps of the last solve: the last adaptivity stage's, else model.eps.
   [[nodiscard]] double final_eps() const noexcept;
-  /// The smallest spacing of the uniform grid the node keys describe; nullopt for a node file.
+  /// The smallest spacing of the uniform grid the node keys describe; nullopt for a node file or a
+  /// CVT node count (checked by the run once the nodes exist).
   [[nodiscard]] std::optional<double> uniform_min_spacing() const;
   /// Signed distance to the initial shape at x (dim entries), > 0 inside.
   [[nodiscard]] double initial_distance(std::span<const double> x) const;

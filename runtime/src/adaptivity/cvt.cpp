@@ -6,6 +6,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <map>
 #include <numeric>
 #include <sstream>
@@ -17,6 +18,7 @@
 
 #include "lmeform/delaunay.hpp"
 #include "lmeform/neighbour_search.hpp"
+#include "lmeform/quadrature.hpp"
 
 namespace lmeform {
 namespace {
@@ -239,6 +241,35 @@ std::size_t place_by_density(NodeSet& nodes, const std::vector<char>& fixed, con
   return replaced;
 }
 
+// The Voronoi cell of node a clipped to the box: the box rectangle cut by the bisector
+// half-plane of each Delaunay neighbour (Voronoi neighbours are among them, so the result is
+// exact). Sutherland-Hodgman on a convex polygon; `poly` and `scratch` are reused buffers.
+void voronoi_cell_2d(const NodeSet& nodes, std::size_t a, std::span<const int> neighbours, const Box& box,
+                     std::vector<std::array<double, 2>>& poly, std::vector<std::array<double, 2>>& scratch) {
+  poly = {{box.lo[0], box.lo[1]}, {box.hi[0], box.lo[1]}, {box.hi[0], box.hi[1]}, {box.lo[0], box.hi[1]}};
+  const double xa = nodes.coords[2 * a], ya = nodes.coords[2 * a + 1];
+  for (const int nb : neighbours) {
+    const double xb = nodes.coords[2 * static_cast<std::size_t>(nb)], yb = nodes.coords[2 * static_cast<std::size_t>(nb) + 1];
+    // Keep p with (p - m) . (b - a) <= 0, m the midpoint.
+    const double nx = xb - xa, ny = yb - ya;
+    const double c = 0.5 * (nx * (xa + xb) + ny * (ya + yb));
+    auto side = [&](const std::array<double, 2>& p) { return nx * p[0] + ny * p[1] - c; };
+    scratch.clear();
+    for (std::size_t i = 0; i < poly.size(); ++i) {
+      const auto& p = poly[i];
+      const auto& q = poly[(i + 1) % poly.size()];
+      const double sp = side(p), sq = side(q);
+      if (sp <= 0) scratch.push_back(p);
+      if ((sp < 0 && sq > 0) || (sp > 0 && sq < 0)) {
+        const double t = sp / (sp - sq);
+        scratch.push_back({p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])});
+      }
+    }
+    poly.swap(scratch);
+    if (poly.size() < 3) break;
+  }
+}
+
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
@@ -300,8 +331,9 @@ NodeSet cvt_relocate(const NodeSet& nodes, const Box& box, const Density& densit
 
   // The proposal: rho^(dim/(dim+2)) at the cell centres, the node density of a CVT of rho.
   const double node_exponent = static_cast<double>(d) / static_cast<double>(d + 2);
-  std::vector<double> proposal(lattice.size());
-  {
+  const bool exact_centroids = d == 2 && options.centroids == CvtCentroids::voronoi;
+  std::vector<double> proposal(options.start == CvtStart::density || !exact_centroids ? lattice.size() : 0);
+  if (!proposal.empty()) {
     std::array<double, 3> x{};
     for (std::size_t c = 0; c < lattice.size(); ++c) {
       lattice.centre(c, x);
@@ -313,6 +345,109 @@ NodeSet cvt_relocate(const NodeSet& nodes, const Box& box, const Density& densit
   if (options.start == CvtStart::density) {
     local.replaced = place_by_density(current, fixed, box, lattice, proposal, density, rng, who);
     check_coincident(KdTree(current), who);
+  }
+
+  local.h_bar = std::pow(volume / static_cast<double>(n), 1.0 / d);
+  std::vector<double> wsum(n), xsum(n * du);
+
+  // Moves every node to its centroid (free coordinates only, clamped to the box); records the
+  // iteration and returns true when the displacement tolerance is met.
+  auto move_to_centroids = [&]() {
+    CvtIteration rec;
+    double total = 0.0;
+    for (std::size_t a = 0; a < n; ++a) {
+      if (!(wsum[a] > 0.0)) {
+        ++rec.empty_cells;
+        continue;
+      }
+      double d2 = 0.0;
+      for (std::size_t i = 0; i < du; ++i) {
+        if (fixed[a * du + i]) continue;
+        double& xi = current.coords[a * du + i];
+        const double c = std::clamp(xsum[a * du + i] / wsum[a], box.lo[i], box.hi[i]);
+        d2 += (c - xi) * (c - xi);
+        xi = c;
+      }
+      const double disp = std::sqrt(d2);
+      total += disp;
+      rec.max_displacement = std::max(rec.max_displacement, disp);
+    }
+    rec.mean_displacement = total / static_cast<double>(n);
+    local.iterations.push_back(rec);
+    return options.tolerance > 0.0 && rec.mean_displacement < options.tolerance * local.h_bar;
+  };
+
+  if (exact_centroids) {
+    if (options.voronoi_subdivision < 1) {
+      throw std::invalid_argument(std::string(who) + ": voronoi_subdivision must be >= 1, got " +
+                                  std::to_string(options.voronoi_subdivision));
+    }
+    const QuadratureRule rule = triangle_rule(7);
+    const int s = options.voronoi_subdivision;
+    std::vector<std::array<double, 2>> poly, scratch;
+    std::vector<std::vector<int>> adjacency(n);
+    std::size_t evaluations = 0;
+    for (int it = 0; it < options.iterations; ++it) {
+      const BackgroundCells cells = delaunay(current);
+      for (auto& list : adjacency) list.clear();
+      for (std::size_t c = 0; c < cells.size(); ++c) {
+        const auto v = cells.cell(c);
+        for (std::size_t i = 0; i < 3; ++i) {
+          for (std::size_t j = 0; j < 3; ++j) {
+            if (i != j) adjacency[static_cast<std::size_t>(v[i])].push_back(v[j]);
+          }
+        }
+      }
+      evaluations = 0;
+      std::array<double, 3> x{};
+      for (std::size_t a = 0; a < n; ++a) {
+        auto& list = adjacency[a];
+        std::sort(list.begin(), list.end());
+        list.erase(std::unique(list.begin(), list.end()), list.end());
+        voronoi_cell_2d(current, a, list, box, poly, scratch);
+        double w = 0.0, wx = 0.0, wy = 0.0;
+        // Fan from vertex 0; each fan triangle (p0, p1, p2) split into s^2 similar triangles.
+        for (std::size_t k = 1; k + 1 < poly.size(); ++k) {
+          const auto& p0 = poly[0];
+          const std::array<double, 2> e1{(poly[k][0] - p0[0]) / s, (poly[k][1] - p0[1]) / s};
+          const std::array<double, 2> e2{(poly[k + 1][0] - p0[0]) / s, (poly[k + 1][1] - p0[1]) / s};
+          const double jac = std::abs(e1[0] * e2[1] - e1[1] * e2[0]);
+          for (int i = 0; i < s; ++i) {
+            for (int j = 0; i + j < s; ++j) {
+              for (int flip = 0; flip < (i + j + 1 < s ? 2 : 1); ++flip) {
+                // Sub-triangle with corner (i, j) in the e1/e2 lattice; flip: the inverted one.
+                for (std::size_t q = 0; q < rule.size(); ++q) {
+                  double u = rule.points[2 * q], v = rule.points[2 * q + 1];
+                  double ci = i + u, cj = j + v;
+                  if (flip == 1) {
+                    ci = i + 1 - u;
+                    cj = j + 1 - v;
+                  }
+                  x[0] = p0[0] + ci * e1[0] + cj * e2[0];
+                  x[1] = p0[1] + ci * e1[1] + cj * e2[1];
+                  const double rho = checked_density(density, x, du, who);
+                  const double wq = rule.weights[q] * jac * rho;
+                  w += wq;
+                  wx += wq * x[0];
+                  wy += wq * x[1];
+                  ++evaluations;
+                }
+              }
+            }
+          }
+        }
+        wsum[a] = w;
+        xsum[2 * a] = wx;
+        xsum[2 * a + 1] = wy;
+      }
+      if (move_to_centroids()) {
+        local.converged = true;
+        break;
+      }
+    }
+    local.samples = evaluations;
+    if (report) *report = std::move(local);
+    return current;
   }
 
   // Samples: systematic sampling of the lattice cells along Morton order with probability
@@ -344,9 +479,6 @@ NodeSet cvt_relocate(const NodeSet& nodes, const Box& box, const Density& densit
   const std::size_t samples_drawn = weight.size();
 
   local.samples = samples_drawn;
-  local.h_bar = std::pow(volume / static_cast<double>(n), 1.0 / d);
-
-  std::vector<double> wsum(n), xsum(n * du);
   std::vector<int> idx;
   for (int it = 0; it < options.iterations; ++it) {
     const KdTree tree(current);
@@ -358,34 +490,86 @@ NodeSet cvt_relocate(const NodeSet& nodes, const Box& box, const Density& densit
       wsum[a] += weight[q];
       for (std::size_t i = 0; i < du; ++i) xsum[a * du + i] += weight[q] * samples[q * du + i];
     }
-    CvtIteration rec;
-    double total = 0.0;
-    for (std::size_t a = 0; a < n; ++a) {
-      if (!(wsum[a] > 0.0)) {
-        ++rec.empty_cells;
-        continue;
-      }
-      double d2 = 0.0;
-      for (std::size_t i = 0; i < du; ++i) {
-        if (fixed[a * du + i]) continue;
-        double& xi = current.coords[a * du + i];
-        const double c = std::clamp(xsum[a * du + i] / wsum[a], box.lo[i], box.hi[i]);
-        d2 += (c - xi) * (c - xi);
-        xi = c;
-      }
-      const double disp = std::sqrt(d2);
-      total += disp;
-      rec.max_displacement = std::max(rec.max_displacement, disp);
-    }
-    rec.mean_displacement = total / static_cast<double>(n);
-    local.iterations.push_back(rec);
-    if (options.tolerance > 0.0 && rec.mean_displacement < options.tolerance * local.h_bar) {
+    if (move_to_centroids()) {
       local.converged = true;
       break;
     }
   }
   if (report) *report = std::move(local);
   return current;
+}
+
+NodeSet uniform_cvt(const Box& box, std::size_t count, const CvtOptions& options, CvtReport* report) {
+  const char* who = "uniform_cvt";
+  box.validate(who);
+  if (box.dim != 2) throw std::invalid_argument(std::string(who) + ": 2D boxes only, got dimension " + std::to_string(box.dim));
+  const double lx = box.hi[0] - box.lo[0], ly = box.hi[1] - box.lo[1];
+  const double h = std::sqrt(2.0 * lx * ly / (std::sqrt(3.0) * static_cast<double>(count)));
+  const auto sx = static_cast<std::size_t>(std::max(1.0, std::round(lx / h)));
+  const auto sy = static_cast<std::size_t>(std::max(1.0, std::round(ly / h)));
+  const std::size_t boundary = 2 * (sx + sy);
+  if (count < boundary + 1) {
+    throw std::invalid_argument(std::string(who) + ": " + std::to_string(count) + " nodes cannot hold the " +
+                                std::to_string(boundary) + " edge nodes and one interior node");
+  }
+  std::vector<double> xy;
+  xy.reserve(2 * count);
+  for (std::size_t i = 0; i < sx; ++i) {  // bottom and top edges, corners at i = 0
+    const double x = box.lo[0] + lx * static_cast<double>(i) / static_cast<double>(sx);
+    xy.insert(xy.end(), {x, box.lo[1], box.hi[0] - (x - box.lo[0]), box.hi[1]});
+  }
+  for (std::size_t j = 0; j < sy; ++j) {  // right and left edges
+    const double y = box.lo[1] + ly * static_cast<double>(j) / static_cast<double>(sy);
+    xy.insert(xy.end(), {box.hi[0], y, box.lo[0], box.hi[1] - (y - box.lo[1])});
+  }
+  // Interior nodes: a hexagonal lattice of m rows alternating k - 1 and k nodes, stretched to fit
+  // the box, with (k, m) chosen near the lattice spacing h to need the fewest removals; the
+  // surplus is removed evenly along the lattice. Lloyd then relaxes the rows next to the edges
+  // and the few vacancies (a random start would leave a 5-7 defect at about every fifth node).
+  const std::size_t interior = count - boundary;
+  const long k0 = std::lround(lx / h), m0 = std::lround(ly / (h * std::sqrt(3.0) / 2.0)) - 1;
+  long best_k = 0, best_m = 0;
+  std::size_t best_total = 0;
+  double best_score = std::numeric_limits<double>::infinity();
+  for (long k = std::max(2L, k0 - 4); k <= k0 + 4; ++k) {
+    for (long m = std::max(1L, m0 - 4); m <= m0 + 4; ++m) {
+      const auto total = static_cast<std::size_t>(m * k - (m + 1) / 2);  // rows j = 1..m, odd rows k - 1 nodes
+      if (total < interior) continue;
+      // Aspect of the stretched lattice against a hexagonal one, and the removals it needs.
+      const double ax = lx / static_cast<double>(k), ay = ly / static_cast<double>(m + 1);
+      const double aspect = std::abs(std::log(ay / (ax * std::sqrt(3.0) / 2.0)));
+      const double score = static_cast<double>(total - interior) / static_cast<double>(interior) + aspect;
+      if (score < best_score) {
+        best_score = score;
+        best_k = k;
+        best_m = m;
+        best_total = total;
+      }
+    }
+  }
+  if (best_total == 0) throw std::invalid_argument(std::string(who) + ": no lattice fits " + std::to_string(count) + " nodes");
+  const double ax = lx / static_cast<double>(best_k), ay = ly / static_cast<double>(best_m + 1);
+  const std::size_t surplus = best_total - interior;
+  std::size_t index = 0, removed = 0;
+  for (long j = 1; j <= best_m; ++j) {
+    const bool odd = j % 2 == 1;
+    for (long i = odd ? 1 : 0; i < best_k; ++i, ++index) {
+      // Remove lattice points index = floor((r + 1/2) total / surplus), r = 0..surplus-1.
+      if (removed < surplus &&
+          index == static_cast<std::size_t>((static_cast<double>(removed) + 0.5) * static_cast<double>(best_total) /
+                                            static_cast<double>(surplus))) {
+        ++removed;
+        continue;
+      }
+      xy.push_back(box.lo[0] + ax * (static_cast<double>(i) + (odd ? 0.0 : 0.5)));
+      xy.push_back(box.lo[1] + ay * static_cast<double>(j));
+    }
+  }
+  if (xy.size() != 2 * count) {
+    throw std::logic_error(std::string(who) + ": built " + std::to_string(xy.size() / 2) + " nodes instead of " +
+                           std::to_string(count));
+  }
+  return cvt_relocate(NodeSet(2, std::move(xy)), box, [](std::span<const double>) { return 1.0; }, options, report);
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -39,10 +39,24 @@ struct StageRecord {
   double adapt_s = 0;
 };
 
-NodeSet initial_nodes(const Scene& scene) {
+NodeSet initial_nodes(const Scene& scene, std::ostream* log) {
   switch (scene.nodes.kind) {
     case SceneNodes::Kind::spacing: return uniform_grid(scene.domain, scene.nodes.spacing);
     case SceneNodes::Kind::counts: return uniform_grid(scene.domain, scene.nodes.counts);
+    case SceneNodes::Kind::count: {
+      const auto t0 = std::chrono::steady_clock::now();
+      CvtOptions cvt;
+      cvt.iterations = scene.nodes.lloyd_iterations;
+      CvtReport report;
+      NodeSet nodes = uniform_cvt(scene.domain, static_cast<std::size_t>(scene.nodes.count), cvt, &report);
+      if (log != nullptr) {
+        *log << "uniform CVT of " << nodes.size() << " nodes: " << report.iterations.size() << " Lloyd iterations"
+             << (report.iterations.empty() ? std::string()
+                                           : ", last mean move " + std::to_string(report.iterations.back().mean_displacement / report.h_bar) + " h")
+             << ", " << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() << " s\n";
+      }
+      return nodes;
+    }
     case SceneNodes::Kind::file: return read_points(scene.nodes.file, scene.dim());
   }
   throw std::logic_error("unknown node kind");
@@ -109,7 +123,7 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
 
   // The schedule: the scene's ε on the initial grid, then each adaptivity stage.
   std::vector<StageRecord> stages;
-  NodeSet nodes = initial_nodes(scene);
+  NodeSet nodes = initial_nodes(scene, log);
   std::vector<double> carried_phi;
   NodeSet carried_nodes;
   const int n_stages = 1 + (scene.adaptivity ? static_cast<int>(scene.adaptivity->stages.size()) : 0);
@@ -121,8 +135,18 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
     if (stage > 0) {
       const auto& st = scene.adaptivity->stages[static_cast<std::size_t>(stage - 1)];
       if (st.lloyd_iterations > 0) {
+        CvtOptions cvt;
+        cvt.iterations = st.lloyd_iterations;
+        cvt.start = scene.adaptivity->start_from_density ? CvtStart::density : CvtStart::given;
+        cvt.samples_per_node = scene.adaptivity->samples_per_node;
+        CvtReport report;
         nodes = app::adapt_nodes(stages.back().result, {scene.domain.lo[0], scene.domain.lo[1]},
-                                 {scene.domain.hi[0], scene.domain.hi[1]}, st.f, st.lloyd_iterations);
+                                 {scene.domain.hi[0], scene.domain.hi[1]}, st.f, cvt, &report);
+        if (log != nullptr) {
+          *log << "CVT with rho = 1 + " << st.f << " |grad phi|: " << report.iterations.size() << " Lloyd iterations"
+               << (cvt.start == CvtStart::density ? " from the density's node placement" : " from the current nodes")
+               << ", " << report.samples << " samples\n";
+        }
       }
       rec.adapt_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     }

@@ -170,15 +170,13 @@ std::vector<double> transfer_phi(const NodeSet& old_nodes, std::span<const doubl
 }
 
 NodeSet adapt_nodes(const VesicleResult& solved, std::array<double, 2> lower, std::array<double, 2> upper, double f,
-                    int lloyd_iterations) {
+                    const CvtOptions& cvt, CvtReport* report) {
   Box box;
   box.dim = 2;
   box.lo = {lower[0], lower[1], 0};
   box.hi = {upper[0], upper[1], 0};
-  CvtOptions cvt;
-  cvt.iterations = lloyd_iterations;
   const auto density = phase_field_density(f, solved.nodes, solved.grad_phi_norm);
-  return cvt_relocate(solved.nodes, box, density, cvt);
+  return cvt_relocate(solved.nodes, box, density, cvt, report);
 }
 
 }  // namespace lmeform::app

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "lmeform/cvt.hpp"
 #include "lmeform/constrained_minimizer.hpp"
 #include "lmeform/delaunay.hpp"
 #include "lmeform/node_set.hpp"
@@ -59,9 +60,10 @@ VesicleResult solve_vesicle(MPI_Comm comm, const VesicleSetup& setup);
 [[nodiscard]] std::vector<double> transfer_phi(const NodeSet& old_nodes, std::span<const double> phi, double gamma,
                                                const NodeSet& new_nodes);
 
-/// One CVT adaptation of a solved state: Lloyd iterations with density ρ = 1 + f·|∇φ| on the box.
+/// One CVT adaptation of a solved state: Lloyd iterations (cvt.iterations, from cvt.start) with
+/// density ρ = 1 + f·|∇φ| on the box.
 [[nodiscard]] NodeSet adapt_nodes(const VesicleResult& solved, std::array<double, 2> lower, std::array<double, 2> upper,
-                                  double f, int lloyd_iterations);
+                                  double f, const CvtOptions& cvt, CvtReport* report = nullptr);
 
 /// tanh(d / (√2 ε)) with d ≈ the signed distance to the ellipse (a_r, a_z) centred at (0, z_c).
 [[nodiscard]] double ellipsoid_profile(double r, double z, std::array<double, 2> semi_axes, double z_center, double eps);

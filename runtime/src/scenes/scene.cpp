@@ -347,18 +347,21 @@ void read_domain(const Section& root, Scene& s) {
 
 void read_nodes(const Section& root, const std::filesystem::path& folder, Scene& s) {
   const Section t = root.table(
-      "nodes", {"spacing", "counts", "file", "gamma", "quadrature_points", "resolution_factor"});
+      "nodes", {"spacing", "counts", "count", "lloyd_iterations", "file", "gamma", "quadrature_points", "resolution_factor"});
   SceneNodes& n = s.nodes;
-  const int given = int(t.has("spacing")) + int(t.has("counts")) + int(t.has("file"));
-  if (given == 0)
-    fail(t.context(), t.at("spacing"),
-         "missing key in [nodes]: one of 'nodes.spacing', 'nodes.counts' or 'nodes.file' is needed");
-  if (given > 1) {
-    const char* second = t.has("counts") && t.has("spacing") ? "counts" : "file";
-    t.fail_key(second, "cannot be combined with " +
-                           std::string(t.has("spacing") ? "'nodes.spacing'" : "'nodes.counts'") +
-                           ": give one of spacing, counts, file");
+  const char* const kinds[] = {"spacing", "counts", "count", "file"};
+  std::vector<std::string> present;
+  for (const char* k : kinds) {
+    if (t.has(k)) present.emplace_back(k);
   }
+  if (present.empty())
+    fail(t.context(), t.at("spacing"),
+         "missing key in [nodes]: one of 'nodes.spacing', 'nodes.counts', 'nodes.count' or 'nodes.file' is needed");
+  if (present.size() > 1) {
+    t.fail_key(present[1], "cannot be combined with 'nodes." + present[0] + "': give one of spacing, counts, count, file");
+  }
+  if (t.has("lloyd_iterations") && !t.has("count"))
+    t.fail_key("lloyd_iterations", "belongs to 'nodes.count' (the Lloyd iterations of its uniform CVT)");
   double extent = std::numeric_limits<double>::infinity();
   for (int i = 0; i < s.dim(); ++i)
     extent = std::min(extent, s.domain.hi[std::size_t(i)] - s.domain.lo[std::size_t(i)]);
@@ -377,6 +380,11 @@ void read_nodes(const Section& root, const std::filesystem::path& folder, Scene&
                                  axis_name(s.axisymmetric(), s.dim(), int(i)));
       n.counts[i] = c[i];
     }
+  } else if (t.has("count")) {
+    n.kind = SceneNodes::Kind::count;
+    if (s.dim() != 2) t.fail_key("count", "is a 2D node set (uniform CVT); this domain is " + std::to_string(s.dim()) + "D");
+    n.count = t.at_least("count", t.integer_of("count", t.require("count")), 16);
+    n.lloyd_iterations = t.at_least("lloyd_iterations", t.integer("lloyd_iterations", n.lloyd_iterations), 0);
   } else {
     n.kind = SceneNodes::Kind::file;
     std::filesystem::path p = t.string("file");
@@ -550,14 +558,17 @@ void read_solver(const Section& root, Scene& s) {
 }
 
 void read_adaptivity(const Section& root, Scene& s) {
-  const auto t = root.optional_table("adaptivity", {"stages", "lloyd_iterations"});
+  const auto t = root.optional_table("adaptivity", {"stages", "lloyd_iterations", "start", "samples_per_node"});
   if (!t) return;
   const int lloyd = t->at_least("lloyd_iterations", t->integer("lloyd_iterations", 20), 1);
+  SceneAdaptivity a;
+  a.start_from_density = t->choice_of("start", t->optional_string("start").value_or("nodes"), {"nodes", "density"}) == "density";
+  a.samples_per_node = t->positive("samples_per_node", t->number("samples_per_node", a.samples_per_node));
+  if (a.samples_per_node < 1) t->fail_key("samples_per_node", "must be at least 1, got " + fmt(a.samples_per_node));
   const toml::node& n = t->require("stages");
   const auto* arr = n.as_array();
   if (arr == nullptr) t->wrong_type("stages", n, "an array of tables");
   if (arr->empty()) t->fail_key("stages", "must list at least one stage (or leave out [adaptivity])");
-  SceneAdaptivity a;
   double previous = s.model.eps;
   for (std::size_t i = 0; i < arr->size(); ++i) {
     const std::string key = "stages[" + std::to_string(i) + "]";
@@ -604,7 +615,7 @@ double Scene::final_eps() const noexcept {
 }
 
 std::optional<double> Scene::uniform_min_spacing() const {
-  if (nodes.kind == SceneNodes::Kind::file) return std::nullopt;
+  if (nodes.kind == SceneNodes::Kind::file || nodes.kind == SceneNodes::Kind::count) return std::nullopt;
   double h = std::numeric_limits<double>::infinity();
   for (int i = 0; i < dim(); ++i) {
     const auto k = std::size_t(i);
