@@ -471,3 +471,117 @@ TEST(HardCases, Gamma6NearTheDelaunayLimit) {
 
 }  // namespace
 }  // namespace lmeform
+
+namespace lmeform {
+namespace {
+
+// A jittered grid on [0, 1]^2 whose left edge x = 0 is the mirror plane (the axis r = 0 of an
+// axisymmetric problem).
+LmeBasis mirrored_basis(const NodeSet& nodes, double gamma = 0.8) {
+  LmeOptions o;
+  o.mirror_axis = 0;
+  o.mirror_position = 0.0;
+  return LmeBasis(nodes, std::vector<double>{gamma}, o);
+}
+
+TEST(MirrorSymmetry, NormalDerivativeVanishesOnThePlane) {
+  const NodeSet nodes = test::grid(2, 13, 1.0, 0.25);
+  const LmeBasis basis = mirrored_basis(nodes);
+  ASSERT_GT(basis.image_count(), 0u);
+  for (const double y : {0.2, 0.37, 0.5, 0.81}) {
+    const std::array<double, 2> x{0.0, y};
+    const auto nbrs = basis.neighbours(x);
+    const auto jet = basis.evaluate(x, nbrs, 2);
+    const std::size_t n = nbrs.size();
+    double dx = 0, dy = 0, sum = 0, sum_y = 0;
+    for (std::size_t a = 0; a < n; ++a) {
+      dx = std::max(dx, std::abs(jet[1 * n + a]));  // each function is even: d/dx = 0 on the plane
+      dy = std::max(dy, std::abs(jet[2 * n + a]));
+      sum += jet[a];
+      sum_y += jet[a] * nodes.point(static_cast<std::size_t>(nbrs[a]))[1];
+    }
+    EXPECT_LT(dx, 1e-10 * dy) << "y = " << y;
+    EXPECT_NEAR(sum, 1.0, 1e-12);   // partition of unity
+    EXPECT_NEAR(sum_y, y, 1e-12);   // consistency along the plane
+  }
+}
+
+TEST(MirrorSymmetry, AwayFromThePlaneTheBasisIsUnchanged) {
+  // Points farther from the plane than every support radius see no image.
+  const NodeSet nodes = test::grid(2, 13, 1.0, 0.25);
+  const LmeBasis plain(nodes, std::vector<double>{0.8});
+  const LmeBasis mirrored = mirrored_basis(nodes);
+  const std::array<double, 2> x{0.8, 0.45};
+  const auto nbrs = plain.neighbours(x);
+  EXPECT_EQ(mirrored.neighbours(x), nbrs);
+  const auto a = plain.evaluate(x, nbrs, 2), b = mirrored.evaluate(x, nbrs, 2);
+  EXPECT_LE(test::rel_err(b, a), 1e-14);
+}
+
+TEST(MirrorSymmetry, DerivativesMatchFiniteDifferencesNearThePlane) {
+  const NodeSet nodes = test::grid(2, 13, 1.0, 0.25);
+  const LmeBasis basis = mirrored_basis(nodes);
+  for (const double r : {0.004, 0.03, 0.09}) {
+    const std::array<double, 2> x{r, 0.43};
+    const auto nbrs = basis.neighbours(x);
+    const FdErrors e = finite_differences(basis, x, nbrs, 1e-6);
+    EXPECT_LT(e.grad, 1e-7) << "r = " << r;
+    EXPECT_LT(e.hess, 1e-6) << "r = " << r;
+  }
+}
+
+TEST(MirrorSymmetry, CompressedRecordReconstructsTheSameJet) {
+  const NodeSet nodes = test::grid(2, 11, 1.0, 0.2);
+  const LmeBasis basis = mirrored_basis(nodes);
+  const std::array<double, 2> x{0.02, 0.61};
+  const auto nbrs = basis.neighbours(x);
+  const auto direct = basis.evaluate(x, nbrs, 2);
+  LmeWorkspace ws;
+  std::vector<double> record(static_cast<std::size_t>(lme_record_size(2, 2)));
+  basis.solve_record(x, nbrs, 2, record, ws);
+  std::vector<double> rebuilt(direct.size(), -7.0);
+  basis.reconstruct(x, nbrs, 2, record, 2, rebuilt, nbrs.size(), {}, ws);
+  EXPECT_LE(test::rel_err(rebuilt, direct), 1e-12);
+}
+
+TEST(MirrorSymmetry, NodesOnBothSidesAreRefused) {
+  NodeSet nodes = test::grid(2, 6, 1.0);
+  for (std::size_t a = 0; a < nodes.size(); ++a) nodes.coords[2 * a] -= 0.5;  // straddles x = 0
+  try {
+    (void)mirrored_basis(nodes);
+    FAIL() << "accepted nodes on both sides of the mirror plane";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("one side of the plane"), std::string::npos) << e.what();
+  }
+}
+
+TEST(SpacingSmoothing, ConstantSpacingIsKeptAndScatterIsDamped) {
+  // Interior nodes of a grid, farther from the edge than the smoothing reaches (edge nodes have
+  // other nearest distances), keep the grid step.
+  const NodeSet uniform = test::grid(2, 31, 1.0);
+  const KdTree tree(uniform);
+  const std::vector<double> h = nodal_spacing(tree);
+  const std::vector<double> s = smooth_spacing(tree, h, 5);
+  const double step = 1.0 / 30.0;
+  for (std::size_t a = 0; a < uniform.size(); ++a) {
+    const auto x = uniform.point(a);
+    if (std::min({x[0], x[1], 1 - x[0], 1 - x[1]}) < 12 * step) continue;
+    EXPECT_NEAR(s[a], step, 1e-13);
+  }
+  const NodeSet jittered = test::grid(2, 15, 1.0, 0.3);
+  const KdTree jt(jittered);
+  const std::vector<double> raw = nodal_spacing(jt);
+  const std::vector<double> smooth = smooth_spacing(jt, raw, 5);
+  auto spread = [](const std::vector<double>& v) {
+    double mean = 0, var = 0;
+    for (const double x : v) mean += x / static_cast<double>(v.size());
+    for (const double x : v) var += (x - mean) * (x - mean) / static_cast<double>(v.size());
+    return std::sqrt(var) / mean;
+  };
+  EXPECT_LT(spread(smooth), 0.5 * spread(raw));
+  EXPECT_THROW((void)smooth_spacing(jt, std::vector<double>(3, 1.0), 1), std::invalid_argument);
+  EXPECT_THROW((void)smooth_spacing(jt, raw, 1, -1.0), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace lmeform

@@ -92,7 +92,7 @@ int main(int argc, char** argv) {
     const double eps = std::ceil(min_admissible_eps(adapted) * 1000.0) / 1000.0;
     app::VesicleSetup s = discocyte(0.0, eps);
     s.nodes = adapted;
-    s.initial_phi = app::transfer_phi(previous.nodes, previous.phi, 0.8, adapted);
+    s.initial_phi = app::transfer_phi(previous.nodes, previous.phi, 0.8, s.spacing_smoothing, adapted);
     app::VesicleResult result;
     Record rec = run(s, "adapted", &result);
     rec.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();  // adaptation included

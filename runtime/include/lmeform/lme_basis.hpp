@@ -21,6 +21,7 @@
 #pragma once
 
 #include <cstddef>
+#include <optional>
 #include <span>
 #include <stdexcept>
 #include <string>
@@ -49,6 +50,17 @@ struct LmeOptions {
   double min_rcond = 1e-14;
   /// Nearest neighbours averaged into the nodal spacing h_a; 0 means 2 * dim.
   int spacing_neighbours = 0;
+  /// Smoothing passes applied to that spacing (smooth_spacing); 0: none. Used by the constructor
+  /// that computes h_a, not by the one given h_a.
+  int spacing_smoothing = 0;
+  /// Mirror symmetry (axisymmetric problems: axis 0 at r = 0). With mirror_axis >= 0 the basis is
+  /// even under the reflection x_axis -> 2 mirror_position - x_axis: every node a whose support
+  /// crosses the plane gets an image a' (same h, beta, support), the LME problem at x is solved on
+  /// its neighbours and their images, and p_a := p_a + p_a'. Then d phi_h / dx_axis = 0 on the plane
+  /// exactly (the symmetry condition of a body of revolution, which keeps phi_r / r finite), and
+  /// the plane is no longer a convex-hull boundary. Nodes must lie on one side of the plane (or on it).
+  int mirror_axis = -1;
+  double mirror_position = 0.0;
 };
 
 enum class LmeFailure {
@@ -104,6 +116,9 @@ struct LmeWorkspace {
   std::vector<int> position;   ///< node -> column in the current cell list (-1: absent)
   std::vector<int> columns;    ///< a point's list mapped to cell columns
   std::vector<double> jet;     ///< one point's jet when scattering
+  std::vector<int> extended;   ///< mirror symmetry: the neighbours followed by their images
+  std::vector<double> mirror_jet;  ///< mirror symmetry: the jet over `extended` before folding
+  std::vector<int> mirror_fold;    ///< mirror symmetry: for each image in `extended`, its node's column
 };
 
 /// The LME basis of a node set: nodes, per-node gamma_a, spacing h_a, beta_a, support radius r_a
@@ -126,7 +141,13 @@ class LmeBasis {
   [[nodiscard]] std::span<const double> beta() const noexcept { return beta_; }
   [[nodiscard]] std::span<const double> support_radii() const noexcept { return radius_; }
 
-  /// Primal list of x: nodes b with |x - x_b| <= r_b, sorted by index.
+  /// Images of nodes across the mirror plane (LmeOptions::mirror_axis): how many, and the node
+  /// each image belongs to. Empty without mirror symmetry.
+  [[nodiscard]] std::size_t image_count() const noexcept { return image_source_.size(); }
+  [[nodiscard]] std::span<const int> image_sources() const noexcept { return image_source_; }
+
+  /// Primal list of x: nodes b with |x - x_b| <= r_b (or, with mirror symmetry, |x - x_b'| <= r_b
+  /// for its image b'), sorted by index.
   [[nodiscard]] std::vector<int> neighbours(std::span<const double> x) const;
   /// Primal lists of many points (point-major coordinates).
   [[nodiscard]] CsrLists neighbour_lists(std::span<const double> points) const;
@@ -161,12 +182,25 @@ class LmeBasis {
 
  private:
   void init(std::span<const double> gamma, std::vector<double> spacing);
+  void init_mirror();
   void check_order(int order, const char* who) const;
+  /// Mirror symmetry: fills ws.extended with `nbrs` followed by the images within reach of x;
+  /// returns the extended size.
+  std::size_t extend(std::span<const double> x, std::span<const int> nbrs, LmeWorkspace& ws) const;
+  [[nodiscard]] bool mirrored() const noexcept { return options_.mirror_axis >= 0; }
+  // Coordinates and beta of every index a list may hold (with mirror symmetry: nodes then images).
+  [[nodiscard]] const double* coords_data() const noexcept { return mirrored() ? all_coords_.data() : nodes_.coords.data(); }
+  [[nodiscard]] const double* beta_data() const noexcept { return mirrored() ? all_beta_.data() : beta_.data(); }
 
   NodeSet nodes_;
   LmeOptions options_;
   KdTree tree_;
   std::vector<double> gamma_, spacing_, beta_, radius_;
+  // Mirror symmetry: nodes then images (coordinates, beta, radius) and the image -> node map.
+  std::vector<int> image_source_;
+  std::vector<int> image_of_;  // node -> image index, -1 without one
+  std::vector<double> all_coords_, all_beta_, all_radius_;
+  std::optional<KdTree> all_tree_;
 };
 
 }  // namespace lmeform

@@ -70,6 +70,14 @@ class KdTree {
 /// Throws std::invalid_argument if the set has fewer than 2 nodes or two nodes coincide (h_a = 0).
 [[nodiscard]] std::vector<double> nodal_spacing(const KdTree& tree, int neighbours = 0);
 
+/// `passes` Jacobi passes h_a <- (h_a + mean of h over the nodes within radius_factor * h_a of
+/// node a) / 2. On graded node sets (CVT) the distances to a few nearest nodes scatter from node
+/// to node, and so would beta_a = gamma / h_a^2; a smooth h keeps the basis regular. The default
+/// radius takes the first ring of a square (1 and 1.41 h) or hexagonal (1 h) lattice; a constant
+/// h is left unchanged, and so are the node set's symmetries.
+[[nodiscard]] std::vector<double> smooth_spacing(const KdTree& tree, std::vector<double> h, int passes,
+                                                 double radius_factor = 1.6);
+
 /// Support radius of an LME basis function: the distance where the Gaussian factor
 /// exp(-beta r^2) falls to tol0, r = sqrt(-ln(tol0) / beta).
 [[nodiscard]] double support_radius(double beta, double tol0);

@@ -42,6 +42,7 @@ struct SceneNodes {
   int lloyd_iterations = 100;          ///< Kind::count: Lloyd iterations of that CVT
   std::filesystem::path file;          ///< Kind::file: read_points() file, resolved against the scene's folder
   double gamma = 0.8;                  ///< LME locality gamma (seed: 0.8)
+  int spacing_smoothing = 5;           ///< smoothing passes on the nodal spacing h_a (smooth_spacing)
   int quadrature_points = 6;           ///< points of the simplex rule per background cell
   double resolution_factor = 2.0;      ///< eps >= resolution_factor * h_min is required (seed App. B)
 };

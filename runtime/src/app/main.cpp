@@ -68,6 +68,7 @@ app::VesicleSetup setup_from(const Scene& scene, const NodeSet& nodes, double ep
   s.upper = {scene.domain.hi[0], scene.domain.hi[1]};
   s.nodes = nodes;
   s.gamma = scene.nodes.gamma;
+  s.spacing_smoothing = scene.nodes.spacing_smoothing;
   s.quadrature_points = scene.nodes.quadrature_points;
   s.k = scene.model.k;
   s.eps = eps;
@@ -155,7 +156,8 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
     // An under-resolved interface is refused before any work (seed App. B: ε ≥ 2 h_min).
     check_resolution(rec.eps, spacing, scene.nodes.resolution_factor, rec.grid + " grid");
     app::VesicleSetup setup = setup_from(scene, nodes, rec.eps);
-    if (stage > 0) setup.initial_phi = app::transfer_phi(carried_nodes, carried_phi, scene.nodes.gamma, nodes);
+    if (stage > 0) setup.initial_phi = app::transfer_phi(carried_nodes, carried_phi, scene.nodes.gamma,
+                                                            scene.nodes.spacing_smoothing, nodes);
     setup.solver.log = log;
     if (log != nullptr) {
       *log << "== stage " << stage << " (" << rec.grid << "): " << nodes.size() << " nodes, eps " << rec.eps

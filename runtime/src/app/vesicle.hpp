@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "lmeform/cvt.hpp"
+#include "lmeform/lme_basis.hpp"
 #include "lmeform/constrained_minimizer.hpp"
 #include "lmeform/delaunay.hpp"
 #include "lmeform/node_set.hpp"
@@ -22,6 +23,7 @@ struct VesicleSetup {
   NodeSet nodes;                                           ///< given, or a uniform grid of `spacing`
   double spacing = 0.03;
   double gamma = 1.6;
+  int spacing_smoothing = 5;                               ///< LmeOptions::spacing_smoothing
   int quadrature_points = 6;
   // Model.
   double k = 1.0, eps = 0.04, C0 = 0.0;
@@ -55,10 +57,14 @@ VesicleFunctionals evaluate_vesicle(MPI_Comm comm, const VesicleSetup& setup);
 /// Builds the discretization and forms for the setup and minimizes. Collective over `comm`.
 VesicleResult solve_vesicle(MPI_Comm comm, const VesicleSetup& setup);
 
+/// The LME options of every axisymmetric basis: mirror symmetry across the axis r = 0, and
+/// `spacing_smoothing` passes on the nodal spacing.
+[[nodiscard]] LmeOptions axisymmetric_lme_options(int spacing_smoothing);
+
 /// φ_h of a finished solve evaluated at new points (values only): the starting field on an
 /// adapted grid.
 [[nodiscard]] std::vector<double> transfer_phi(const NodeSet& old_nodes, std::span<const double> phi, double gamma,
-                                               const NodeSet& new_nodes);
+                                               int spacing_smoothing, const NodeSet& new_nodes);
 
 /// One CVT adaptation of a solved state: Lloyd iterations (cvt.iterations, from cvt.start) with
 /// density ρ = 1 + f·|∇φ| on the box.

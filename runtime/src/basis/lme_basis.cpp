@@ -139,15 +139,14 @@ struct Lme {
   }
 
   // Scaled relative coordinates y^_a = (x - x_a)/l, beta^_a = beta_a l^2; returns l.
-  static double prepare(const LmeBasis& basis, std::span<const double> x, std::span<const int> nbrs,
-                        LmeWorkspace& ws) {
+  // coords / beta: of every node index the list may hold (nodes, then mirror images).
+  static double prepare(const double* coords, const double* beta, std::span<const double> x,
+                        std::span<const int> nbrs, LmeWorkspace& ws) {
     const auto n = nbrs.size();
     ws.y.resize(n * D);
     ws.beta.resize(n);
     ws.c.resize(n);
     ws.p.resize(n);
-    const auto& coords = basis.nodes().coords;
-    const auto beta = basis.beta();
     double sum2 = 0.0;
     for (std::size_t a = 0; a < n; ++a) {
       const auto b = static_cast<std::size_t>(nbrs[a]);
@@ -434,6 +433,21 @@ struct Lme {
   }
 };
 
+// Mirror symmetry: the jet over [neighbours..., images...] (stride n_ext) folded into the n
+// neighbour columns of `out` (column(k) = cols[k], or k): own entries set, images added.
+void fold_images(const double* ext, std::size_t n_ext, std::size_t n, int rows, const int* image_columns, double* out,
+                 std::size_t stride, const int* cols) {
+  for (int s = 0; s < rows; ++s) {
+    const double* src = ext + static_cast<std::size_t>(s) * n_ext;
+    double* dst = out + static_cast<std::size_t>(s) * stride;
+    for (std::size_t k = 0; k < n; ++k) dst[cols ? static_cast<std::size_t>(cols[k]) : k] = src[k];
+    for (std::size_t k = n; k < n_ext; ++k) {
+      const auto own = static_cast<std::size_t>(image_columns[k - n]);
+      dst[cols ? static_cast<std::size_t>(cols[own]) : own] += src[k];
+    }
+  }
+}
+
 template <class F>
 decltype(auto) dispatch(int dim, F&& f) {
   switch (dim) {
@@ -447,7 +461,7 @@ decltype(auto) dispatch(int dim, F&& f) {
 
 LmeBasis::LmeBasis(NodeSet nodes, std::span<const double> gamma, LmeOptions options)
     : nodes_(std::move(nodes)), options_(options), tree_(nodes_) {
-  init(gamma, nodal_spacing(tree_, options_.spacing_neighbours));
+  init(gamma, smooth_spacing(tree_, nodal_spacing(tree_, options_.spacing_neighbours), options_.spacing_smoothing));
 }
 
 LmeBasis::LmeBasis(NodeSet nodes, std::span<const double> gamma, std::vector<double> spacing, LmeOptions options)
@@ -482,6 +496,70 @@ void LmeBasis::init(std::span<const double> gamma, std::vector<double> spacing) 
     beta_[a] = gamma_[a] / (spacing_[a] * spacing_[a]);
     radius_[a] = support_radius(beta_[a], options_.tol0);
   }
+  if (mirrored()) init_mirror();
+}
+
+void LmeBasis::init_mirror() {
+  const int axis = options_.mirror_axis;
+  if (axis >= dim()) {
+    throw std::invalid_argument("LmeBasis: mirror_axis = " + std::to_string(axis) + " in dimension " +
+                                std::to_string(dim()));
+  }
+  const std::size_t n = nodes_.size(), d = static_cast<std::size_t>(dim());
+  const double plane = options_.mirror_position;
+  double extent = 0.0;
+  for (std::size_t a = 0; a < n; ++a) extent = std::max(extent, std::abs(nodes_.coords[a * d + std::size_t(axis)] - plane));
+  const double on_plane = 1e-12 * std::max(extent, 1e-300);
+  // Every node on the same side: the reflection of one side is the other.
+  double lo = 0.0, hi = 0.0;
+  for (std::size_t a = 0; a < n; ++a) {
+    const double delta = nodes_.coords[a * d + std::size_t(axis)] - plane;
+    lo = std::min(lo, delta);
+    hi = std::max(hi, delta);
+  }
+  if (lo < -on_plane && hi > on_plane) {
+    throw std::invalid_argument("LmeBasis: mirror symmetry about x[" + std::to_string(axis) + "] = " +
+                                std::to_string(plane) + " needs every node on one side of the plane (they span " +
+                                std::to_string(plane + lo) + " .. " + std::to_string(plane + hi) + ")");
+  }
+  all_coords_ = nodes_.coords;
+  all_beta_ = beta_;
+  all_radius_ = radius_;
+  image_of_.assign(n, -1);
+  for (std::size_t a = 0; a < n; ++a) {
+    const double delta = nodes_.coords[a * d + std::size_t(axis)] - plane;
+    // Nodes on the plane are their own image; others get one where their support crosses it.
+    if (std::abs(delta) <= on_plane || std::abs(delta) >= radius_[a]) continue;
+    image_of_[a] = static_cast<int>(image_source_.size());
+    image_source_.push_back(static_cast<int>(a));
+    for (std::size_t i = 0; i < d; ++i) {
+      const double c = nodes_.coords[a * d + i];
+      all_coords_.push_back(i == std::size_t(axis) ? plane - delta : c);
+    }
+    all_beta_.push_back(beta_[a]);
+    all_radius_.push_back(radius_[a]);
+  }
+  all_tree_.emplace(NodeSet(dim(), all_coords_));
+}
+
+std::size_t LmeBasis::extend(std::span<const double> x, std::span<const int> nbrs, LmeWorkspace& ws) const {
+  const std::size_t n = nodes_.size(), d = static_cast<std::size_t>(dim());
+  ws.extended.assign(nbrs.begin(), nbrs.end());
+  ws.mirror_fold.clear();
+  for (std::size_t k = 0; k < nbrs.size(); ++k) {
+    const int image = image_of_[static_cast<std::size_t>(nbrs[k])];
+    if (image < 0) continue;
+    const std::size_t e = n + static_cast<std::size_t>(image);
+    double r2 = 0.0;
+    for (std::size_t i = 0; i < d; ++i) {
+      const double t = x[i] - all_coords_[e * d + i];
+      r2 += t * t;
+    }
+    if (r2 > all_radius_[e] * all_radius_[e]) continue;
+    ws.extended.push_back(static_cast<int>(e));
+    ws.mirror_fold.push_back(static_cast<int>(k));
+  }
+  return ws.extended.size();
 }
 
 void LmeBasis::check_order(int order, const char* who) const {
@@ -492,11 +570,30 @@ void LmeBasis::check_order(int order, const char* who) const {
 }
 
 std::vector<int> LmeBasis::neighbours(std::span<const double> x) const {
-  return primal_lists(tree_, x, radius_).indices;
+  return neighbour_lists(x).indices;
 }
 
 CsrLists LmeBasis::neighbour_lists(std::span<const double> points) const {
-  return primal_lists(tree_, points, radius_);
+  if (!mirrored()) return primal_lists(tree_, points, radius_);
+  // Lists over nodes and images, images mapped to their nodes (a node may reach x twice).
+  const CsrLists all = primal_lists(*all_tree_, points, all_radius_);
+  const auto n = static_cast<int>(nodes_.size());
+  CsrLists out;
+  out.offsets.assign(all.offsets.size(), 0);
+  out.indices.reserve(all.indices.size());
+  std::vector<int> row;
+  for (std::size_t q = 0; q + 1 < all.offsets.size(); ++q) {
+    row.clear();
+    for (int k = all.offsets[q]; k < all.offsets[q + 1]; ++k) {
+      const int b = all.indices[static_cast<std::size_t>(k)];
+      row.push_back(b < n ? b : image_source_[static_cast<std::size_t>(b - n)]);
+    }
+    std::sort(row.begin(), row.end());
+    row.erase(std::unique(row.begin(), row.end()), row.end());
+    out.indices.insert(out.indices.end(), row.begin(), row.end());
+    out.offsets[q + 1] = static_cast<int>(out.indices.size());
+  }
+  return out;
 }
 
 void LmeBasis::evaluate(std::span<const double> x, std::span<const int> nbrs, int order, std::span<double> jet,
@@ -509,23 +606,34 @@ void LmeBasis::evaluate(std::span<const double> x, std::span<const int> nbrs, in
                                 " coordinates (dim " + std::to_string(dim()) + "), jet buffer holds " +
                                 std::to_string(jet.size()) + " doubles");
   }
+  const std::size_t n_all = mirrored() ? extend(x, nbrs, ws) : n;
+  const std::span<const int> list = mirrored() ? std::span<const int>(ws.extended) : nbrs;
+  const int rows = kernel::jet_size(dim(), order);
+  double* out = jet.data();
+  std::size_t stride = n;
+  if (mirrored()) {
+    ws.mirror_jet.resize(static_cast<std::size_t>(rows) * n_all);
+    out = ws.mirror_jet.data();
+    stride = n_all;
+  }
   dispatch(dim(), [&](auto dc) {
     constexpr int D = decltype(dc)::value;
     using K = Lme<D>;
-    const int ni = static_cast<int>(n);
-    const double len = K::prepare(*this, x, nbrs, ws);
+    const int ni = static_cast<int>(n_all);
+    const double len = K::prepare(coords_data(), beta_data(), x, list, ws);
     K::check_geometry(x, ni, len, ws, options_);
     double lnz = 0.0;
     const Vec<D> lam = K::newton(x, ni, ws, options_, lnz);
     if (order == 0) {
-      std::copy(ws.p.begin(), ws.p.begin() + static_cast<std::ptrdiff_t>(n), jet.begin());
+      std::copy(ws.p.begin(), ws.p.begin() + static_cast<std::ptrdiff_t>(n_all), out);
       return;
     }
     ws.record.resize(static_cast<std::size_t>(lme_record_size(D, order)));
     K::build_record(x, ni, ws, lam, lnz, order, options_.min_rcond, ws.record.data());
-    K::jet(ni, ws.y.data(), ws.beta.data(), ws.record.data(), order, order, ws.p.data(), 1.0 / len, jet.data(), n,
+    K::jet(ni, ws.y.data(), ws.beta.data(), ws.record.data(), order, order, ws.p.data(), 1.0 / len, out, stride,
            nullptr);
   });
+  if (mirrored()) fold_images(out, n_all, n, rows, ws.mirror_fold.data(), jet.data(), n, nullptr);
 }
 
 std::vector<double> LmeBasis::evaluate(std::span<const double> x, std::span<const int> nbrs, int order) const {
@@ -558,11 +666,13 @@ void LmeBasis::solve_record(std::span<const double> x, std::span<const int> nbrs
       record.size() < static_cast<std::size_t>(lme_record_size(dim(), order))) {
     throw std::invalid_argument("LmeBasis::solve_record: bad point or record size");
   }
+  const std::size_t n_all = mirrored() ? extend(x, nbrs, ws) : nbrs.size();
+  const std::span<const int> list = mirrored() ? std::span<const int>(ws.extended) : nbrs;
   dispatch(dim(), [&](auto dc) {
     constexpr int D = decltype(dc)::value;
     using K = Lme<D>;
-    const int ni = static_cast<int>(nbrs.size());
-    const double len = K::prepare(*this, x, nbrs, ws);
+    const int ni = static_cast<int>(n_all);
+    const double len = K::prepare(coords_data(), beta_data(), x, list, ws);
     K::check_geometry(x, ni, len, ws, options_);
     double lnz = 0.0;
     const Vec<D> lam = K::newton(x, ni, ws, options_, lnz);
@@ -582,19 +692,33 @@ void LmeBasis::reconstruct(std::span<const double> x, std::span<const int> nbrs,
   if (!columns.empty() && columns.size() != nbrs.size()) {
     throw std::invalid_argument("LmeBasis::reconstruct: columns and neighbours differ in size");
   }
+  const std::size_t n_all = mirrored() ? extend(x, nbrs, ws) : nbrs.size();
+  const std::span<const int> list = mirrored() ? std::span<const int>(ws.extended) : nbrs;
+  const int rows = kernel::jet_size(dim(), order);
+  if (mirrored()) ws.mirror_jet.resize(static_cast<std::size_t>(rows) * n_all);
   dispatch(dim(), [&](auto dc) {
     constexpr int D = decltype(dc)::value;
-    const std::size_t n = nbrs.size();
-    ws.y.resize(n * D);
-    ws.beta.resize(n);
-    for (std::size_t a = 0; a < n; ++a) {
-      const auto b = static_cast<std::size_t>(nbrs[a]);
-      for (std::size_t i = 0; i < D; ++i) ws.y[a * D + i] = x[i] - nodes_.coords[b * D + i];
-      ws.beta[a] = beta_[b];
+    const double* coords = coords_data();
+    const double* beta = beta_data();
+    ws.y.resize(n_all * D);
+    ws.beta.resize(n_all);
+    for (std::size_t a = 0; a < n_all; ++a) {
+      const auto b = static_cast<std::size_t>(list[a]);
+      for (std::size_t i = 0; i < D; ++i) ws.y[a * D + i] = x[i] - coords[b * D + i];
+      ws.beta[a] = beta[b];
     }
-    Lme<D>::jet(static_cast<int>(n), ws.y.data(), ws.beta.data(), record.data(), record_order, order, nullptr, 1.0,
-                jet.data(), stride, columns.empty() ? nullptr : columns.data());
+    if (mirrored()) {
+      Lme<D>::jet(static_cast<int>(n_all), ws.y.data(), ws.beta.data(), record.data(), record_order, order, nullptr,
+                  1.0, ws.mirror_jet.data(), n_all, nullptr);
+    } else {
+      Lme<D>::jet(static_cast<int>(n_all), ws.y.data(), ws.beta.data(), record.data(), record_order, order, nullptr,
+                  1.0, jet.data(), stride, columns.empty() ? nullptr : columns.data());
+    }
   });
+  if (mirrored()) {
+    fold_images(ws.mirror_jet.data(), n_all, nbrs.size(), rows, ws.mirror_fold.data(), jet.data(), stride,
+                columns.empty() ? nullptr : columns.data());
+  }
 }
 
 }  // namespace lmeform

@@ -134,6 +134,43 @@ void KdTree::knn(std::span<const double> x, int k, std::vector<int>& out, std::v
   }
 }
 
+std::vector<double> smooth_spacing(const KdTree& tree, std::vector<double> h, int passes, double radius_factor) {
+  const std::size_t n = tree.size();
+  if (h.size() != n) {
+    throw std::invalid_argument("smooth_spacing: " + std::to_string(h.size()) + " spacings for " + std::to_string(n) +
+                                " nodes");
+  }
+  if (!(radius_factor > 0.0)) throw std::invalid_argument("smooth_spacing: radius_factor must be positive");
+  if (passes <= 0 || n < 2) return h;
+  // Neighbourhoods by radius, not by count: equidistant nodes (a lattice) are all in or all out,
+  // so the smoothing keeps the node set's symmetries.
+  std::vector<int> offsets(n + 1, 0), lists;
+  std::vector<int> idx;
+  const NodeSet& nodes = tree.nodes();
+  for (std::size_t a = 0; a < n; ++a) {
+    tree.radius_search(nodes.point(a), radius_factor * h[a], idx);
+    for (const int b : idx) {
+      if (b != static_cast<int>(a)) lists.push_back(b);
+    }
+    offsets[a + 1] = static_cast<int>(lists.size());
+  }
+  std::vector<double> next(n);
+  for (int pass = 0; pass < passes; ++pass) {
+    for (std::size_t a = 0; a < n; ++a) {
+      const int count = offsets[a + 1] - offsets[a];
+      if (count == 0) {
+        next[a] = h[a];
+        continue;
+      }
+      double mean = 0.0;
+      for (int k = offsets[a]; k < offsets[a + 1]; ++k) mean += h[static_cast<std::size_t>(lists[static_cast<std::size_t>(k)])];
+      next[a] = 0.5 * (h[a] + mean / count);
+    }
+    h.swap(next);
+  }
+  return h;
+}
+
 std::vector<double> nodal_spacing(const KdTree& tree, int neighbours) {
   const int k = neighbours > 0 ? neighbours : 2 * tree.dim();
   const std::size_t n = tree.size();

@@ -347,7 +347,8 @@ void read_domain(const Section& root, Scene& s) {
 
 void read_nodes(const Section& root, const std::filesystem::path& folder, Scene& s) {
   const Section t = root.table(
-      "nodes", {"spacing", "counts", "count", "lloyd_iterations", "file", "gamma", "quadrature_points", "resolution_factor"});
+      "nodes", {"spacing", "counts", "count", "lloyd_iterations", "file", "gamma", "spacing_smoothing", "quadrature_points",
+                "resolution_factor"});
   SceneNodes& n = s.nodes;
   const char* const kinds[] = {"spacing", "counts", "count", "file"};
   std::vector<std::string> present;
@@ -394,6 +395,7 @@ void read_nodes(const Section& root, const std::filesystem::path& folder, Scene&
     n.file = p;
   }
   n.gamma = t.positive("gamma", t.number("gamma", n.gamma));
+  n.spacing_smoothing = t.at_least("spacing_smoothing", t.integer("spacing_smoothing", n.spacing_smoothing), 0);
   n.quadrature_points = t.integer("quadrature_points", n.quadrature_points);
   const std::vector<int> sizes = s.dim() == 2 ? triangle_rule_sizes() : tetrahedron_rule_sizes();
   if (std::find(sizes.begin(), sizes.end(), n.quadrature_points) == sizes.end()) {
