@@ -128,7 +128,11 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
   std::vector<double> carried_phi;
   NodeSet carried_nodes;
   const int n_stages = 1 + (scene.adaptivity ? static_cast<int>(scene.adaptivity->stages.size()) : 0);
+  // A stage that cannot run (an under-resolved eps on an adapted grid, an LME evaluation or a
+  // linear solve that fails) ends the schedule; the last finished stage is still written.
+  std::string failure;
   for (int stage = 0; stage < n_stages; ++stage) {
+   try {
     StageRecord rec;
     const auto t0 = std::chrono::steady_clock::now();
     rec.eps = stage == 0 ? scene.model.eps : scene.adaptivity->stages[static_cast<std::size_t>(stage - 1)].eps;
@@ -146,7 +150,8 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
         if (log != nullptr) {
           *log << "CVT with rho = 1 + " << st.f << " |grad phi|: " << report.iterations.size() << " Lloyd iterations"
                << (cvt.start == CvtStart::density ? " from the density's node placement" : " from the current nodes")
-               << ", " << report.samples << " samples\n";
+               << ", " << report.samples << (cvt.centroids == CvtCentroids::voronoi ? " density evaluations per iteration" : " samples")
+               << ", h_min " << spacing_summary(nodes).h_min << "\n";
         }
       }
       rec.adapt_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -170,10 +175,20 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
     carried_phi = rec.result.phi;
     stages.push_back(std::move(rec));
     if (!stages.back().result.solve.converged) break;
+   } catch (const std::exception& e) {
+    if (stages.empty()) throw;  // nothing to write
+    failure = "stage " + std::to_string(stage) + ": " + e.what();
+    if (log != nullptr) *log << "lmeform: " << failure << "\nlmeform: writing the last finished stage\n";
+    break;
+   }
   }
 
   const StageRecord& last = stages.back();
   const auto& r = last.result;
+  const bool converged = failure.empty() && r.solve.converged;
+  const std::string status = !failure.empty()        ? "FAILED: " + failure
+                             : r.solve.converged ? std::string("converged")
+                                                 : "FAILED: " + r.solve.message;
   const double reference = scene.reference_energy.value_or(std::nan(""));
   const double rel_error = scene.reference_energy ? (r.solve.energy - reference) / reference : std::nan("");
 
@@ -187,7 +202,8 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
     OutputAttributes attributes;
     attributes.emplace("energy", r.solve.energy);
     attributes.emplace("eps", last.eps);
-    attributes.emplace("converged", static_cast<std::int64_t>(r.solve.converged ? 1 : 0));
+    attributes.emplace("converged", static_cast<std::int64_t>(converged ? 1 : 0));
+    attributes.emplace("status", status);
     attributes.emplace("scene", scene.source);
     write_field_hdf5(h5, r.nodes, r.cells, fields, attributes);
     h5_name = h5.string();
@@ -203,7 +219,7 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
   const double total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
   if (rank == 0) {
     std::printf("\n%-26s %s\n", "scene", scene.source.c_str());
-    std::printf("%-26s %s\n", "status", r.solve.converged ? "converged" : ("FAILED: " + r.solve.message).c_str());
+    std::printf("%-26s %s\n", "status", status.c_str());
     std::printf("%-26s %.6f\n", "energy", r.solve.energy);
     if (scene.reference_energy) {
       std::printf("%-26s %.6f (relative error %+.3f %%)\n", "sharp-interface reference", reference, 100 * rel_error);
@@ -216,20 +232,30 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
     std::printf("%-26s %g\n", "eps", last.eps);
     std::printf("%-26s %d augmented Lagrangian + %d KKT\n", "Newton iterations", r.solve.augmented_iterations,
                 r.solve.newton_iterations);
-    std::printf("\n%-14s %8s %8s %10s %12s %10s %9s %9s %9s\n", "stage", "nodes", "eps", "energy", "rel. error",
-                "adapt s", "setup s", "AL s", "KKT s");
+    std::printf("\n%-14s %8s %8s %9s %10s %12s %8s %10s %9s %9s %9s\n", "stage", "nodes", "eps", "h_min", "energy",
+                "rel. error", "AL+KKT", "adapt s", "setup s", "AL s", "KKT s");
     for (const auto& s : stages) {
       const double e = s.result.solve.energy;
-      std::printf("%-14s %8d %8g %10.5f %+11.3f%% %10.2f %9.2f %9.2f %9.2f\n", s.grid.c_str(), s.nodes, s.eps, e,
-                  scene.reference_energy ? 100 * (e - reference) / reference : std::nan(""), s.adapt_s,
-                  s.result.seconds_setup, s.result.solve.seconds_augmented, s.result.solve.seconds_newton);
+      const std::string its = std::to_string(s.result.solve.augmented_iterations) + "+" +
+                              std::to_string(s.result.solve.newton_iterations);
+      char error[32] = "-";
+      if (scene.reference_energy) std::snprintf(error, sizeof error, "%+.3f%%", 100 * (e - reference) / reference);
+      std::printf("%-14s %8d %8g %9.4g %10.5f %12s %8s %10.2f %9.2f %9.2f %9.2f\n", s.grid.c_str(), s.nodes, s.eps,
+                  s.h_min, e, error, its.c_str(), s.adapt_s, s.result.seconds_setup, s.result.solve.seconds_augmented,
+                  s.result.solve.seconds_newton);
     }
     std::printf("%-26s %.1f s\n", "total wall time", total_s);
     if (!h5_name.empty()) std::printf("%-26s %s (+ .xmf for ParaView)\n", "fields", h5_name.c_str());
     if (!png_name.empty()) std::printf("%-26s %s\n", "figure", png_name.c_str());
     if (!json_path.empty()) {
       std::ostringstream js;
-      js << "{\n  \"scene\": \"" << scene.name << "\",\n  \"converged\": " << (r.solve.converged ? "true" : "false")
+      std::string message;  // JSON-escaped status
+      for (const char c : status) {
+        if (c == '"' || c == '\\') message += '\\';
+        message += c == '\n' ? ' ' : c;
+      }
+      js << "{\n  \"scene\": \"" << scene.name << "\",\n  \"converged\": " << (converged ? "true" : "false")
+         << ",\n  \"status\": \"" << message << "\""
          << ",\n  \"eps\": " << json_number(last.eps) << ",\n  \"grid\": \""
          << (stages.size() > 1 ? "adapted" : "uniform") << "\",\n  \"nodes\": " << last.nodes
          << ",\n  \"energy\": " << json_number(r.solve.energy)
@@ -237,15 +263,20 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
          << ",\n  \"newton_iterations\": " << r.solve.newton_iterations
          << ",\n  \"augmented_iterations\": " << r.solve.augmented_iterations << ",\n  \"stages\": [";
       for (std::size_t i = 0; i < stages.size(); ++i) {
-        js << (i ? ", " : "") << "{\"eps\": " << json_number(stages[i].eps) << ", \"nodes\": " << stages[i].nodes
-           << ", \"energy\": " << json_number(stages[i].result.solve.energy)
-           << ", \"wall_s\": " << json_number(stages[i].wall_s) << "}";
+        const double e = stages[i].result.solve.energy;
+        js << (i ? ",\n    " : "\n    ") << "{\"grid\": \"" << stages[i].grid << "\", \"eps\": " << json_number(stages[i].eps)
+           << ", \"nodes\": " << stages[i].nodes << ", \"h_min\": " << json_number(stages[i].h_min)
+           << ", \"energy\": " << json_number(e) << ", \"relative_error_sharp\": "
+           << json_number(scene.reference_energy ? (e - reference) / reference : std::nan(""))
+           << ", \"augmented_iterations\": " << stages[i].result.solve.augmented_iterations
+           << ", \"newton_iterations\": " << stages[i].result.solve.newton_iterations
+           << ", \"adapt_s\": " << json_number(stages[i].adapt_s) << ", \"wall_s\": " << json_number(stages[i].wall_s) << "}";
       }
       js << "]\n}\n";
       write_text_atomically(json_path, js.str());
     }
   }
-  return r.solve.converged ? 0 : 2;
+  return converged ? 0 : 2;
 }
 
 }  // namespace
