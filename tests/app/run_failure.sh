@@ -39,7 +39,7 @@ set -e
 cat "$out/log.txt"
 fail() { echo "FAIL: $*"; exit 1; }
 [ "$code" -eq 2 ] || fail "exit code $code, expected 2"
-grep -q "status.*FAILED: stage 1: adapted-1 grid" "$out/log.txt" || fail "the status line does not name the failed stage"
+grep -q "status.*FAILED: stage 1: uniform grid" "$out/log.txt" || fail "the status line does not name the failed stage"
 grep -q "under-resolved" "$out/log.txt" || fail "the message does not say why"
 [ -s "$out/result/tiny.h5" ] || fail "the finished stage was not written"
 [ -s "$out/result/tiny.xmf" ] || fail "no XDMF sidecar"

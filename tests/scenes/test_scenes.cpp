@@ -182,6 +182,16 @@ TEST(Scene, FullSceneLoadsEveryField) {
   EXPECT_EQ(c.adaptivity->stages[2].lloyd_iterations, 0);
   EXPECT_EQ(c.adaptivity->stages[2].f, 0.0);
   EXPECT_EQ(c.final_eps(), 0.02);
+  // A branch: the next stage that is not one continues from stage 1 (eps 0.04), not from 0.02.
+  const Scene b = parse_scene(edit(kFull, "{ eps = 0.04, f = 10.0 }, ", "{ eps = 0.04, f = 10.0 }, { eps = 0.02, lloyd_iterations = 0, branch = true }, "),
+                              "branch.toml");
+  ASSERT_EQ(b.adaptivity->stages.size(), 3u);
+  EXPECT_TRUE(b.adaptivity->stages[1].branch);
+  EXPECT_FALSE(b.adaptivity->stages[2].branch);
+  expect_error(edit(kFull, "{ eps = 0.04, f = 10.0 }, ", "{ eps = 0.04, f = 10.0 }, { eps = 0.02, lloyd_iterations = 0 }, "),
+               {"key 'adaptivity.stages[2].eps' = 0.03 exceeds the previous eps (0.02)"});
+  expect_error(edit(kFull, "{ eps = 0.04, f = 10.0 }", "{ eps = 0.04, f = 10.0, branch = 1 }"),
+               {"key 'adaptivity.stages[0].branch' must be a boolean"});
   expect_error(edit(kFull, "{ eps = 0.04, f = 10.0 }", "{ eps = 0.04 }"),
                {"missing key 'adaptivity.stages[0].f' in [adaptivity.stages[0]]"});
   EXPECT_EQ(s.reference_energy, 9.12657);

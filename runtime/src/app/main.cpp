@@ -31,7 +31,10 @@ using namespace lmeform;
 
 struct StageRecord {
   double eps = 0;
-  std::string grid;
+  std::string grid;   ///< "uniform" / "file", then "cvt-1", "cvt-2", ... per relocation
+  int generation = 0; ///< relocations along the chain of stages that led here
+  int stage = 0;
+  std::string label;  ///< " (branch)" for a side solve
   int nodes = 0;
   double h_min = 0;
   app::VesicleResult result;
@@ -125,8 +128,9 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
   // The schedule: the scene's ε on the initial grid, then each adaptivity stage.
   std::vector<StageRecord> stages;
   NodeSet nodes = initial_nodes(scene, log);
-  std::vector<double> carried_phi;
-  NodeSet carried_nodes;
+  // A stage continues from the previous one, except that a stage which is not a branch continues
+  // from the last stage that is not one (AdaptivityStage::branch).
+  std::size_t main_stage = 0;
   const int n_stages = 1 + (scene.adaptivity ? static_cast<int>(scene.adaptivity->stages.size()) : 0);
   // A stage that cannot run (an under-resolved eps on an adapted grid, an LME evaluation or a
   // linear solve that fails) ends the schedule; the last finished stage is still written.
@@ -136,16 +140,24 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
     StageRecord rec;
     const auto t0 = std::chrono::steady_clock::now();
     rec.eps = stage == 0 ? scene.model.eps : scene.adaptivity->stages[static_cast<std::size_t>(stage - 1)].eps;
-    rec.grid = stage == 0 ? "initial" : "adapted-" + std::to_string(stage);
+    // Grids are named by generation: the scene's node set, then cvt-1, cvt-2, ... for each
+    // relocation along the chain; a stage without relocation keeps its grid.
+    rec.grid = scene.nodes.kind == SceneNodes::Kind::file ? "file" : "uniform";
+    std::size_t from = 0;  // the finished stage this one starts from
     if (stage > 0) {
       const auto& st = scene.adaptivity->stages[static_cast<std::size_t>(stage - 1)];
+      from = st.branch ? stages.size() - 1 : main_stage;
+      nodes = stages[from].result.nodes;
+      rec.generation = stages[from].generation + (st.lloyd_iterations > 0 ? 1 : 0);
+      rec.grid = rec.generation == 0 ? stages[from].grid : "cvt-" + std::to_string(rec.generation);
+      if (st.branch) rec.label = " (branch)";
       if (st.lloyd_iterations > 0) {
         CvtOptions cvt;
         cvt.iterations = st.lloyd_iterations;
         cvt.start = scene.adaptivity->start_from_density ? CvtStart::density : CvtStart::given;
         cvt.samples_per_node = scene.adaptivity->samples_per_node;
         CvtReport report;
-        nodes = app::adapt_nodes(stages.back().result, {scene.domain.lo[0], scene.domain.lo[1]},
+        nodes = app::adapt_nodes(stages[from].result, {scene.domain.lo[0], scene.domain.lo[1]},
                                  {scene.domain.hi[0], scene.domain.hi[1]}, st.f, cvt, &report);
         if (log != nullptr) {
           *log << "CVT with rho = 1 + " << st.f << " |grad phi|: " << report.iterations.size() << " Lloyd iterations"
@@ -160,20 +172,23 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
     rec.h_min = spacing.h_min;
     // An under-resolved interface is refused before any work (seed App. B: ε ≥ 2 h_min).
     check_resolution(rec.eps, spacing, scene.nodes.resolution_factor, rec.grid + " grid");
+    rec.stage = stage;
     app::VesicleSetup setup = setup_from(scene, nodes, rec.eps);
-    if (stage > 0) setup.initial_phi = app::transfer_phi(carried_nodes, carried_phi, scene.nodes.gamma,
-                                                            scene.nodes.spacing_smoothing, nodes);
+    if (stage > 0) {
+      setup.initial_phi = app::transfer_phi(stages[from].result.nodes, stages[from].result.phi, scene.nodes.gamma,
+                                            scene.nodes.spacing_smoothing, nodes);
+    }
     setup.solver.log = log;
     if (log != nullptr) {
-      *log << "== stage " << stage << " (" << rec.grid << "): " << nodes.size() << " nodes, eps " << rec.eps
+      *log << "== stage " << stage << " (" << rec.grid << rec.label << "): " << nodes.size() << " nodes, eps " << rec.eps
            << ", h_min " << rec.h_min << "\n";
     }
     rec.result = app::solve_vesicle(PETSC_COMM_WORLD, setup);
     rec.nodes = rec.result.nodes_count;
     rec.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    carried_nodes = rec.result.nodes;
-    carried_phi = rec.result.phi;
+    const bool branch = stage > 0 && scene.adaptivity->stages[static_cast<std::size_t>(stage - 1)].branch;
     stages.push_back(std::move(rec));
+    if (!branch) main_stage = stages.size() - 1;
     if (!stages.back().result.solve.converged) break;
    } catch (const std::exception& e) {
     if (stages.empty()) throw;  // nothing to write
@@ -232,7 +247,7 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
     std::printf("%-26s %g\n", "eps", last.eps);
     std::printf("%-26s %d augmented Lagrangian + %d KKT\n", "Newton iterations", r.solve.augmented_iterations,
                 r.solve.newton_iterations);
-    std::printf("\n%-14s %8s %8s %9s %10s %12s %8s %10s %9s %9s %9s\n", "stage", "nodes", "eps", "h_min", "energy",
+    std::printf("\n%-20s %8s %8s %9s %10s %12s %8s %10s %9s %9s %9s\n", "stage", "nodes", "eps", "h_min", "energy",
                 "rel. error", "AL+KKT", "adapt s", "setup s", "AL s", "KKT s");
     for (const auto& s : stages) {
       const double e = s.result.solve.energy;
@@ -240,7 +255,8 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
                               std::to_string(s.result.solve.newton_iterations);
       char error[32] = "-";
       if (scene.reference_energy) std::snprintf(error, sizeof error, "%+.3f%%", 100 * (e - reference) / reference);
-      std::printf("%-14s %8d %8g %9.4g %10.5f %12s %8s %10.2f %9.2f %9.2f %9.2f\n", s.grid.c_str(), s.nodes, s.eps,
+      const std::string name = std::to_string(s.stage) + " " + s.grid + s.label;
+      std::printf("%-20s %8d %8g %9.4g %10.5f %12s %8s %10.2f %9.2f %9.2f %9.2f\n", name.c_str(), s.nodes, s.eps,
                   s.h_min, e, error, its.c_str(), s.adapt_s, s.result.seconds_setup, s.result.solve.seconds_augmented,
                   s.result.solve.seconds_newton);
     }
@@ -264,7 +280,8 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
          << ",\n  \"augmented_iterations\": " << r.solve.augmented_iterations << ",\n  \"stages\": [";
       for (std::size_t i = 0; i < stages.size(); ++i) {
         const double e = stages[i].result.solve.energy;
-        js << (i ? ",\n    " : "\n    ") << "{\"grid\": \"" << stages[i].grid << "\", \"eps\": " << json_number(stages[i].eps)
+        js << (i ? ",\n    " : "\n    ") << "{\"stage\": " << stages[i].stage << ", \"grid\": \"" << stages[i].grid << "\", \"branch\": "
+           << (stages[i].label.empty() ? "false" : "true") << ", \"eps\": " << json_number(stages[i].eps)
            << ", \"nodes\": " << stages[i].nodes << ", \"h_min\": " << json_number(stages[i].h_min)
            << ", \"energy\": " << json_number(e) << ", \"relative_error_sharp\": "
            << json_number(scene.reference_energy ? (e - reference) / reference : std::nan(""))

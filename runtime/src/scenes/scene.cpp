@@ -571,19 +571,25 @@ void read_adaptivity(const Section& root, Scene& s) {
   const auto* arr = n.as_array();
   if (arr == nullptr) t->wrong_type("stages", n, "an array of tables");
   if (arr->empty()) t->fail_key("stages", "must list at least one stage (or leave out [adaptivity])");
-  double previous = s.model.eps;
+  double previous = s.model.eps, main_eps = s.model.eps;
   for (std::size_t i = 0; i < arr->size(); ++i) {
     const std::string key = "stages[" + std::to_string(i) + "]";
-    const Section st = t->table_of(key, (*arr)[i], {"eps", "f", "lloyd_iterations"});
+    const Section st = t->table_of(key, (*arr)[i], {"eps", "f", "lloyd_iterations", "branch"});
     AdaptivityStage stage;
     stage.eps = st.positive("eps", st.number("eps"));
     // lloyd_iterations = 0: no relocation, the stage only lowers eps (f may then be left out).
     stage.lloyd_iterations = st.at_least("lloyd_iterations", st.integer("lloyd_iterations", lloyd), 0);
     stage.f = stage.lloyd_iterations == 0 && !st.has("f") ? 0.0 : st.non_negative("f", st.number("f"));
-    if (stage.eps > previous)
-      st.fail_key("eps", "= " + fmt(stage.eps) + " exceeds the previous eps (" + fmt(previous) +
+    stage.branch = st.boolean("branch", false);
+    // Each stage lowers eps from the stage it continues from: the previous one, or for a stage
+    // after a branch that is not one itself, the last stage that is not a branch.
+    const bool after_branch = !a.stages.empty() && a.stages.back().branch;
+    const double from = after_branch && !stage.branch ? main_eps : previous;
+    if (stage.eps > from)
+      st.fail_key("eps", "= " + fmt(stage.eps) + " exceeds the previous eps (" + fmt(from) +
                              (i == 0 ? ", model.eps" : "") + "): the schedule lowers eps");
     previous = stage.eps;
+    if (!stage.branch) main_eps = stage.eps;
     a.stages.push_back(stage);
   }
   s.adaptivity = std::move(a);
