@@ -80,6 +80,7 @@ double estimate_gb(int per_axis, double gamma, int points) {
 struct StrategyRun {
   double neighbour_search = 0, cells = 0, basis = 0, structure = 0, create_matrix = 0;
   double fill = 0, fill_kernel = 0, fill_first = 0;
+  double fill_setvalues = 0;  // the same fill through MatSetValues (Assembler::MatrixInsertion::SetValues)
   double setup_cpu = 0, fill_cpu = 0;  // thread CPU time: the whole Discretization, best fill
   double mean_neighbours = 0, mean_element_nodes = 0;
   long long pattern_nonzeros = 0;
@@ -180,6 +181,15 @@ StrategyRun run_strategy(const NodeSet& nodes, double gamma, int points, Neighbo
       run.fill_kernel = max_over_ranks(heat.times().matrix_kernel);
     }
   }
+  {
+    // The same fill with PETSc's MatSetValues insertion instead of the direct AIJ addition.
+    PetscMatrix K_set = heat.create_matrix(Assembler::MatrixInsertion::SetValues);
+    run.fill_setvalues = std::numeric_limits<double>::infinity();
+    for (int r = 0; r < reps; ++r) {
+      heat.matrix(u, K_set);
+      run.fill_setvalues = std::min(run.fill_setvalues, max_over_ranks(heat.times().matrix));
+    }
+  }
   if (solve) solve_heat(disc, heat, K, run);
   return run;
 }
@@ -231,9 +241,9 @@ std::vector<JsonRecord> heat_benchmark(bool quick, const SweepFilter& filter, Js
 
   std::vector<JsonRecord> records;
   say("\nheat problem -Lap T = 2y: per-point (pt) vs cell-based (cell) neighbourhoods; times in s\n");
-  say("%6s %4s %3s %6s %6s | %8s %8s %6s | %8s %8s %6s | %6s | %7s %7s %7s %7s %7s\n", "nodes", "gam", "nq", "nbrs",
-      "cellN", "str_pt", "str_cell", "x", "fill_pt", "fill_cl", "x", "nnz_x", "search", "basis", "struct", "fill",
-      "solve");
+  say("%6s %4s %3s %6s %6s | %8s %8s %6s | %8s %8s %6s | %6s | %7s %7s %7s %7s %7s | %8s %6s\n", "nodes", "gam", "nq",
+      "nbrs", "cellN", "str_pt", "str_cell", "x", "fill_pt", "fill_cl", "x", "nnz_x", "search", "basis", "struct", "fill",
+      "solve", "fill_set", "x");
   for (const int n : grids) {
     const NodeSet nodes = uniform_grid(Box::unit(2), {n, n, 1});
     for (const double gamma : gammas) {
@@ -283,6 +293,9 @@ std::vector<JsonRecord> heat_benchmark(bool quick, const SweepFilter& filter, Js
             .set("fill_speedup_cpu", pt.fill_cpu / cell.fill_cpu)
             .set("setup_cpu_s_point", pt.setup_cpu)
             .set("setup_cpu_s_cell", cell.setup_cpu)
+            .set("fill_setvalues_s_point", pt.fill_setvalues)
+            .set("fill_setvalues_s_cell", cell.fill_setvalues)
+            .set("direct_insertion_speedup_cell", cell.fill_setvalues / cell.fill)
             .set("fill_kernel_s_point", pt.fill_kernel)
             .set("fill_kernel_s_cell", cell.fill_kernel)
             .set("mean_cell_nodes", cell.mean_element_nodes)
@@ -291,11 +304,13 @@ std::vector<JsonRecord> heat_benchmark(bool quick, const SweepFilter& filter, Js
             .set("pattern_nonzeros_point", pt.pattern_nonzeros)
             .set("pattern_nonzeros_cell", cell.pattern_nonzeros);
         records.push_back(std::move(r));
-        say("%6d %4.1f %3d %6.1f %6.1f | %8.4f %8.4f %6.1f | %8.4f %8.4f %6.1f | %6.2f | %7.3f %7.3f %7.3f %7.3f %7.3f\n",
+        say("%6d %4.1f %3d %6.1f %6.1f | %8.4f %8.4f %6.1f | %8.4f %8.4f %6.1f | %6.2f | %7.3f %7.3f %7.3f %7.3f %7.3f | "
+            "%8.4f %6.1f\n",
             n * n, gamma, points, cell.mean_neighbours, cell.mean_element_nodes, s_pt, s_cell, s_pt / s_cell, pt.fill,
             cell.fill, pt.fill / cell.fill,
             static_cast<double>(cell.pattern_nonzeros) / static_cast<double>(pt.pattern_nonzeros),
-            cell.neighbour_search, cell.basis, s_cell, cell.fill, cell.solve);
+            cell.neighbour_search, cell.basis, s_cell, cell.fill, cell.solve, cell.fill_setvalues,
+            cell.fill_setvalues / cell.fill);
       }
     }
   }
