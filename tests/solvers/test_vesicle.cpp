@@ -85,5 +85,53 @@ TEST(Vesicle, SphereConvergesToTwoPiWithinTheModellingError) {
   EXPECT_LT(last_ratio, 1e-2);
 }
 
+TEST(Vesicle, RescaledInterfaceIsTheTanhProfileOfTheNewWidth) {
+  // tanh(d / (sqrt2 eps_from)) re-profiled to eps_to is tanh(d / (sqrt2 eps_to)).
+  std::vector<double> d, from;
+  for (double x = -0.3; x <= 0.3; x += 0.01) {
+    d.push_back(x);
+    from.push_back(std::tanh(x / (std::sqrt(2.0) * 0.04)));
+  }
+  from.push_back(-1.0);  // a Dirichlet value stays -1
+  d.push_back(-1.0);
+  const auto to = app::rescale_interface(from, 0.04, 0.025);
+  for (std::size_t i = 0; i + 1 < d.size(); ++i) EXPECT_NEAR(to[i], std::tanh(d[i] / (std::sqrt(2.0) * 0.025)), 1e-12);
+  EXPECT_EQ(to.back(), -1.0);
+  EXPECT_THROW((void)app::rescale_interface(from, 0.0, 0.025), std::invalid_argument);
+}
+
+TEST(Vesicle, WarmStartedMultipliersSaveIterations) {
+  // A continuation (eps 0.1 -> 0.09 on the same grid) from the previous solution: starting from the
+  // previous multipliers converges in fewer augmented-Lagrangian steps than starting from zero.
+  app::VesicleSetup s;
+  const double R = 0.4;
+  s.lower = {0.0, 0.0};
+  s.upper = {0.8, 1.2};
+  s.z_center = 0.6;
+  s.gamma = 0.8;
+  s.eps = 0.1;
+  s.spacing = 0.045;
+  s.semi_axes = {1.1 * R, 0.85 * R};
+  s.area_target = 4 * pi * R * R;
+  s.volume_target = 0.95 * 4.0 / 3 * pi * R * R * R;
+  s.moment_target = 0.0;
+  const auto first = app::solve_vesicle(PETSC_COMM_SELF, s);
+  ASSERT_TRUE(first.solve.converged) << first.solve.message;
+  s.eps = 0.09;
+  s.nodes = first.nodes;
+  s.initial_phi = app::rescale_interface(first.phi, 0.1, 0.09);
+  const auto cold = app::solve_vesicle(PETSC_COMM_SELF, s);
+  s.initial_multipliers = first.solve.multipliers;
+  const auto warm = app::solve_vesicle(PETSC_COMM_SELF, s);
+  std::printf("continuation: cold start %d AL + %d KKT, warm start %d AL + %d KKT; E %.8f vs %.8f\n",
+              cold.solve.augmented_iterations, cold.solve.newton_iterations, warm.solve.augmented_iterations,
+              warm.solve.newton_iterations, cold.solve.energy, warm.solve.energy);
+  ASSERT_TRUE(cold.solve.converged && warm.solve.converged);
+  EXPECT_LT(warm.solve.augmented_iterations, cold.solve.augmented_iterations);
+  EXPECT_NEAR(warm.solve.energy, cold.solve.energy, 1e-6 * cold.solve.energy);  // the same minimizer
+  s.initial_multipliers = {1.0};
+  EXPECT_THROW((void)app::solve_vesicle(PETSC_COMM_SELF, s), std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace lmeform

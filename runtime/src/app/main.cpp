@@ -177,6 +177,10 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
     if (stage > 0) {
       setup.initial_phi = app::transfer_phi(stages[from].result.nodes, stages[from].result.phi, scene.nodes.gamma,
                                             scene.nodes.spacing_smoothing, nodes);
+      // A narrower interface: start from the same level sets with the new width.
+      if (rec.eps < stages[from].eps) setup.initial_phi = app::rescale_interface(setup.initial_phi, stages[from].eps, rec.eps);
+      // The multipliers (tension, pressure) change little between stages: start from the last ones.
+      if (stages[from].result.solve.converged) setup.initial_multipliers = stages[from].result.solve.multipliers;
     }
     setup.solver.log = log;
     if (log != nullptr) {

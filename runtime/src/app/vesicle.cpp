@@ -24,6 +24,14 @@ double ellipsoid_profile(double r, double z, std::array<double, 2> semi_axes, do
   return std::tanh(inside / (std::sqrt(2.0) * eps));
 }
 
+std::vector<double> rescale_interface(std::span<const double> phi, double eps_from, double eps_to) {
+  if (!(eps_from > 0) || !(eps_to > 0)) throw std::invalid_argument("rescale_interface: eps must be positive");
+  const double ratio = eps_from / eps_to, bound = 1.0 - 1e-15;
+  std::vector<double> out(phi.size());
+  for (std::size_t a = 0; a < phi.size(); ++a) out[a] = std::tanh(ratio * std::atanh(std::clamp(phi[a], -bound, bound)));
+  return out;
+}
+
 LmeOptions axisymmetric_lme_options(int spacing_smoothing) {
   // φ of a body of revolution is even in r: the basis is mirrored across the axis r = 0, so
   // φ_r = 0 there exactly and φ_r / r stays finite (without it φ_r(0, z) ≠ 0 and the bending
@@ -144,7 +152,15 @@ VesicleResult solve_vesicle(MPI_Comm comm, const VesicleSetup& setup) {
   minimizer.set_fixed_dofs(owned_dofs_of_nodes(disc, boundary, 1));
   result.seconds_setup = MPI_Wtime() - t0;
   const double t1 = MPI_Wtime();
-  result.solve = minimizer.minimize(phi);
+  std::vector<double> nu;  // the minimizer works with multipliers of the scaled constraints
+  if (!setup.initial_multipliers.empty()) {
+    if (setup.initial_multipliers.size() != constraints.size()) {
+      throw std::invalid_argument("solve_vesicle: " + std::to_string(setup.initial_multipliers.size()) +
+                                  " starting multipliers for " + std::to_string(constraints.size()) + " constraints");
+    }
+    for (std::size_t i = 0; i < constraints.size(); ++i) nu.push_back(setup.initial_multipliers[i] * constraints[i].scale);
+  }
+  result.solve = minimizer.minimize(phi, nu);
   result.seconds_solve = MPI_Wtime() - t1;
 
   result.phi = to_original(disc, phi, 1);

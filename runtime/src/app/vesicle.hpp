@@ -33,6 +33,9 @@ struct VesicleSetup {
   // Initial field: tanh profile of an ellipsoid with semi-axes (a_r, a_z) centred on the axis.
   std::array<double, 2> semi_axes{0.55, 0.25};
   std::vector<double> initial_phi;                         ///< overrides the ellipsoid when set
+  /// Starting Lagrange multipliers in physical units, one per declared constraint in the order
+  /// area, volume, moment (a previous solve's ConstrainedResult::multipliers); empty: zero.
+  std::vector<double> initial_multipliers;
   ConstrainedMinimizerOptions solver{};
 };
 
@@ -56,6 +59,10 @@ VesicleFunctionals evaluate_vesicle(MPI_Comm comm, const VesicleSetup& setup);
 
 /// Builds the discretization and forms for the setup and minimizes. Collective over `comm`.
 VesicleResult solve_vesicle(MPI_Comm comm, const VesicleSetup& setup);
+
+/// A phase field of interface width eps_from re-profiled to eps_to: tanh(atanh(phi) eps_from / eps_to)
+/// (phi clamped into (-1, 1)). Exact for a tanh profile; the start of a continuation in eps.
+[[nodiscard]] std::vector<double> rescale_interface(std::span<const double> phi, double eps_from, double eps_to);
 
 /// The LME options of every axisymmetric basis: mirror symmetry across the axis r = 0, and
 /// `spacing_smoothing` passes on the nodal spacing.
