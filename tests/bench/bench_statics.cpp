@@ -1,62 +1,61 @@
-// Speed against error for the discocyte (issue 5): a ladder of (ε, grid) — uniform grids and CVT-
-// adapted grids of the same node count — with the energy's error against the sharp-interface
-// value and the wall time of each run. Writes DIR/statics.json and DIR/statics.png.
+// Speed against error for the discocyte (issue 5): uniform grids (uniform CVTs of a node count,
+// eps = 2 h) against one adapted grid that follows the progressive schedule of seed Table B.6
+// down in eps, each point with its error against the sharp-interface energy and the wall time it
+// took (adapted: cumulative over the stages, relocations included). Runs scenes through the same
+// stage loop as `lmeform run` (app::run_scene). Writes DIR/statics.json and DIR/statics.png.
 //   bench_statics [--quick] [--out DIR]
-#include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
-#include <numbers>
 #include <sstream>
 #include <string>
 #include <vector>
 
-#include "lmeform/cvt.hpp"
 #include "lmeform/output.hpp"
 #include "lmeform/petsc.hpp"
-#include "vesicle.hpp"
+#include "lmeform/scene.hpp"
+#include "run_scene.hpp"
 
 namespace {
 
 using namespace lmeform;
 constexpr double kSharp = 9.12657;  // discocyte, seed Paper A Sec. 4
-constexpr double pi = std::numbers::pi;
 
 struct Record {
   double eps;
   std::string grid;
   int nodes;
-  double energy, relative_error_sharp, wall_s;
+  double h_min, energy, relative_error_sharp, wall_s;
 };
 
-app::VesicleSetup discocyte(double spacing, double eps) {
-  app::VesicleSetup s;
-  s.lower = {0.0, 0.0};
-  s.upper = {1.5, 2.0};
-  s.spacing = spacing;
-  s.gamma = 0.8;
-  s.eps = eps;
-  s.z_center = 1.0;
-  s.semi_axes = {0.4987, 0.2059};  // oblate spheroid with the sharp A0 and V0 (demos/discocyte.toml)
-  const double R = 0.4;
-  s.area_target = 4 * pi * R * R;
-  s.volume_target = 0.8 * 4.0 / 3.0 * pi * R * R * R;
-  s.moment_target = 0.0;
-  return s;
+// The discocyte of demos/discocyte.toml on a uniform CVT of `count` nodes, gamma 0.5 on both
+// ladders (the adapted grids need it, docs/results_adapted.md), plus `adaptivity` (TOML) if any.
+std::string discocyte_scene(int count, double eps, const std::string& adaptivity) {
+  std::ostringstream s;
+  s << "[scene]\nname = \"discocyte\"\ncoordinates = \"axisymmetric\"\n"
+    << "[domain]\nlower = [0.0, 0.0]\nupper = [1.5, 2.0]\n"
+    << "[nodes]\ncount = " << count << "\ngamma = 0.5\nquadrature_points = 6\nresolution_factor = 1.6\n"
+    << "[initial]\nshape = \"ellipsoid\"\ncenter = [0.0, 1.0]\nsemi_axes = [0.4987, 0.2059]\n"
+    << "[model]\nform = \"helfrich_axisymmetric\"\neps = " << eps << "\n"
+    << "[constraints]\narea = { radius = 0.4 }\nvolume = { reduced_volume = 0.8 }\n"
+    << "moment = { target = 0.0, z_center = 1.0 }\n"
+    << "[solver]\naugmented_tolerance = 1e-3\n"
+    << "[reference]\nenergy = " << kSharp << "\n"
+    << adaptivity;
+  return s.str();
 }
 
-Record run(const app::VesicleSetup& s, const std::string& grid, app::VesicleResult* keep = nullptr) {
-  const auto t0 = std::chrono::steady_clock::now();
-  auto r = app::solve_vesicle(PETSC_COMM_WORLD, s);
-  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  Record rec{s.eps, grid, r.nodes_count, r.solve.energy, (r.solve.energy - kSharp) / kSharp, wall};
-  std::printf("%-9s %7d nodes  eps %.3f  E %.5f  rel. error %+7.3f %%  %7.1f s  %s\n", grid.c_str(), rec.nodes, rec.eps,
-              rec.energy, 100 * rec.relative_error_sharp, rec.wall_s, r.solve.converged ? "" : r.solve.message.c_str());
-  if (keep != nullptr) *keep = std::move(r);
-  return rec;
+Record record_of(const app::StageRecord& st, const std::string& grid, double wall) {
+  const double e = st.result.solve.energy;
+  Record r{st.eps, grid, st.nodes, st.h_min, e, (e - kSharp) / kSharp, wall};
+  std::printf("%-8s %6d nodes  h_min %.4f  eps %.4f  E %.5f  rel. error %+7.3f %%  %7.1f s\n", grid.c_str(), r.nodes,
+              r.h_min, r.eps, r.energy, 100 * r.relative_error_sharp, r.wall_s);
+  return r;
 }
+
+// A uniform CVT of n nodes has the hexagonal spacing h = sqrt(2 |Omega| / (sqrt 3 n)).
+double hex_spacing(int n) { return std::sqrt(2.0 * 1.5 * 2.0 / (std::sqrt(3.0) * n)); }
 
 }  // namespace
 
@@ -71,40 +70,44 @@ int main(int argc, char** argv) {
   std::setvbuf(stdout, nullptr, _IOLBF, 0);  // progress lines as they come, also into a log file
   std::filesystem::create_directories(out);
   std::vector<Record> records;
-  // Uniform ladder: ε = 2h.
-  const std::vector<std::pair<double, double>> uniform =
-      quick ? std::vector<std::pair<double, double>>{{0.05, 0.10}, {0.04, 0.08}}
-            : std::vector<std::pair<double, double>>{{0.05, 0.10}, {0.04, 0.08}, {0.03, 0.06}, {0.024, 0.05}};
-  app::VesicleResult coarse;
-  for (std::size_t k = 0; k < uniform.size(); ++k) {
-    records.push_back(run(discocyte(uniform[k].first, uniform[k].second), "uniform", k == 0 ? &coarse : nullptr));
+
+  // Uniform ladder: eps = 2 h, rounded up to 1e-3.
+  const std::vector<int> counts = quick ? std::vector<int>{1500, 3000, 6124} : std::vector<int>{1500, 3000, 6124, 12271, 24597};
+  for (const int n : counts) {
+    const double eps = std::ceil(2000.0 * hex_spacing(n)) / 1000.0;
+    const Scene scene = parse_scene(discocyte_scene(n, eps, ""), "bench_statics uniform");
+    const app::SceneRun run = app::run_scene(PETSC_COMM_WORLD, scene, nullptr);
+    records.push_back(record_of(run.stages.back(), "uniform", run.wall_s));
   }
-  // Adapted ladder: the coarsest grid's node count, relocated by CVT on the previous solution,
-  // then solved at the smallest ε the adapted grid resolves (ε ≥ 2 h_min).
-  const int stages = quick ? 1 : 3;
-  app::VesicleResult previous = std::move(coarse);
-  double f = 10.0;
-  for (int stage = 0; stage < stages; ++stage, f *= 2) {
-    const auto t0 = std::chrono::steady_clock::now();
-    CvtOptions cvt;
-    cvt.iterations = 40;
-    const NodeSet adapted = app::adapt_nodes(previous, {0.0, 0.0}, {1.5, 2.0}, f, cvt);
-    const double eps = std::ceil(min_admissible_eps(adapted) * 1000.0) / 1000.0;
-    app::VesicleSetup s = discocyte(0.0, eps);
-    s.nodes = adapted;
-    s.initial_phi = app::transfer_phi(previous.nodes, previous.phi, 0.8, s.spacing_smoothing, adapted);
-    app::VesicleResult result;
-    Record rec = run(s, "adapted", &result);
-    rec.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();  // adaptation included
-    records.push_back(rec);
-    previous = std::move(result);
+
+  // Adapted ladder: the Table 3 schedule (f = 10, 100, 1000, eps lowered in between) scaled to the
+  // node count, eps_k = c_k h with the seed's c_k for O1 (h = 0.024): 0.04 ... 0.01.
+  const int n = quick ? 1500 : 6124;
+  const double scale = hex_spacing(n) / 0.024;
+  auto e = [&](double seed_eps) { return std::round(1000.0 * seed_eps * scale) / 1000.0; };
+  std::ostringstream adaptivity;
+  adaptivity << "[adaptivity]\nlloyd_iterations = 40\nstart = \"density\"\nstages = [\n"
+             << "  { eps = " << e(0.04) << ", f = 10.0 },\n  { eps = " << e(0.03) << ", lloyd_iterations = 0 },\n"
+             << "  { eps = " << e(0.03) << ", f = 100.0 },\n  { eps = " << e(0.025) << ", lloyd_iterations = 0 },\n"
+             << "  { eps = " << e(0.025) << ", f = 1000.0 },\n  { eps = " << e(0.02) << ", lloyd_iterations = 0 },\n"
+             << "  { eps = " << e(0.015) << ", lloyd_iterations = 0 },\n  { eps = " << e(0.01)
+             << ", lloyd_iterations = 0 },\n]\n";
+  const Scene scene = parse_scene(discocyte_scene(n, e(0.04), adaptivity.str()), "bench_statics adapted");
+  const app::SceneRun run = app::run_scene(PETSC_COMM_WORLD, scene, nullptr);
+  double cumulative = run.wall_s;
+  for (const auto& st : run.stages) cumulative -= st.wall_s;  // the uniform CVT of the start
+  for (const auto& st : run.stages) {
+    cumulative += st.wall_s;
+    if (st.stage > 0) records.push_back(record_of(st, "adapted", cumulative));
   }
+  if (!run.failure.empty()) std::printf("adapted ladder stopped: %s\n", run.failure.c_str());
+
   if (PetscSession::rank() == 0) {
     std::ostringstream js;
     js << "[\n";
     for (std::size_t i = 0; i < records.size(); ++i) {
       const auto& r = records[i];
-      js << "  {\"eps\": " << r.eps << ", \"grid\": \"" << r.grid << "\", \"nodes\": " << r.nodes
+      js << "  {\"eps\": " << r.eps << ", \"grid\": \"" << r.grid << "\", \"nodes\": " << r.nodes << ", \"h_min\": " << r.h_min
          << ", \"energy\": " << r.energy << ", \"relative_error_sharp\": " << r.relative_error_sharp
          << ", \"wall_s\": " << r.wall_s << "}" << (i + 1 < records.size() ? "," : "") << "\n";
     }

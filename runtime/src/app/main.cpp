@@ -23,79 +23,12 @@
 #include "lmeform/output.hpp"
 #include "lmeform/petsc.hpp"
 #include "lmeform/scene.hpp"
+#include "run_scene.hpp"
 #include "vesicle.hpp"
 
 namespace {
 
 using namespace lmeform;
-
-struct StageRecord {
-  double eps = 0;
-  std::string grid;   ///< "uniform" / "file", then "cvt-1", "cvt-2", ... per relocation
-  int generation = 0; ///< relocations along the chain of stages that led here
-  int stage = 0;
-  std::string label;  ///< " (branch)" for a side solve
-  int nodes = 0;
-  double h_min = 0;
-  app::VesicleResult result;
-  double wall_s = 0;
-  double adapt_s = 0;
-};
-
-NodeSet initial_nodes(const Scene& scene, std::ostream* log) {
-  switch (scene.nodes.kind) {
-    case SceneNodes::Kind::spacing: return uniform_grid(scene.domain, scene.nodes.spacing);
-    case SceneNodes::Kind::counts: return uniform_grid(scene.domain, scene.nodes.counts);
-    case SceneNodes::Kind::count: {
-      const auto t0 = std::chrono::steady_clock::now();
-      CvtOptions cvt;
-      cvt.iterations = scene.nodes.lloyd_iterations;
-      CvtReport report;
-      NodeSet nodes = uniform_cvt(scene.domain, static_cast<std::size_t>(scene.nodes.count), cvt, &report);
-      if (log != nullptr) {
-        *log << "uniform CVT of " << nodes.size() << " nodes: " << report.iterations.size() << " Lloyd iterations"
-             << (report.iterations.empty() ? std::string()
-                                           : ", last mean move " + std::to_string(report.iterations.back().mean_displacement / report.h_bar) + " h")
-             << ", " << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() << " s\n";
-      }
-      return nodes;
-    }
-    case SceneNodes::Kind::file: return read_points(scene.nodes.file, scene.dim());
-  }
-  throw std::logic_error("unknown node kind");
-}
-
-app::VesicleSetup setup_from(const Scene& scene, const NodeSet& nodes, double eps) {
-  app::VesicleSetup s;
-  s.lower = {scene.domain.lo[0], scene.domain.lo[1]};
-  s.upper = {scene.domain.hi[0], scene.domain.hi[1]};
-  s.nodes = nodes;
-  s.gamma = scene.nodes.gamma;
-  s.spacing_smoothing = scene.nodes.spacing_smoothing;
-  s.quadrature_points = scene.nodes.quadrature_points;
-  s.k = scene.model.k;
-  s.eps = eps;
-  s.C0 = scene.model.C0;
-  s.area_target = scene.constraints.area;
-  s.volume_target = scene.constraints.volume;
-  if (scene.constraints.moment) {
-    s.moment_target = scene.constraints.moment->target;
-    s.z_center = scene.constraints.moment->z_center;
-  } else {
-    s.z_center = scene.initial.center[1];
-  }
-  s.initial_phi.resize(nodes.size());
-  for (std::size_t a = 0; a < nodes.size(); ++a) s.initial_phi[a] = scene.initial_phi(nodes.point(a));
-  s.solver.penalty = scene.solver.penalty;
-  s.solver.augmented_tolerance = scene.solver.augmented_tolerance;
-  s.solver.inner_tolerance = scene.solver.inner_tolerance;
-  s.solver.max_outer_iterations = scene.solver.max_outer_iterations;
-  s.solver.max_inner_iterations = scene.solver.max_inner_iterations;
-  s.solver.newton_tolerance = scene.solver.newton_tolerance;
-  s.solver.constraint_tolerance = scene.solver.constraint_tolerance;
-  s.solver.max_newton_iterations = scene.solver.max_newton_iterations;
-  return s;
-}
 
 std::string json_number(double v) {
   if (!std::isfinite(v)) return "null";
@@ -110,14 +43,7 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
   std::ostream* log = rank == 0 ? &std::cout : nullptr;
   const auto t_start = std::chrono::steady_clock::now();
   const Scene scene = load_scene(scene_path);
-  if (!scene.axisymmetric() || scene.dim() != 2) {
-    throw SceneError(scene.source + ": coordinates = \"" + to_string(scene.coordinates) +
-                     "\" is accepted by the scene format, but lmeform run solves axisymmetric (r, z) vesicles only so far");
-  }
-  if (scene.model.form != "helfrich_axisymmetric") {
-    throw SceneError(scene.source + ": model.form = \"" + scene.model.form +
-                     "\": lmeform run knows the energy \"helfrich_axisymmetric\" only");
-  }
+  app::check_runnable(scene);  // before any directory is made
   std::filesystem::path out_dir = !output_override.empty() ? std::filesystem::path(output_override)
                                   : scene.output ? scene.output->directory
                                                  : std::filesystem::path("out") / scene.name;
@@ -125,84 +51,10 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
   const bool write_png = !scene.output || scene.output->png;
   if (rank == 0) std::filesystem::create_directories(out_dir);
 
-  // The schedule: the scene's ε on the initial grid, then each adaptivity stage.
-  std::vector<StageRecord> stages;
-  NodeSet nodes = initial_nodes(scene, log);
-  // A stage continues from the previous one, except that a stage which is not a branch continues
-  // from the last stage that is not one (AdaptivityStage::branch).
-  std::size_t main_stage = 0;
-  const int n_stages = 1 + (scene.adaptivity ? static_cast<int>(scene.adaptivity->stages.size()) : 0);
-  // A stage that cannot run (an under-resolved eps on an adapted grid, an LME evaluation or a
-  // linear solve that fails) ends the schedule; the last finished stage is still written.
-  std::string failure;
-  for (int stage = 0; stage < n_stages; ++stage) {
-   try {
-    StageRecord rec;
-    const auto t0 = std::chrono::steady_clock::now();
-    rec.eps = stage == 0 ? scene.model.eps : scene.adaptivity->stages[static_cast<std::size_t>(stage - 1)].eps;
-    // Grids are named by generation: the scene's node set, then cvt-1, cvt-2, ... for each
-    // relocation along the chain; a stage without relocation keeps its grid.
-    rec.grid = scene.nodes.kind == SceneNodes::Kind::file ? "file" : "uniform";
-    std::size_t from = 0;  // the finished stage this one starts from
-    if (stage > 0) {
-      const auto& st = scene.adaptivity->stages[static_cast<std::size_t>(stage - 1)];
-      from = st.branch ? stages.size() - 1 : main_stage;
-      nodes = stages[from].result.nodes;
-      rec.generation = stages[from].generation + (st.lloyd_iterations > 0 ? 1 : 0);
-      rec.grid = rec.generation == 0 ? stages[from].grid : "cvt-" + std::to_string(rec.generation);
-      if (st.branch) rec.label = " (branch)";
-      if (st.lloyd_iterations > 0) {
-        CvtOptions cvt;
-        cvt.iterations = st.lloyd_iterations;
-        cvt.start = scene.adaptivity->start_from_density ? CvtStart::density : CvtStart::given;
-        cvt.samples_per_node = scene.adaptivity->samples_per_node;
-        CvtReport report;
-        nodes = app::adapt_nodes(stages[from].result, {scene.domain.lo[0], scene.domain.lo[1]},
-                                 {scene.domain.hi[0], scene.domain.hi[1]}, st.f, cvt, &report);
-        if (log != nullptr) {
-          *log << "CVT with rho = 1 + " << st.f << " |grad phi|: " << report.iterations.size() << " Lloyd iterations"
-               << (cvt.start == CvtStart::density ? " from the density's node placement" : " from the current nodes")
-               << ", " << report.samples << (cvt.centroids == CvtCentroids::voronoi ? " density evaluations per iteration" : " samples")
-               << ", h_min " << spacing_summary(nodes).h_min << "\n";
-        }
-      }
-      rec.adapt_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    }
-    const SpacingSummary spacing = spacing_summary(nodes);
-    rec.h_min = spacing.h_min;
-    // An under-resolved interface is refused before any work (seed App. B: ε ≥ 2 h_min).
-    check_resolution(rec.eps, spacing, scene.nodes.resolution_factor, rec.grid + " grid");
-    rec.stage = stage;
-    app::VesicleSetup setup = setup_from(scene, nodes, rec.eps);
-    if (stage > 0) {
-      setup.initial_phi = app::transfer_phi(stages[from].result.nodes, stages[from].result.phi, scene.nodes.gamma,
-                                            scene.nodes.spacing_smoothing, nodes);
-      // A narrower interface: start from the same level sets with the new width.
-      if (rec.eps < stages[from].eps) setup.initial_phi = app::rescale_interface(setup.initial_phi, stages[from].eps, rec.eps);
-      // The multipliers (tension, pressure) change little between stages: start from the last ones.
-      if (stages[from].result.solve.converged) setup.initial_multipliers = stages[from].result.solve.multipliers;
-    }
-    setup.solver.log = log;
-    if (log != nullptr) {
-      *log << "== stage " << stage << " (" << rec.grid << rec.label << "): " << nodes.size() << " nodes, eps " << rec.eps
-           << ", h_min " << rec.h_min << "\n";
-    }
-    rec.result = app::solve_vesicle(PETSC_COMM_WORLD, setup);
-    rec.nodes = rec.result.nodes_count;
-    rec.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    const bool branch = stage > 0 && scene.adaptivity->stages[static_cast<std::size_t>(stage - 1)].branch;
-    stages.push_back(std::move(rec));
-    if (!branch) main_stage = stages.size() - 1;
-    if (!stages.back().result.solve.converged) break;
-   } catch (const std::exception& e) {
-    if (stages.empty()) throw;  // nothing to write
-    failure = "stage " + std::to_string(stage) + ": " + e.what();
-    if (log != nullptr) *log << "lmeform: " << failure << "\nlmeform: writing the last finished stage\n";
-    break;
-   }
-  }
-
-  const StageRecord& last = stages.back();
+  const app::SceneRun run = app::run_scene(PETSC_COMM_WORLD, scene, log);
+  const std::vector<app::StageRecord>& stages = run.stages;
+  const std::string& failure = run.failure;
+  const app::StageRecord& last = stages.back();
   const auto& r = last.result;
   const bool converged = failure.empty() && r.solve.converged;
   const std::string status = !failure.empty()        ? "FAILED: " + failure
@@ -244,8 +96,11 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
       std::printf("%-26s %.6f (relative error %+.3f %%)\n", "sharp-interface reference", reference, 100 * rel_error);
     }
     for (std::size_t i = 0; i < r.constraint_names.size(); ++i) {
-      std::printf("%-26s %.6g (relative residual %.1e), multiplier %.6g\n", (r.constraint_names[i] + " constraint").c_str(),
-                  r.solve.constraint_values[i], r.solve.relative_residuals[i], r.solve.multipliers[i]);
+      // The area multiplier is the membrane tension, the volume multiplier the pressure difference.
+      const std::string& c = r.constraint_names[i];
+      const char* meaning = c == "area" ? " (tension)" : c == "volume" ? " (pressure)" : "";
+      std::printf("%-26s %.6g (relative residual %.1e), multiplier%s %.6g\n", (c + " constraint").c_str(),
+                  r.solve.constraint_values[i], r.solve.relative_residuals[i], meaning, r.solve.multipliers[i]);
     }
     std::printf("%-26s %d (h_min %.4g, h_mean %.4g)\n", "nodes", last.nodes, r.h_min, r.h_mean);
     std::printf("%-26s %g\n", "eps", last.eps);
@@ -281,7 +136,15 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
          << ",\n  \"energy\": " << json_number(r.solve.energy)
          << ",\n  \"relative_error_sharp\": " << json_number(rel_error) << ",\n  \"wall_s\": " << json_number(total_s)
          << ",\n  \"newton_iterations\": " << r.solve.newton_iterations
-         << ",\n  \"augmented_iterations\": " << r.solve.augmented_iterations << ",\n  \"stages\": [";
+         << ",\n  \"augmented_iterations\": " << r.solve.augmented_iterations << ",\n  \"multipliers\": {";
+      for (std::size_t i = 0; i < r.constraint_names.size(); ++i) {
+        js << (i ? ", " : "") << "\"" << r.constraint_names[i] << "\": " << json_number(r.solve.multipliers[i]);
+      }
+      js << "},\n  \"constraint_residuals\": {";
+      for (std::size_t i = 0; i < r.constraint_names.size(); ++i) {
+        js << (i ? ", " : "") << "\"" << r.constraint_names[i] << "\": " << json_number(r.solve.relative_residuals[i]);
+      }
+      js << "},\n  \"stages\": [";
       for (std::size_t i = 0; i < stages.size(); ++i) {
         const double e = stages[i].result.solve.energy;
         js << (i ? ",\n    " : "\n    ") << "{\"stage\": " << stages[i].stage << ", \"grid\": \"" << stages[i].grid << "\", \"branch\": "
