@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <iostream>
 #include <filesystem>
 #include <sstream>
 #include <string>
@@ -93,7 +94,7 @@ int main(int argc, char** argv) {
              << "  { eps = " << e(0.015) << ", lloyd_iterations = 0 },\n  { eps = " << e(0.01)
              << ", lloyd_iterations = 0 },\n]\n";
   const Scene scene = parse_scene(discocyte_scene(n, e(0.04), adaptivity.str()), "bench_statics adapted");
-  const app::SceneRun run = app::run_scene(PETSC_COMM_WORLD, scene, nullptr);
+  const app::SceneRun run = app::run_scene(PETSC_COMM_WORLD, scene, quick ? nullptr : &std::cout);
   double cumulative = run.wall_s;
   for (const auto& st : run.stages) cumulative -= st.wall_s;  // the uniform CVT of the start
   for (const auto& st : run.stages) {
@@ -101,6 +102,10 @@ int main(int argc, char** argv) {
     if (st.stage > 0) records.push_back(record_of(st, "adapted", cumulative));
   }
   if (!run.failure.empty()) std::printf("adapted ladder stopped: %s\n", run.failure.c_str());
+  if (!run.stages.back().result.solve.converged) {
+    std::printf("adapted ladder stopped: stage %d did not converge: %s\n", run.stages.back().stage,
+                run.stages.back().result.solve.message.c_str());
+  }
 
   if (PetscSession::rank() == 0) {
     std::ostringstream js;

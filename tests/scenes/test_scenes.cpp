@@ -411,7 +411,14 @@ TEST(Scene, Demos) {
     const double a = s.initial.semi_axes[0], c = s.initial.semi_axes[1];
     EXPECT_NEAR(4.0 / 3.0 * pi * a * a * c / *s.constraints.volume, 1.0, 2e-3);
     EXPECT_EQ(std::string(name) == "discocyte", a > c);  // oblate vs prolate
-    EXPECT_GE(s.model.eps, 2 * *s.uniform_min_spacing());
+    // The seed's grid O1 / P1 and the Table B.6 schedule down to eps = 0.01.
+    EXPECT_EQ(s.nodes.kind, SceneNodes::Kind::count);
+    EXPECT_EQ(s.nodes.count, 6124);
+    ASSERT_TRUE(s.adaptivity);
+    EXPECT_EQ(s.final_eps(), 0.01);
+    int relocations = 0;
+    for (const auto& st : s.adaptivity->stages) relocations += st.lloyd_iterations > 0 ? 1 : 0;
+    EXPECT_EQ(relocations, 3);  // f = 10, 100, 1000
   }
 }
 
