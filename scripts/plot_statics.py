@@ -20,10 +20,16 @@ def main() -> int:
         rows = [r for r in records if r["grid"] == grid]
         if not rows:
             continue
-        ax.plot([r["wall_s"] for r in rows], [100 * abs(r["relative_error_sharp"]) for r in rows], marker, label=grid)
-        for r in rows:
-            ax.annotate(f"eps {r['eps']:g}, {r['nodes']} nodes", (r["wall_s"], 100 * abs(r["relative_error_sharp"])),
-                        textcoords="offset points", xytext=(5, 4), fontsize=8)
+        nodes = sorted({r["nodes"] for r in rows})
+        label = f"{grid} ({', '.join(str(n) for n in nodes)} nodes)" if grid == "adapted" else grid
+        ax.plot([r["wall_s"] for r in rows], [100 * abs(r["relative_error_sharp"]) for r in rows], marker, label=label)
+        # One label per eps (an adapted stage that relocates and the next that lowers eps share one).
+        for i, r in enumerate(rows):
+            if i + 1 < len(rows) and rows[i + 1]["eps"] == r["eps"]:
+                continue
+            text = f"eps {r['eps']:g}" + (f", {r['nodes']} nodes" if grid == "uniform" else "")
+            ax.annotate(text, (r["wall_s"], 100 * abs(r["relative_error_sharp"])), textcoords="offset points",
+                        xytext=(6, -10 if grid == "adapted" else 5), fontsize=7)
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("wall time [s]")
