@@ -157,9 +157,9 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
     log_iterate(it);
   };
 
-  // Newton on the KKT system has no globalization: when it diverges from where the augmented
-  // Lagrangian stopped, the state is restored and the augmented Lagrangian resumes with a 100x
-  // tighter tolerance (twice at most).
+  // Newton on the KKT system is damped by a line search on its residual; when that stalls (or
+  // the state turns non-finite, which is then rolled back), the augmented Lagrangian resumes with
+  // a 100x tighter tolerance (twice at most) and hands over to Newton again.
   double al_tolerance = options_.augmented_tolerance;
   PetscVector u_saved = energy_->create_vector();
   std::vector<double> sigma(nu);
@@ -233,13 +233,14 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
   }
   LMEFORM_PETSC_CHECK(VecCopy(u, u_saved));
   const std::vector<double> nu_saved = nu;
-  bool diverged = false;
+  bool diverged = false, restore = false;
   double first_merit = 0;
 
   // ---- Stage 2: Newton on the KKT system, Schur complement on the multipliers ------------------
   const double stage2_start = MPI_Wtime();
   {
     evaluate(u, nu, false, ev);  // then kept current by the line search
+    int damped_steps = 0;         // consecutive steps the line search shortened
     for (int it = 0; it <= options_.max_newton_iterations; ++it) {
       lagrangian_gradient(ev, nu, rhs);
       const double gnorm = norm(rhs);
@@ -251,6 +252,7 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
       if (it == 0) first_merit = merit;
       if (!std::isfinite(ev.energy) || !std::isfinite(gnorm) || (it > 0 && merit > 1e3 * std::max(first_merit, 1e-12))) {
         diverged = true;
+        restore = true;
         break;
       }
       if (gnorm <= options_.newton_tolerance * scale && relative_residual(ev) <= options_.constraint_tolerance) {
@@ -301,8 +303,8 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
       // m = (|∇L| / scale)² + Σ r_i², for which the Newton direction is a descent direction
       // (d/dα m = −2m). Without it, a nearly singular KKT matrix made Newton cycle between two
       // states (measured: a 1500-node discocyte at eps = 0.08, 25 steps without converging).
-      auto kkt_merit = [&](const Evaluation& e, const std::vector<double>& multipliers) {
-        lagrangian_gradient(e, multipliers, f1);  // f1 as scratch
+      auto kkt_merit = [&](const Evaluation& e, const std::vector<double>& sigma_trial) {
+        lagrangian_gradient(e, sigma_trial, f1);  // f1 as scratch
         const double g = norm(f1) / scale;
         double m = g * g;
         for (const double r : e.residuals) m += r * r;
@@ -323,8 +325,11 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
           break;
         }
       }
-      if (!accepted) {
-        diverged = true;  // no step along the Newton direction reduces the residual
+      damped_steps = alpha < 1.0 ? damped_steps + 1 : 0;
+      if (!accepted || damped_steps >= 3) {
+        // No step along the Newton direction reduces the residual, or only short ones, three times
+        // in a row: far from the quadratic regime. Back to the augmented Lagrangian (below).
+        diverged = true;
         break;
       }
       LMEFORM_PETSC_CHECK(VecCopy(trial, u));
@@ -335,14 +340,19 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
   }
   seconds_newton += MPI_Wtime() - stage2_start;
   if (!diverged) break;
-  LMEFORM_PETSC_CHECK(VecCopy(u_saved, u));
-  nu = nu_saved;
+  // The line search keeps the KKT residual decreasing, so the state reached is kept (it holds the
+  // constraints better, with better multipliers); only a non-finite one is rolled back.
+  if (restore) {
+    LMEFORM_PETSC_CHECK(VecCopy(u_saved, u));
+    nu = nu_saved;
+  }
   sigma = nu;
   evaluate(u, nu, false, ev);
   al_tolerance *= 0.01;
-  result.message = "KKT Newton diverged from the augmented Lagrangian's state";
+  result.message = "KKT Newton diverged or stalled from the augmented Lagrangian's state";
   if (options_.log != nullptr && energy_->discretization().rank() == 0) {
-    *options_.log << "KKT Newton diverged: back to the augmented Lagrangian with tolerance " << al_tolerance << std::endl;
+    *options_.log << "KKT Newton diverged or stalled: back to the augmented Lagrangian with tolerance " << al_tolerance
+                  << std::endl;
   }
   }
   result.seconds_newton = seconds_newton;
