@@ -11,19 +11,27 @@ namespace lmeform {
 namespace {
 
 constexpr double pi = std::numbers::pi;
+constexpr double kR = 0.4;
+
+// A sphere of radius kR on the axis of the box [0, 0.8] x [0, 1.2] (centre z = 0.6), gamma 0.8.
+app::VesicleSetup sphere_box(double eps, double spacing) {
+  app::VesicleSetup s;
+  s.lower = {0.0, 0.0};
+  s.upper = {0.8, 1.2};
+  s.z_center = 0.6;
+  s.semi_axes = {kR, kR};
+  s.gamma = 0.8;
+  s.eps = eps;
+  s.spacing = spacing;
+  return s;
+}
 
 // With the smooth γ = 0.8 basis the energy of a prescribed tanh sphere tends to 2π as h → 0 at
 // fixed ε (larger γ has inconsistent basis Hessians: the energy plateaus above 2π), and area and
 // volume differ from the sharp values by the diffuse interface's O(ε²) terms.
 TEST(Vesicle, PrescribedTanhSphereMatchesSharpInterfaceValues) {
-  app::VesicleSetup s;
-  const double R = 0.4;
-  s.lower = {0.0, 0.0};
-  s.upper = {0.8, 1.2};
-  s.z_center = 0.6;
-  s.semi_axes = {R, R};
-  s.gamma = 0.8;
-  s.eps = 0.08;
+  app::VesicleSetup s = sphere_box(0.08, 0.04);
+  const double R = kR;
   double previous_error = 1e300;
   for (const double ratio : {2.0, 4.0}) {
     s.spacing = s.eps / ratio;
@@ -46,15 +54,8 @@ TEST(Vesicle, PrescribedTanhSphereMatchesSharpInterfaceValues) {
 // ½(|Ω| + ∫φ) exceeds the sharp one by ≈ 3.1 (ε/R)², so sharp targets force a deflated,
 // non-spherical minimizer — the modelling error of ε, not a solver error.)
 TEST(Vesicle, SphereConvergesToTwoPiWithinTheModellingError) {
-  app::VesicleSetup s;
-  const double R = 0.4;
-  s.lower = {0.0, 0.0};
-  s.upper = {0.8, 1.2};
-  s.z_center = 0.6;
-  s.gamma = 0.8;
-  s.eps = 0.08;
-  s.spacing = 0.04;
-  s.semi_axes = {R, R};
+  app::VesicleSetup s = sphere_box(0.08, 0.04);
+  const double R = kR;
   const auto diffuse = app::evaluate_vesicle(PETSC_COMM_SELF, s);
   s.area_target = diffuse.area;
   s.volume_target = diffuse.volume;
@@ -103,14 +104,8 @@ TEST(Vesicle, RescaledInterfaceIsTheTanhProfileOfTheNewWidth) {
 TEST(Vesicle, WarmStartedMultipliersSaveIterations) {
   // A continuation (eps 0.1 -> 0.09 on the same grid) from the previous solution: starting from the
   // previous multipliers converges in fewer augmented-Lagrangian steps than starting from zero.
-  app::VesicleSetup s;
-  const double R = 0.4;
-  s.lower = {0.0, 0.0};
-  s.upper = {0.8, 1.2};
-  s.z_center = 0.6;
-  s.gamma = 0.8;
-  s.eps = 0.1;
-  s.spacing = 0.045;
+  app::VesicleSetup s = sphere_box(0.1, 0.045);
+  const double R = kR;
   s.semi_axes = {1.1 * R, 0.85 * R};
   s.area_target = 4 * pi * R * R;
   s.volume_target = 0.95 * 4.0 / 3 * pi * R * R * R;
