@@ -1,6 +1,7 @@
 // Serial tests of the assembly engine with hand-written reference kernels.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <set>
@@ -125,6 +126,25 @@ TEST(Assembly, CellBasedAndPerPointAssembleTheSameOperator) {
     EXPECT_LE(testing::max_abs_difference(a.gradient, b.gradient), 1e-12 * testing::max_abs(a.gradient));
     EXPECT_LE(testing::max_abs_difference(a.hessian, b.hessian), 1e-12 * testing::max_abs(a.hessian));
     EXPECT_LT(cell.n_elements(), point.n_elements());
+  }
+}
+
+TEST(Assembly, EveryPointListHoldsItsCellVertices) {
+  // So that each quadrature point lies in the convex hull of its list, also on a strongly graded
+  // node set where a fine node's support can end short of a point of a long cell.
+  GradedGridOptions g;
+  g.h_min = 0.004;
+  g.h_max = 0.08;
+  g.transition = 0.05;
+  const NodeSet nodes = graded_grid_2d(g);
+  const Discretization disc(PETSC_COMM_SELF, nodes, options(0.5, 6, NeighbourhoodStrategy::CellBased));
+  const auto& lists = disc.point_lists();
+  const int nq = disc.quadrature().points_per_cell;
+  for (std::size_t q = 0; q < lists.size(); ++q) {
+    const auto list = lists[q];
+    for (const int v : disc.cells().cell(q / static_cast<std::size_t>(nq))) {
+      ASSERT_TRUE(std::binary_search(list.begin(), list.end(), v)) << "point " << q << " misses vertex " << v;
+    }
   }
 }
 

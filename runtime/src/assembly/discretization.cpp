@@ -50,6 +50,35 @@ std::vector<double> expand_gamma(const std::vector<double>& gamma, std::size_t n
   return gamma;
 }
 
+// Every quadrature point's list also holds the vertices of its cell, so the point lies in the
+// convex hull of its list and the LME problem there has a solution. The support cutoff alone does
+// not guarantee it on strongly graded grids: a fine node's support can end short of a point in a
+// long triangle it shares with coarse nodes (measured: a dumbbell CVT with h from 0.004 to 0.09,
+// "point outside the convex hull of its neighbours" at 41 neighbours). A vertex added this way
+// contributes its Gaussian factor, below tol0 there.
+CsrLists with_cell_vertices(const CsrLists& lists, const BackgroundCells& cells, int points_per_cell) {
+  CsrLists out;
+  out.offsets.assign(lists.offsets.size(), 0);
+  out.indices.reserve(lists.indices.size());
+  std::vector<int> row;
+  for (std::size_t q = 0; q < lists.size(); ++q) {
+    const auto own = lists[q];
+    row.assign(own.begin(), own.end());
+    const std::size_t c = q / static_cast<std::size_t>(points_per_cell);
+    bool added = false;
+    for (const int v : cells.cell(c)) {
+      if (!std::binary_search(own.begin(), own.end(), v)) {
+        row.push_back(v);
+        added = true;
+      }
+    }
+    if (added) std::sort(row.begin(), row.end());
+    out.indices.insert(out.indices.end(), row.begin(), row.end());
+    out.offsets[q + 1] = static_cast<int>(out.indices.size());
+  }
+  return out;
+}
+
 }  // namespace
 
 Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, DiscretizationOptions options)
@@ -108,7 +137,8 @@ Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, Discretizati
     }
     nodes_ = NodeSet(nodes.dim, std::move(coords));
     if (!basis_) basis_.emplace(nodes_, renumbered_gamma, std::move(renumbered_spacing), options_.lme);
-    point_lists_ = basis_->neighbour_lists(quadrature_.points);
+    point_lists_ = with_cell_vertices(basis_->neighbour_lists(quadrature_.points), cells_,
+                                      quadrature_.points_per_cell);
   }
 
   // Elements: cells (union of their points' lists) or single points.
