@@ -65,7 +65,7 @@ for shape in ("discocyte", "dumbbell"):
         df = f"{100 * (e - fine) / fine:+.3f} %" if fine else "-"
         if ref:
             worst_seed = max(worst_seed, abs(100 * (e - ref) / ref))
-        label = grid + (" (branch)" if st.get("branch") else "") + (" (not in the seed)" if gen > 3 else "")
+        label = grid + (" (branch)" if st.get("branch") else "")
         lines.append(f"| {st['stage']} | {label} | {st['h_min']:.4g} | {eps:g} | {e:.5f} | {ref or '-'} | {d} | {fine or '-'} | {df} | "
                      f"{100 * st['relative_error_sharp']:+.2f} % | {st['augmented_iterations']} + {st['newton_iterations']} | {st['wall_s']:.0f} |")
     lines += ["", f"Largest difference to the published adapted-grid energies: {worst_seed:.3f} %.", ""]

@@ -418,8 +418,7 @@ TEST(Scene, Demos) {
     EXPECT_EQ(s.final_eps(), 0.01);
     int relocations = 0;
     for (const auto& st : s.adaptivity->stages) relocations += st.lloyd_iterations > 0 ? 1 : 0;
-    // f = 10, 100, 1000 (Table B.6); the dumbbell adds P14 for eps = 0.01 (docs/results.md).
-    EXPECT_EQ(relocations, std::string(name) == "discocyte" ? 3 : 4);
+    EXPECT_EQ(relocations, 3);  // f = 10, 100, 1000
   }
 }
 
