@@ -6,26 +6,7 @@ lmeform=$1
 out=$2
 rm -rf "$out"
 mkdir -p "$out"
-cat > "$out/scene.toml" <<TOML
-[scene]
-name = "tiny"
-coordinates = "axisymmetric"
-[domain]
-lower = [0.0, 0.0]
-upper = [1.0, 1.2]
-[nodes]
-spacing = 0.06
-[initial]
-shape = "sphere"
-center = [0.0, 0.6]
-radius = 0.35
-[model]
-eps = 0.14
-[constraints]
-area = { radius = 0.35 }
-volume = { reduced_volume = 0.98 }
-[solver]
-augmented_tolerance = 1e-2
+cat "$(dirname "$0")/tiny_scene.toml" - > "$out/scene.toml" <<TOML
 [adaptivity]
 stages = [ { eps = 0.12, f = 10.0 } ]
 TOML
