@@ -323,14 +323,5 @@ TEST(Density, NodalValuesInterpolateLinearly) {
   EXPECT_NEAR(rho(x), 1.0 + 3.0 * (2.0 * 0.37 + 0.61), 1e-12);
 }
 
-TEST(Schedule, TableB6) {
-  const auto s = table_b6_schedule("O1");
-  ASSERT_EQ(s.size(), 3u);
-  EXPECT_EQ(s[2].grid, "O13");
-  EXPECT_EQ(s[2].f, 1000.0);
-  EXPECT_EQ(s[2].eps_phi, 0.025);
-  EXPECT_THROW((void)table_b6_schedule("O7"), std::invalid_argument);
-}
-
 }  // namespace
 }  // namespace lmeform

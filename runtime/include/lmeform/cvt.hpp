@@ -152,18 +152,4 @@ void check_resolution(double eps, double h_min, double factor = 2.0, std::string
 void check_resolution(double eps, const NodeSet& nodes, const SpacingOptions& options = {});
 void check_resolution(double eps, const SpacingSummary& spacing, double factor = 2.0, std::string_view what = {});
 
-// ---------------------------------------------------------------------------------------------
-// The progressive schedule of seed Table B.6: adapt the grid with a moderate f using the phase
-// field of the previous eps, then lower eps (f = 10, 100, 1000 in successive stages).
-
-struct ScheduleStage {
-  std::string grid;      ///< the adapted grid this stage produces (e.g. "O11")
-  double f = 0.0;        ///< amplification factor of rho = 1 + f |grad phi|
-  double eps_phi = 0.0;  ///< eps of the phase field Phi whose gradient drives the CVT
-};
-
-/// The stages of Table B.6 starting from the uniform grid `start` ("O1", "O2", "O3" or "P1").
-/// Throws std::invalid_argument for another name.
-[[nodiscard]] std::vector<ScheduleStage> table_b6_schedule(const std::string& start);
-
 }  // namespace lmeform

@@ -824,16 +824,4 @@ void check_resolution(double eps, const NodeSet& nodes, const SpacingOptions& op
   check_resolution(eps, spacing_summary(nodes, options));
 }
 
-// ---------------------------------------------------------------------------------------------
-// Table B.6
-
-std::vector<ScheduleStage> table_b6_schedule(const std::string& start) {
-  if (start == "O1") return {{"O11", 10.0, 0.04}, {"O12", 100.0, 0.03}, {"O13", 1000.0, 0.025}};
-  if (start == "O2") return {{"O21", 10.0, 0.03}, {"O22", 100.0, 0.025}, {"O23", 1000.0, 0.015}};
-  if (start == "O3") return {{"O31", 10.0, 0.03}, {"O32", 100.0, 0.015}};
-  if (start == "P1") return {{"P11", 10.0, 0.04}, {"P12", 100.0, 0.03}, {"P13", 1000.0, 0.025}};
-  throw std::invalid_argument("table_b6_schedule: no adapted grids start from '" + start +
-                              "' in Table B.6 (known: O1, O2, O3, P1)");
-}
-
 }  // namespace lmeform
