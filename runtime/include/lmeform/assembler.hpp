@@ -99,6 +99,8 @@ class Assembler {
   template <class PerElement>
   void element_loop(Vec u, bool owned_only, int order, PerElement&& per_element);
   void add_matrix_terms(Vec u, std::span<const MatrixTerm> terms, Mat out);
+  // out += scale * vector; with_value: also the value (summed over ranks), else 0.
+  double vector_pass(Vec u, Vec out, double scale, bool with_value);
   void gather_ghosted(Vec source, Vec ghosted);
 
   const Discretization* disc_;

@@ -291,33 +291,9 @@ double Assembler::value(Vec u) {
 }
 
 double Assembler::value_and_vector(Vec u, Vec out) {
-  if (form_->value == nullptr || form_->vector == nullptr) {
-    throw std::logic_error(describe() + ": value_and_vector needs both a value and a vector kernel");
-  }
-  const auto start = std::chrono::steady_clock::now();
-  const bool zero_communication = disc_->options().off_process == OffProcessMode::ZeroCommunication;
-  const int bs = form_->dofs_per_node;
+  if (form_->value == nullptr) throw std::logic_error(describe() + ": value_and_vector needs a value kernel");
   LMEFORM_PETSC_CHECK(VecZeroEntries(out));
-  LMEFORM_PETSC_CHECK(VecSetOption(out, VEC_IGNORE_OFF_PROC_ENTRIES, zero_communication ? PETSC_TRUE : PETSC_FALSE));
-  double local_sum = 0.0;
-  // One tabulation per element for both kernels; the value counts owned elements only.
-  element_loop(u, /*owned_only=*/!zero_communication, [&](int e, const kernel::CellInputs& in) {
-    if (disc_->element_owned(e)) local_sum += form_->value(in);
-    const auto nodes = disc_->element_nodes(e);
-    const std::size_t m = nodes.size() * static_cast<std::size_t>(bs);
-    std::fill_n(local_.begin(), m, 0.0);
-    form_->vector(in, local_.data());
-    for (std::size_t a = 0; a < nodes.size(); ++a) {
-      rows_[a] = (!zero_communication || disc_->owns(nodes[a])) ? nodes[a] : -1;
-    }
-    LMEFORM_PETSC_CHECK(VecSetValuesBlocked(out, static_cast<PetscInt>(nodes.size()), rows_.data(), local_.data(), ADD_VALUES));
-  });
-  LMEFORM_PETSC_CHECK(VecAssemblyBegin(out));
-  LMEFORM_PETSC_CHECK(VecAssemblyEnd(out));
-  double total = 0.0;
-  MPI_Allreduce(&local_sum, &total, 1, MPI_DOUBLE, MPI_SUM, disc_->comm());
-  times_.vector = seconds_since(start);
-  return total;
+  return vector_pass(u, out, 1.0, /*with_value=*/true);
 }
 
 void Assembler::vector(Vec u, Vec out) {
@@ -325,13 +301,18 @@ void Assembler::vector(Vec u, Vec out) {
   add_vector(u, out, 1.0);
 }
 
-void Assembler::add_vector(Vec u, Vec out, double scale) {
+void Assembler::add_vector(Vec u, Vec out, double scale) { (void)vector_pass(u, out, scale, /*with_value=*/false); }
+
+double Assembler::vector_pass(Vec u, Vec out, double scale, bool with_value) {
   if (form_->vector == nullptr) throw std::logic_error(describe() + ": has no vector kernel");
   const auto start = std::chrono::steady_clock::now();
   const bool zero_communication = disc_->options().off_process == OffProcessMode::ZeroCommunication;
   const int bs = form_->dofs_per_node;
   LMEFORM_PETSC_CHECK(VecSetOption(out, VEC_IGNORE_OFF_PROC_ENTRIES, zero_communication ? PETSC_TRUE : PETSC_FALSE));
+  double local_sum = 0.0;
+  // One tabulation per element for both kernels; the value counts owned elements only.
   element_loop(u, /*owned_only=*/!zero_communication, [&](int e, const kernel::CellInputs& in) {
+    if (with_value && disc_->element_owned(e)) local_sum += form_->value(in);
     const auto nodes = disc_->element_nodes(e);
     const std::size_t m = nodes.size() * static_cast<std::size_t>(bs);
     std::fill_n(local_.begin(), m, 0.0);
@@ -347,7 +328,10 @@ void Assembler::add_vector(Vec u, Vec out, double scale) {
   });
   LMEFORM_PETSC_CHECK(VecAssemblyBegin(out));
   LMEFORM_PETSC_CHECK(VecAssemblyEnd(out));
+  double total = 0.0;
+  if (with_value) MPI_Allreduce(&local_sum, &total, 1, MPI_DOUBLE, MPI_SUM, disc_->comm());
   times_.vector = seconds_since(start);
+  return total;
 }
 
 void Assembler::matrix(Vec u, Mat out) {
