@@ -12,6 +12,8 @@ find_package(GTest REQUIRED)
 find_package(benchmark CONFIG)                      # optional: Google Benchmark
 find_package(tomlplusplus CONFIG)                   # scenes (TOML)
 find_package(CLI11 CONFIG)                          # command lines
+find_package(nlohmann_json 3 REQUIRED CONFIG)       # every JSON writer and reader
+find_package(fmt REQUIRED CONFIG)                   # message formatting
 
 # MPI: the C bindings only (MPI::MPI_CXX drags in the deprecated C++ bindings).
 find_package(MPI REQUIRED COMPONENTS C)

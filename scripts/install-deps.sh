@@ -9,7 +9,7 @@ packages=(
   libhdf5-openmpi-dev libopenmpi-dev openmpi-bin
   libnanoflann-dev libqhull-dev
   libgtest-dev libgmock-dev libbenchmark-dev
-  libtomlplusplus-dev libcli11-dev
+  libtomlplusplus-dev libcli11-dev nlohmann-json3-dev libfmt-dev
   python3-matplotlib python3-numpy python3-h5py
   # An optimized BLAS/LAPACK behind libblas.so.3 (Debian alternatives): MUMPS factorizes with it.
   # Serial flavour: ranks are the parallelism; threads would oversubscribe the cores.

@@ -1,8 +1,11 @@
 #include "lmeform/compiler/ir.hpp"
 
+#include <algorithm>
 #include <bit>
 #include <cmath>
+#include <functional>
 #include <sstream>
+#include <unordered_set>
 
 namespace lmeform::compiler::ir {
 
@@ -215,9 +218,56 @@ std::vector<NodeId> Graph::reachable(std::span<const NodeId> roots) const {
   return out;
 }
 
-NodeId Differentiator::derivative(NodeId id) {
-  if (auto it = memo_.find(id); it != memo_.end()) return it->second;
-  const Node n = g_.node(id);  // copy: the graph grows below
+namespace {
+
+/// The children whose derivatives the rule of node n needs (Sign, comparisons and logic are
+/// piecewise constant, a Select's condition is not differentiated, a constant exponent neither).
+int differentiated_children(const Graph& g, const Node& n, NodeId (&out)[2]) {
+  switch (n.op) {
+    case Op::Add: case Op::Mul: case Op::Div: out[0] = n.arg[0]; out[1] = n.arg[1]; return 2;
+    case Op::Pow:
+      out[0] = n.arg[0];
+      if (g.is_const(n.arg[1])) return 1;
+      out[1] = n.arg[1];
+      return 2;
+    case Op::Neg: case Op::Sqrt: case Op::Exp: case Op::Log: case Op::Sin: case Op::Cos: case Op::Tanh:
+    case Op::Abs: out[0] = n.arg[0]; return 1;
+    case Op::Select: out[0] = n.arg[1]; out[1] = n.arg[2]; return 2;
+    default: return 0;
+  }
+}
+
+}  // namespace
+
+// Post-order over an explicit stack rather than recursion: a sum of thousands of terms is a chain
+// that deep, and every node's derivative needs its children's first.
+NodeId Differentiator::derivative(NodeId root) {
+  if (auto it = memo_.find(root); it != memo_.end()) return it->second;
+  std::vector<NodeId> stack{root};
+  while (!stack.empty()) {
+    const NodeId id = stack.back();
+    if (memo_.count(id)) {
+      stack.pop_back();
+      continue;
+    }
+    const Node n = g_.node(id);  // copy: the graph grows below
+    NodeId children[2] = {-1, -1};
+    const int n_children = differentiated_children(g_, n, children);
+    bool ready = true;
+    for (int k = n_children - 1; k >= 0; --k)  // pushed last-first: the first child is done first
+      if (!memo_.count(children[k])) {
+        stack.push_back(children[k]);
+        ready = false;
+      }
+    if (!ready) continue;
+    stack.pop_back();
+    memo_.emplace(id, apply_rule(id, n));
+  }
+  return memo_.at(root);
+}
+
+NodeId Differentiator::apply_rule(NodeId id, const Node& n) {
+  const auto D = [&](NodeId child) { return memo_.at(child); };
   const Loc saved = g_.current_origin();
   g_.set_origin(g_.origin(id));
   NodeId d = g_.zero();
@@ -225,37 +275,96 @@ NodeId Differentiator::derivative(NodeId id) {
   switch (n.op) {
     case Op::Const: d = g_.zero(); break;
     case Op::Jet: case Op::Coord: case Op::Param: case Op::Qdata: d = rule_(g_, id); break;
-    case Op::Add: d = g_.add(derivative(a), derivative(b)); break;
-    case Op::Mul: d = g_.add(g_.mul(derivative(a), b), g_.mul(a, derivative(b))); break;
-    case Op::Neg: d = g_.neg(derivative(a)); break;
-    case Op::Div: {  // (a/b)' = (a' - (a/b) b') / b
-      const NodeId db = derivative(b);
-      d = g_.div(g_.sub(derivative(a), g_.mul(id, db)), b);
-      break;
-    }
-    case Op::Pow: {
-      const NodeId da = derivative(a);
+    case Op::Add: d = g_.add(D(a), D(b)); break;
+    case Op::Mul: d = g_.add(g_.mul(D(a), b), g_.mul(a, D(b))); break;
+    case Op::Neg: d = g_.neg(D(a)); break;
+    case Op::Div: d = g_.div(g_.sub(D(a), g_.mul(id, D(b))), b); break;  // (a/b)' = (a' - (a/b) b') / b
+    case Op::Pow:
       if (g_.is_const(b)) {
         const double p = g_.node(b).value;
-        d = g_.mul(g_.mul(b, g_.pow(a, g_.constant(p - 1.0))), da);
+        d = g_.mul(g_.mul(b, g_.pow(a, g_.constant(p - 1.0))), D(a));
       } else {  // (a^b)' = a^b (b' log a + b a'/a)
-        d = g_.mul(id, g_.add(g_.mul(derivative(b), g_.unary(Op::Log, a)), g_.div(g_.mul(b, da), a)));
+        d = g_.mul(id, g_.add(g_.mul(D(b), g_.unary(Op::Log, a)), g_.div(g_.mul(b, D(a)), a)));
       }
       break;
-    }
-    case Op::Sqrt: d = g_.div(derivative(a), g_.mul(g_.constant(2.0), id)); break;
-    case Op::Exp: d = g_.mul(id, derivative(a)); break;
-    case Op::Log: d = g_.div(derivative(a), a); break;
-    case Op::Sin: d = g_.mul(g_.unary(Op::Cos, a), derivative(a)); break;
-    case Op::Cos: d = g_.neg(g_.mul(g_.unary(Op::Sin, a), derivative(a))); break;
-    case Op::Tanh: d = g_.mul(g_.sub(g_.one(), g_.mul(id, id)), derivative(a)); break;
-    case Op::Abs: d = g_.mul(g_.unary(Op::Sign, a), derivative(a)); break;
-    case Op::Select: d = g_.select(a, derivative(b), derivative(n.arg[2])); break;
+    case Op::Sqrt: d = g_.div(D(a), g_.mul(g_.constant(2.0), id)); break;
+    case Op::Exp: d = g_.mul(id, D(a)); break;
+    case Op::Log: d = g_.div(D(a), a); break;
+    case Op::Sin: d = g_.mul(g_.unary(Op::Cos, a), D(a)); break;
+    case Op::Cos: d = g_.neg(g_.mul(g_.unary(Op::Sin, a), D(a))); break;
+    case Op::Tanh: d = g_.mul(g_.sub(g_.one(), g_.mul(id, id)), D(a)); break;
+    case Op::Abs: d = g_.mul(g_.unary(Op::Sign, a), D(a)); break;
+    case Op::Select: d = g_.select(a, D(b), D(n.arg[2])); break;
     default: d = g_.zero(); break;  // Sign, comparisons and logic are piecewise constant
   }
   g_.set_origin(saved);
-  memo_.emplace(id, d);
   return d;
+}
+
+std::vector<std::pair<std::size_t, NodeId>> gradient(Graph& g, NodeId f, std::span<const NodeId> wrt) {
+  // The nodes f depends on, by a walk that touches only them (f may be a small part of a large
+  // graph: one row of a Hessian), then visited from f down, in decreasing (reverse topological) id.
+  std::unordered_set<NodeId> cone{f};
+  std::vector<NodeId> pending{f};
+  while (!pending.empty()) {
+    const Node& n = g.node(pending.back());
+    pending.pop_back();
+    if (is_terminal(n.op)) continue;
+    for (NodeId child : n.arg)
+      if (child >= 0 && cone.insert(child).second) pending.push_back(child);
+  }
+  std::vector<NodeId> order(cone.begin(), cone.end());
+  std::sort(order.begin(), order.end(), std::greater<>());
+
+  std::unordered_map<NodeId, NodeId> adjoint{{f, g.one()}};  // ∂f/∂node, accumulated over its uses
+  const auto accumulate = [&](NodeId node, NodeId contribution) {
+    if (g.is_const(contribution, 0.0)) return;
+    auto [it, fresh] = adjoint.try_emplace(node, contribution);
+    if (!fresh) it->second = g.add(it->second, contribution);
+  };
+  const Loc saved = g.current_origin();
+  for (NodeId id : order) {
+    const auto found = adjoint.find(id);
+    if (found == adjoint.end()) continue;
+    const NodeId bar = found->second;
+    const Node n = g.node(id);  // copy: the graph grows below
+    const NodeId a = n.arg[0], b = n.arg[1];
+    g.set_origin(g.origin(id));
+    switch (n.op) {
+      case Op::Add: accumulate(a, bar); accumulate(b, bar); break;
+      case Op::Mul: accumulate(a, g.mul(bar, b)); accumulate(b, g.mul(bar, a)); break;
+      case Op::Neg: accumulate(a, g.neg(bar)); break;
+      case Op::Div:  // d(a/b) = da/b - (a/b) db/b
+        accumulate(a, g.div(bar, b));
+        accumulate(b, g.neg(g.div(g.mul(bar, id), b)));
+        break;
+      case Op::Pow:
+        if (g.is_const(b)) {
+          accumulate(a, g.mul(bar, g.mul(b, g.pow(a, g.constant(g.node(b).value - 1.0)))));
+        } else {  // d(a^b) = a^b (b/a da + log a db)
+          accumulate(a, g.mul(bar, g.div(g.mul(b, id), a)));
+          accumulate(b, g.mul(bar, g.mul(id, g.unary(Op::Log, a))));
+        }
+        break;
+      case Op::Sqrt: accumulate(a, g.div(bar, g.mul(g.constant(2.0), id))); break;
+      case Op::Exp: accumulate(a, g.mul(bar, id)); break;
+      case Op::Log: accumulate(a, g.div(bar, a)); break;
+      case Op::Sin: accumulate(a, g.mul(bar, g.unary(Op::Cos, a))); break;
+      case Op::Cos: accumulate(a, g.neg(g.mul(bar, g.unary(Op::Sin, a)))); break;
+      case Op::Tanh: accumulate(a, g.mul(bar, g.sub(g.one(), g.mul(id, id)))); break;
+      case Op::Abs: accumulate(a, g.mul(bar, g.unary(Op::Sign, a))); break;
+      case Op::Select:
+        accumulate(n.arg[1], g.select(a, bar, g.zero()));
+        accumulate(n.arg[2], g.select(a, g.zero(), bar));
+        break;
+      default: break;  // terminals; Sign, comparisons and logic are piecewise constant
+    }
+  }
+  g.set_origin(saved);
+  std::vector<std::pair<std::size_t, NodeId>> result;
+  for (std::size_t i = 0; i < wrt.size(); ++i)
+    if (const auto it = adjoint.find(wrt[i]); it != adjoint.end()) result.emplace_back(i, it->second);
+  return result;
 }
 
 std::vector<double> Interpreter::evaluate(std::span<const NodeId> roots,
@@ -318,7 +427,9 @@ std::string describe(const Graph& g, NodeId id, const std::function<std::string(
     const Node& m = g.node(c);
     if (m.op == Op::Const) { std::ostringstream s; s.precision(17); s << m.value; return s.str(); }
     if (is_terminal(m.op)) return name(c);
-    return "t" + std::to_string(c);
+    std::string r = "t";  // appended separately: `"t" + string` trips GCC 12's -Wrestrict false positive
+    r += std::to_string(c);
+    return r;
   };
   std::ostringstream s;
   s << "t" << id << " = ";

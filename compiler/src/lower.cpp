@@ -64,7 +64,10 @@ std::string shape_name(const Value& v) {
   std::string s = v.rank() < 6 ? names[v.rank()] : "tensor";
   if (v.scalar()) return s;
   s += "[";
-  for (int i = 0; i < v.rank(); ++i) s += (i ? "x" : "") + std::to_string(v.shape[static_cast<std::size_t>(i)]);
+  for (int i = 0; i < v.rank(); ++i) {
+    if (i > 0) s += 'x';  // appended separately: `"x" + string` trips GCC 12's -Wrestrict false positive
+    s += std::to_string(v.shape[static_cast<std::size_t>(i)]);
+  }
   return s + "]";
 }
 
@@ -77,6 +80,7 @@ struct Symbol {
   Loc loc;
   Value value;              // Field/Constant/Qdata/Coordinate/Let/Measure
   const Stmt* def = nullptr;  // Def
+  int order = 0;            ///< declaration sequence number: a def body sees only smaller ones
 };
 
 const std::vector<std::pair<std::string, int>>& builtin_functions() {
@@ -93,6 +97,11 @@ int builtin_arity(const std::string& name) {
   return -1;
 }
 bool is_builtin_value(const std::string& n) { return n == "pi" || n == "identity" || n == "I" || n == "dx"; }
+/// Builtins that a declaration may hide: short names that forms already use for their own things
+/// (`let e = sym(grad(u))`), so reserving them would break such forms.
+bool is_predefined(const std::string& n) { return n == "e" || n == "dim"; }
+
+constexpr const char* kDefScopeRule = "a def body may use only its parameters and names declared before the def";
 
 class Lowering {
  public:
@@ -100,6 +109,17 @@ class Lowering {
       : form_(form), dim_(dim), stmts_(statements) {
     form_.graphs[dim] = std::make_shared<ir::Graph>();
     g_ = form_.graphs[dim].get();
+    // Declarations are looked up by name once per declared item: maps keep that linear in the
+    // number of declarations (forms with thousands of unknowns exist).
+    std::map<ir::Role, int> count_of_role;
+    for (const FieldDecl& f : form_.fields) field_of_name_.emplace(f.name, FieldRef{&f, count_of_role[f.role]++});
+    for (std::size_t i = 0; i < form_.constants.size(); ++i) constant_index_.emplace(form_.constants[i].name, static_cast<int>(i));
+    int offset = 0;
+    for (std::size_t i = 0; i < form_.qdata.size(); ++i) {
+      qdata_index_.emplace(form_.qdata[i].name, static_cast<int>(i));
+      qdata_offset_.push_back(offset);
+      offset += form_.qdata[i].size(dim_);
+    }
   }
 
   void run() {
@@ -112,9 +132,25 @@ class Lowering {
   const std::vector<const Stmt*>& stmts_;
   ir::Graph* g_ = nullptr;
   std::map<std::string, Symbol> globals_;
-  std::vector<std::map<std::string, Value>> locals_;  // def parameters, innermost last
+  int declared_ = 0;  ///< number of globals declared so far (the next Symbol::order)
+  /// The def bodies being lowered, innermost last: their parameters, and the def itself (whose
+  /// declaration order bounds the globals its body may see).
+  struct DefScope {
+    std::map<std::string, Value> params;
+    const Symbol* def = nullptr;
+  };
+  std::vector<DefScope> scopes_;
   std::vector<std::unique_ptr<ir::Differentiator>> spatial_;
   int def_depth_ = 0;
+  int expr_depth_ = 0;  ///< current recursion depth of expr()
+  struct FieldRef {
+    const FieldDecl* decl;
+    int index_in_role;
+  };
+  std::map<std::string, FieldRef> field_of_name_;  ///< first declaration of each name
+  std::map<std::string, int> constant_index_;
+  std::map<std::string, int> qdata_index_;
+  std::vector<int> qdata_offset_;  ///< per qdata, at this dimension
 
   [[noreturn]] void fail(const Loc& loc, const std::string& msg) const { fail_at(form_.sources, loc, msg); }
 
@@ -127,6 +163,7 @@ class Lowering {
     if (auto it = globals_.find(name); it != globals_.end())
       fail(loc, "'" + name + "' is already declared at " + form_.sources.where(it->second.loc));
     sym.loc = loc;
+    sym.order = declared_++;
     globals_.emplace(name, std::move(sym));
   }
 
@@ -146,25 +183,15 @@ class Lowering {
         for (const auto& item : s.items) {
           Symbol sym{SymKind::Field, item.loc, {}, nullptr};
           if (s.keyword == "qdata") {
-            int idx = -1;
-            for (std::size_t i = 0; i < form_.qdata.size(); ++i)
-              if (form_.qdata[i].name == item.name && form_.qdata[i].loc.offset == item.loc.offset) idx = static_cast<int>(i);
+            const int idx = qdata_index_.at(item.name);
             const auto& q = form_.qdata[static_cast<std::size_t>(idx)];
             sym.kind = SymKind::Qdata;
-            const int off = form_.qdata_offset(idx, dim_);
+            const int off = qdata_offset_[static_cast<std::size_t>(idx)];
             for (int r = 0; r < q.rank; ++r) sym.value.shape.push_back(dim_);
             for (int i = 0; i < q.size(dim_); ++i) sym.value.c.push_back(g_->qdata(off + i));
           } else {
-            const FieldDecl* f = nullptr;
-            int index = 0;
-            for (const auto& fd : form_.fields) {
-              if (fd.name == item.name) { f = &fd; break; }
-            }
-            for (const auto* fd : form_.fields_of(f->role)) {
-              if (fd == f) break;
-              ++index;
-            }
-            sym.value = field_value(f->role, index, f->is_vector);
+            const FieldRef& f = field_of_name_.at(item.name);
+            sym.value = field_value(f.decl->role, f.index_in_role, f.decl->is_vector);
           }
           declare(item.name, item.loc, std::move(sym));
         }
@@ -172,8 +199,7 @@ class Lowering {
       }
       case StmtKind::Constant: {
         for (const auto& item : s.items) {
-          int idx = 0;
-          while (form_.constants[static_cast<std::size_t>(idx)].name != item.name) ++idx;
+          const int idx = constant_index_.at(item.name);
           if (item.value) {
             const Value v = expr(*item.value);
             if (!v.scalar() || v.measure || v.condition || !g_->is_const(v.c[0]))
@@ -247,6 +273,79 @@ class Lowering {
         if (has_u || has_w) fail(s.body->loc, what + " must not depend on unknowns or trial functions");
         break;
     }
+    if (out.kind == OutputKind::Residual || out.kind == OutputKind::Linear || out.kind == OutputKind::Bilinear)
+      require_linear(v.c[0], ir::Role::Test, what, "test");
+    if (out.kind == OutputKind::Bilinear) require_linear(v.c[0], ir::Role::Trial, what, "trial");
+  }
+
+  /// Fails, pointing at the offending term, unless the integrand f is linear in the fields of
+  /// `role`: checked here, where the nodes still know the source they came from.
+  void require_linear(NodeId f, ir::Role role, const std::string& what, const std::string& role_word) const {
+    const NodeId term = first_nonlinear_node(f, role);
+    if (term < 0) return;
+    std::string field;
+    const NodeId roots[] = {term};
+    for (NodeId id : g_->reachable(roots))
+      if (g_->node(id).op == Op::Jet && g_->jet_var(id).role == role) {
+        field = form_.field(role, g_->jet_var(id).field).name;
+        break;
+      }
+    fail(term_start(g_->origin(term)), what + " is not linear in the " + role_word + " function '" + field + "'");
+  }
+
+  /// The innermost node of f that is non-linear in the fields of `role` although its operands are
+  /// at most linear in them (v*v, sin(v), 1/v, a comparison of v, ...), or -1 if f is linear.
+  /// A polynomial degree per node, capped at 2 (= not linear), in increasing (topological) order.
+  NodeId first_nonlinear_node(NodeId f, ir::Role role) const {
+    constexpr unsigned char kConstant = 0, kLinear = 1, kNonlinear = 2;
+    std::vector<unsigned char> degree(g_->size(), kConstant);
+    const NodeId roots[] = {f};
+    for (NodeId id : g_->reachable(roots)) {
+      const ir::Node& n = g_->node(id);
+      const auto deg = [&](int k) { return degree[static_cast<std::size_t>(n.arg[static_cast<std::size_t>(k)])]; };
+      unsigned char d = kConstant;
+      unsigned char operands = kConstant;  // the highest degree among the operands
+      switch (n.op) {
+        case Op::Const: case Op::Coord: case Op::Param: case Op::Qdata: break;
+        case Op::Jet: d = g_->jet_var(id).role == role ? kLinear : kConstant; break;
+        case Op::Add: operands = std::max(deg(0), deg(1)); d = operands; break;
+        case Op::Neg: operands = deg(0); d = operands; break;
+        case Op::Mul:
+          operands = std::max(deg(0), deg(1));
+          d = static_cast<unsigned char>(std::min<int>(kNonlinear, deg(0) + deg(1)));
+          break;
+        case Op::Div: operands = std::max(deg(0), deg(1)); d = deg(1) == kConstant ? deg(0) : kNonlinear; break;
+        case Op::Select:
+          operands = std::max({deg(0), deg(1), deg(2)});
+          d = deg(0) == kConstant ? std::max(deg(1), deg(2)) : kNonlinear;
+          break;
+        default: {  // functions, powers, comparisons, logic: non-linear in anything they depend on
+          for (int k = 0; k < 4 && n.arg[static_cast<std::size_t>(k)] >= 0; ++k) operands = std::max(operands, deg(k));
+          d = operands == kConstant ? kConstant : kNonlinear;
+        }
+      }
+      degree[static_cast<std::size_t>(id)] = d;
+      if (d == kNonlinear && operands < kNonlinear) return id;
+    }
+    return -1;
+  }
+
+  /// Where the sub-expression that created a node starts. Nodes record the location of their
+  /// operator or name (Expr::loc); a diagnostic about a whole term points at its beginning.
+  Loc term_start(const Loc& origin) const {
+    std::vector<const Expr*> pending;
+    for (const Stmt* s : stmts_) {
+      if (s->body) pending.push_back(s->body.get());
+      for (const auto& item : s->items)
+        if (item.value) pending.push_back(item.value.get());
+    }
+    while (!pending.empty()) {
+      const Expr* e = pending.back();
+      pending.pop_back();
+      if (e->loc.file == origin.file && e->loc.offset == origin.offset) return e->begin;
+      for (const auto& a : e->args) pending.push_back(a.get());
+    }
+    return origin;
   }
 
   std::set<ir::Role> used_roles(NodeId root) const {
@@ -260,12 +359,27 @@ class Lowering {
   // ---- expressions --------------------------------------------------------------------------
   std::vector<std::string> visible_names() const {
     std::vector<std::string> names;
-    for (const auto& [n, s] : globals_) names.push_back(n);
-    if (!locals_.empty())
-      for (const auto& [n, v] : locals_.back()) names.push_back(n);
+    for (const auto& [n, s] : globals_)
+      if (scopes_.empty() || s.order < scopes_.back().def->order) names.push_back(n);
+    if (!scopes_.empty())
+      for (const auto& [n, v] : scopes_.back().params) names.push_back(n);
     for (const auto& [n, a] : builtin_functions()) names.push_back(n);
-    for (const char* n : {"pi", "identity", "I", "dx"}) names.push_back(n);
+    for (const char* n : {"pi", "identity", "I", "dx", "e", "dim"}) names.push_back(n);
     return names;
+  }
+
+  /// The global `name` as seen from where it is used (nullptr: not declared, or a predefined name
+  /// whose builtin meaning applies). Inside a def body only names declared before the def count;
+  /// using a later one is an error rather than silently binding whatever the caller sees.
+  const Symbol* global(const std::string& name, const Loc& use) const {
+    const auto it = globals_.find(name);
+    if (it == globals_.end()) return nullptr;
+    if (scopes_.empty() || it->second.order < scopes_.back().def->order) return &it->second;
+    if (is_predefined(name)) return nullptr;
+    const Symbol& def = *scopes_.back().def;
+    if (&it->second == &def) fail(use, "def '" + name + "' cannot call itself: " + kDefScopeRule);
+    fail(use, "'" + name + "' is declared at " + form_.sources.where(it->second.loc) + ", after def '" + def.def->name +
+                  "' (" + form_.sources.where(def.loc) + "): " + kDefScopeRule);
   }
 
   [[noreturn]] void unknown_name(const Loc& loc, const std::string& name) const {
@@ -276,10 +390,17 @@ class Lowering {
   }
 
   Value expr(const Expr& e) {
+    // Lowering recurses once per level of the expression tree, def bodies included: the parser
+    // bounds the nesting of one expression, this bounds what def calls stack on top of it.
+    constexpr int kMaxDepth = 512;
+    if (expr_depth_ >= kMaxDepth)
+      fail(e.begin, "expression nested too deeply once def calls are inlined: more than " + std::to_string(kMaxDepth) + " levels");
+    ++expr_depth_;
     const Loc saved = g_->current_origin();
     if (def_depth_ == 0) g_->set_origin(e.loc);
     Value v = expr_impl(e);
     g_->set_origin(saved);
+    --expr_depth_;
     return v;
   }
 
@@ -301,11 +422,7 @@ class Lowering {
         return a;
       }
       case ExprKind::Binary: return binary(e);
-      case ExprKind::If: {
-        const Value c = expr(*e.args[0]);
-        if (!c.condition) fail(e.args[0]->loc, "the condition of 'if' must be a comparison; found " + shape_name(c));
-        return select(c, expr(*e.args[1]), expr(*e.args[2]), e.loc);
-      }
+      case ExprKind::If: return conditional(*e.args[0], *e.args[1], *e.args[2], e.loc, "the condition of 'if'");
     }
     fail(e.loc, "internal: unhandled expression");
   }
@@ -324,6 +441,15 @@ class Lowering {
     if (v.measure) fail(loc, what + " cannot be applied to a measure");
   }
 
+  /// `if c then a else b` and cond(c, a, b). A condition known at compile time (`dim == 3`) picks
+  /// its branch before the other is lowered, so that the other may be invalid in this dimension.
+  Value conditional(const Expr& cond, const Expr& a, const Expr& b, const Loc& loc, const std::string& what) {
+    const Value c = expr(cond);
+    if (!c.condition) fail(cond.loc, what + " must be a comparison; found " + shape_name(c));
+    if (g_->is_const(c.c[0])) return expr(g_->node(c.c[0]).value != 0.0 ? a : b);
+    return select(c, expr(a), expr(b), loc);
+  }
+
   Value select(const Value& c, const Value& a, const Value& b, const Loc& loc) {
     if (a.shape != b.shape || a.measure != b.measure || a.condition || b.condition)
       fail(loc, "the branches of a conditional must have the same shape; found " + shape_name(a) + " and " + shape_name(b));
@@ -333,23 +459,44 @@ class Lowering {
   }
 
   Value name(const Expr& e) {
-    if (!locals_.empty()) {
-      if (auto it = locals_.back().find(e.name); it != locals_.back().end()) return it->second;
+    if (!scopes_.empty()) {
+      const auto& params = scopes_.back().params;
+      if (auto it = params.find(e.name); it != params.end()) return it->second;
     }
-    if (auto it = globals_.find(e.name); it != globals_.end()) {
-      if (it->second.kind == SymKind::Def)
+    if (const Symbol* sym = global(e.name, e.loc)) {
+      if (sym->kind == SymKind::Def)
         fail(e.loc, "'" + e.name + "' is a function; call it with arguments: " + e.name + "(...)");
-      return it->second.value;
+      return sym->value;
     }
     if (e.name == "pi") return scalar(g_->constant(std::numbers::pi));
+    if (e.name == "dim") return scalar(g_->constant(dim_));
     if (e.name == "identity" || e.name == "I") return identity();
     if (e.name == "dx") {
       Value v = scalar(g_->one());
       v.measure = true;
       return v;
     }
-    if (builtin_arity(e.name) >= 0) fail(e.loc, "'" + e.name + "' is a function; call it with arguments: " + e.name + "(...)");
+    if (builtin_arity(e.name) >= 0 || e.name == "e")
+      fail(e.loc, "'" + e.name + "' is a function; call it with arguments: " + e.name + "(...)");
     unknown_name(e.loc, e.name);
+  }
+
+  /// e(i): the i-th Cartesian unit vector of the current dimension.
+  Value unit_vector(const Expr& e) {
+    if (e.args.size() != 1) fail(e.loc, "function 'e' takes 1 argument, got " + std::to_string(e.args.size()));
+    const Expr& arg = *e.args[0];
+    const Value iv = expr(arg);
+    if (!iv.scalar() || iv.measure || iv.condition || !g_->is_const(iv.c[0]) ||
+        g_->node(iv.c[0]).value != std::floor(g_->node(iv.c[0]).value))
+      fail(arg.begin, "the argument of e() must be an integer constant expression (such as 0, 1 or dim - 1)");
+    const double i = g_->node(iv.c[0]).value;
+    if (i < 0 || i >= dim_)
+      fail(arg.begin, "unit vector e(" + std::to_string(static_cast<long long>(i)) + ") does not exist in dimension " +
+                          std::to_string(dim_) + " (e(0) to e(" + std::to_string(dim_ - 1) + "))");
+    Value v;
+    v.shape = {dim_};
+    for (int k = 0; k < dim_; ++k) v.c.push_back(k == static_cast<int>(i) ? g_->one() : g_->zero());
+    return v;
   }
 
   Value identity() const {
@@ -364,8 +511,8 @@ class Lowering {
     std::vector<Value> items;
     for (const auto& a : e.args) items.push_back(expr(*a));
     Value r;
-    r.shape = items[0].shape;
-    r.shape.insert(r.shape.begin(), static_cast<int>(items.size()));
+    r.shape.push_back(static_cast<int>(items.size()));
+    r.shape.insert(r.shape.end(), items[0].shape.begin(), items[0].shape.end());
     for (std::size_t i = 0; i < items.size(); ++i) {
       plain(items[i], e.args[i]->loc, "a list literal");
       if (items[i].shape != items[0].shape)
@@ -404,9 +551,25 @@ class Lowering {
   }
 
   Value binary(const Expr& e) {
+    // a + b - c + ... is a left spine of Binary nodes as long as the chain: walk it with a loop,
+    // so that a sum of thousands of terms does not recurse once per term.
+    std::vector<const Expr*> spine;
+    for (const Expr* p = &e; p->kind == ExprKind::Binary; p = p->args[0].get()) spine.push_back(p);
+    Value acc = expr(*spine.back()->args[0]);
+    const Loc saved = g_->current_origin();
+    for (auto it = spine.rbegin(); it != spine.rend(); ++it) {
+      const Expr& op = **it;
+      Value rhs = expr(*op.args[1]);
+      if (def_depth_ == 0) g_->set_origin(op.loc);
+      acc = combine(op, std::move(acc), std::move(rhs));
+    }
+    g_->set_origin(saved);
+    return acc;
+  }
+
+  /// One binary operator applied to its lowered operands.
+  Value combine(const Expr& e, Value a, Value b) {
     const std::string& op = e.name;
-    Value a = expr(*e.args[0]);
-    Value b = expr(*e.args[1]);
     if (op == "and" || op == "or") {
       if (!a.condition || !b.condition)
         fail(e.loc, "'" + op + "' combines conditions (comparisons); found " + shape_name(a) + " and " + shape_name(b));
@@ -537,17 +700,19 @@ class Lowering {
 
   // ---- calls --------------------------------------------------------------------------------
   Value call(const Expr& e) {
-    if (auto it = globals_.find(e.name); it != globals_.end()) {
-      if (it->second.kind != SymKind::Def)
-        fail(e.loc, "'" + e.name + "' is not a function (declared at " + form_.sources.where(it->second.loc) + ")");
-      return call_def(e, *it->second.def);
+    if (const Symbol* sym = global(e.name, e.loc)) {
+      if (sym->kind != SymKind::Def)
+        fail(e.loc, "'" + e.name + "' is not a function (declared at " + form_.sources.where(sym->loc) + ")");
+      return call_def(e, *sym);
     }
+    if (e.name == "e") return unit_vector(e);
     const int arity = builtin_arity(e.name);
     if (arity < 0) {
       std::vector<std::string> fns;
       for (const auto& [n, s] : globals_)
-        if (s.kind == SymKind::Def) fns.push_back(n);
+        if (s.kind == SymKind::Def && (scopes_.empty() || s.order < scopes_.back().def->order)) fns.push_back(n);
       for (const auto& [n, a] : builtin_functions()) fns.push_back(n);
+      fns.push_back("e");
       std::string msg = "unknown function '" + e.name + "'";
       const std::string best = closest_name(e.name, fns);
       if (!best.empty()) msg += "; did you mean '" + best + "'?";
@@ -556,14 +721,11 @@ class Lowering {
     if (static_cast<int>(e.args.size()) != arity)
       fail(e.loc, "function '" + e.name + "' takes " + std::to_string(arity) + " argument" + (arity == 1 ? "" : "s") +
                       ", got " + std::to_string(e.args.size()));
+    const std::string& f = e.name;
+    if (f == "cond") return conditional(*e.args[0], *e.args[1], *e.args[2], e.loc, "the first argument of cond()");
     std::vector<Value> a;
     for (const auto& x : e.args) a.push_back(expr(*x));
-    const std::string& f = e.name;
     const Loc& l0 = e.args[0]->loc;
-    if (f == "cond") {
-      if (!a[0].condition) fail(l0, "the first argument of cond() must be a comparison; found " + shape_name(a[0]));
-      return select(a[0], a[1], a[2], e.loc);
-    }
     for (std::size_t i = 0; i < a.size(); ++i) plain(a[i], e.args[i]->loc, "function '" + f + "'");
     if (f == "grad") return gradient(a[0], e.loc, "grad");
     if (f == "hess") return gradient(gradient(a[0], e.loc, "hess"), e.loc, "hess");
@@ -679,19 +841,25 @@ class Lowering {
     return r;
   }
 
-  Value call_def(const Expr& e, const Stmt& def) {
+  Value call_def(const Expr& e, const Symbol& sym) {
+    const Stmt& def = *sym.def;
     if (e.args.size() != def.params.size())
       fail(e.loc, "function '" + def.name + "' (defined at " + form_.sources.where(def.name_loc) + ") takes " +
                       std::to_string(def.params.size()) + " argument" + (def.params.size() == 1 ? "" : "s") + ", got " +
                       std::to_string(e.args.size()));
-    if (def_depth_ > 64) fail(e.loc, "function calls nested too deeply (recursive definition of '" + def.name + "'?)");
-    std::map<std::string, Value> scope;
-    for (std::size_t i = 0; i < e.args.size(); ++i) scope[def.params[i]] = expr(*e.args[i]);
-    locals_.push_back(std::move(scope));
+    // A def can only call earlier defs, so calls nest at most as deep as there are defs; the bound
+    // keeps the lowering recursion (a few frames per level) far from the stack limit.
+    constexpr int kMaxDefNesting = 64;
+    if (def_depth_ >= kMaxDefNesting)
+      fail(e.loc, "def calls nested more than " + std::to_string(kMaxDefNesting) + " deep (calling '" + def.name + "')");
+    DefScope scope;
+    scope.def = &sym;
+    for (std::size_t i = 0; i < e.args.size(); ++i) scope.params[def.params[i]] = expr(*e.args[i]);
+    scopes_.push_back(std::move(scope));
     ++def_depth_;
     Value r = expr(*def.body);
     --def_depth_;
-    locals_.pop_back();
+    scopes_.pop_back();
     return r;
   }
 };
@@ -718,8 +886,20 @@ void expand(CompiledForm& form, int file, const CompileOptions& options, std::ve
     candidates.push_back(form.sources.file(file).path.parent_path() / s.path);
     for (const auto& d : options.include_dirs) candidates.push_back(d / s.path);
     std::filesystem::path found;
-    for (const auto& c : candidates)
-      if (std::filesystem::is_regular_file(c)) { found = c; break; }
+    std::size_t not_regular = candidates.size();  // the first candidate that exists but is no regular file
+    for (std::size_t i = 0; i < candidates.size() && found.empty(); ++i) {
+      std::error_code ec;
+      const auto status = std::filesystem::status(candidates[i], ec);
+      if (std::filesystem::is_regular_file(status)) found = candidates[i];
+      else if (std::filesystem::exists(status) && not_regular == candidates.size()) not_regular = i;
+    }
+    if (found.empty() && not_regular < candidates.size()) {
+      const auto& path = candidates[not_regular];
+      // Beside the including file is where one looks first; found through -I, say where.
+      const std::string where = not_regular == 0 ? "" : " (found as " + path.string() + ")";
+      fail_at(form.sources, s.loc, "include file '" + s.path + "'" + where + " is " +
+                                       (std::filesystem::is_directory(path) ? "a directory, not a regular file" : "not a regular file"));
+    }
     if (found.empty()) {
       std::string searched;
       for (const auto& c : candidates) {
@@ -748,7 +928,19 @@ void collect_declarations(CompiledForm& form, const std::vector<const Stmt*>& st
   bool have_dims = false;
   for (const Stmt* s : stmts) {
     switch (s->kind) {
-      case StmtKind::Form: form.module = s->name; break;
+      case StmtKind::Form: {
+        // lmeform_add_forms and the runtime name the generated files after the form file, so
+        // another name here would break them; a form compiled from text without a file name has
+        // no file name to match and takes this one.
+        const std::filesystem::path& file = form.sources.file(0).path;
+        if (file.stem().empty()) form.module = s->name;
+        else if (s->name != form.module)
+          fail_at(form.sources, s->name_loc,
+                  "module name '" + s->name + "' must equal the file name '" + form.module + "'" +
+                      (file.stem().string() == form.module ? "" : " (made a C++ identifier from '" + file.filename().string() + "')") +
+                      "; write 'form " + form.module + "' or omit the form line");
+        break;
+      }
       case StmtKind::Dimension:
         if (have_dims) fail_at(form.sources, s->loc, "the dimensions are already given");
         have_dims = true;
@@ -824,6 +1016,8 @@ void collect_declarations(CompiledForm& form, const std::vector<const Stmt*>& st
       default: break;
     }
   }
+  if (form.module.empty())
+    fail_at(form.sources, Loc{0, 0}, "a form compiled without a file name needs a module name: add 'form NAME'");
   if (form.dims.empty()) form.dims.push_back(2);
   if (form.outputs.empty()) fail_at(form.sources, Loc{0, 0}, "the form defines no output (energy, constraint, residual, bilinear or linear)");
   // Residuals and bilinear forms pair test functions with unknowns / trials, in order.
@@ -843,33 +1037,75 @@ void collect_declarations(CompiledForm& form, const std::vector<const Stmt*>& st
   }
 }
 
-CompiledForm compile_main(CompiledForm form, int main_file, const CompileOptions& options) {
+/// The module name a form file implies: its stem made a C identifier the way CMake's
+/// string(MAKE_C_IDENTIFIER) does it (lmeform_add_forms names the generated header so).
+std::string module_name_of(const std::filesystem::path& path) {
+  std::string name = path.stem().string();
+  for (char& ch : name)
+    if (!std::isalnum(static_cast<unsigned char>(ch)) && ch != '_') ch = '_';
+  if (!name.empty() && std::isdigit(static_cast<unsigned char>(name[0]))) name.insert(name.begin(), '_');
+  return name;
+}
+
+/// The form's text with its includes spliced in: the statements in order (owned by `storage`).
+std::vector<const Stmt*> load_statements(CompiledForm& form, int main_file, const CompileOptions& options,
+                                         std::vector<std::unique_ptr<std::vector<Stmt>>>& storage) {
   std::vector<std::filesystem::path> stack{std::filesystem::weakly_canonical(form.sources.file(main_file).path)};
-  std::vector<std::unique_ptr<std::vector<Stmt>>> storage;
   std::vector<const Stmt*> stmts;
   expand(form, main_file, options, stack, storage, stmts);
-  form.module = form.sources.file(main_file).path.stem().string();
+  return stmts;
+}
+
+CompiledForm compile_main(CompiledForm form, int main_file, const CompileOptions& options) {
+  std::vector<std::unique_ptr<std::vector<Stmt>>> storage;
+  const std::vector<const Stmt*> stmts = load_statements(form, main_file, options, storage);
+  form.module = module_name_of(form.sources.file(main_file).path);
   collect_declarations(form, stmts);
-  for (char& ch : form.module)
-    if (!std::isalnum(static_cast<unsigned char>(ch)) && ch != '_') ch = '_';
   for (int d : form.dims) Lowering(form, d, stmts).run();
   return form;
+}
+
+CompiledForm form_with_source(const std::string& text, const std::filesystem::path& path) {
+  CompiledForm form;
+  form.sources.add(path, text);
+  if (!path.empty()) form.dependencies.push_back(path);
+  return form;
+}
+
+/// Reads the main form file; refuses what is not a regular file (a directory would read as an
+/// empty form, a device such as /dev/zero would never end).
+std::string read_form_file(const std::filesystem::path& path) {
+  std::error_code ec;
+  const auto status = std::filesystem::status(path, ec);
+  if (std::filesystem::is_directory(status)) throw CompileError(path.string() + ": error: is a directory, not a form file\n");
+  if (std::filesystem::exists(status) && !std::filesystem::is_regular_file(status))
+    throw CompileError(path.string() + ": error: is not a regular file\n");
+  bool ok = false;
+  std::string text = read_file(path, ok);
+  if (!ok) throw CompileError(path.string() + ": error: cannot open the form file\n");
+  return text;
 }
 
 }  // namespace
 
 CompiledForm compile_source(const std::string& text, const std::filesystem::path& path, const CompileOptions& options) {
-  CompiledForm form;
-  const int idx = form.sources.add(path, text);
-  form.dependencies.push_back(path);
-  return compile_main(std::move(form), idx, options);
+  return compile_main(form_with_source(text, path), 0, options);
 }
 
 CompiledForm compile_file(const std::filesystem::path& path, const CompileOptions& options) {
-  bool ok = false;
-  std::string text = read_file(path, ok);
-  if (!ok) throw CompileError(path.string() + ": error: cannot open the form file\n");
-  return compile_source(text, path, options);
+  return compile_source(read_form_file(path), path, options);
+}
+
+std::vector<std::filesystem::path> form_dependencies(const std::filesystem::path& path, const CompileOptions& options) {
+  CompiledForm form = form_with_source(read_form_file(path), path);
+  std::vector<std::unique_ptr<std::vector<Stmt>>> storage;
+  load_statements(form, 0, options, storage);
+  std::vector<std::filesystem::path> files;
+  for (const auto& d : form.dependencies) {
+    const auto normal = std::filesystem::absolute(d).lexically_normal();
+    if (std::find(files.begin(), files.end(), normal) == files.end()) files.push_back(normal);
+  }
+  return files;
 }
 
 }  // namespace lmeform::compiler

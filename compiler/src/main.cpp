@@ -1,6 +1,10 @@
 // lmeformc: the form compiler's command line.
+#include <unistd.h>
+
+#include <cerrno>
 #include <chrono>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -26,10 +30,17 @@ struct Options {
   bool print_ir = false;
   std::vector<std::string> include_dirs;
   std::string depfile;
+  bool dependencies = false;
 };
+
+#ifndef LMEFORM_VERSION
+#error "LMEFORM_VERSION (the project version) must be defined by the build"
+#endif
+constexpr const char* kVersionLine = "lmeformc " LMEFORM_VERSION;
 
 const char* kUsage =
     "lmeformc FILE.form -o DIR [--no-json] [--print-ir] [-I DIR]... [--depfile FILE]\n"
+    "lmeformc FILE.form --dependencies [-I DIR]...\n"
     "  Compiles a lmeform form file into DIR/<module>_kernels.hpp (C++ kernels: value, gradient,\n"
     "  Hessian / residual, Jacobian) and DIR/<module>.json (metadata).\n"
     "  -o, --output DIR   output directory (created if missing; default .)\n"
@@ -38,17 +49,50 @@ const char* kUsage =
     "  --print-ir         print the IR after differentiation to stdout (for debugging a form)\n"
     "  -I DIR             add an include search directory (after the including file's own directory)\n"
     "  --depfile FILE     write a Makefile dependency file (the form and every included file)\n"
+    "  --dependencies     only parse the form and its includes, and print the absolute path of the\n"
+    "                     form and of every included file, one per line; write nothing\n"
+    "  --version          print the version (lmeformc X.Y.Z)\n"
     "  -h, --help         this text\n";
 
-/// Writes through a temporary file renamed at the end, so that a failure leaves nothing behind.
-void write_atomically(const fs::path& path, const std::string& text) {
-  const fs::path tmp = path.string() + ".tmp";
-  {
-    std::ofstream o(tmp, std::ios::binary);
-    o << text;
-    if (!o) throw std::runtime_error("cannot write " + tmp.string());
+void remove_quietly(const std::vector<fs::path>& paths) {
+  for (const auto& p : paths) {
+    std::error_code ignored;
+    fs::remove(p, ignored);
   }
-  fs::rename(tmp, path);
+}
+
+/// Writes every output or none: each goes to a temporary next to it, and the temporaries are
+/// renamed into place only once all of them are complete. On failure the temporaries, and any
+/// output already renamed, are removed, so that a build never sees a header without its JSON or
+/// depfile.
+void write_all_or_nothing(const std::vector<std::pair<fs::path, std::string>>& files) {
+  std::vector<fs::path> temporaries;
+  try {
+    for (const auto& [path, text] : files) {
+      if (fs::is_directory(path)) throw std::runtime_error("cannot write " + path.string() + ": it is a directory");
+      // The process id keeps concurrent runs writing the same outputs from sharing a temporary.
+      temporaries.push_back(path.string() + "." + std::to_string(::getpid()) + ".tmp");
+      std::ofstream out(temporaries.back(), std::ios::binary);
+      if (!out) throw std::runtime_error("cannot write " + path.string() + ": " + std::strerror(errno));
+      out << text;
+      out.close();
+      if (!out) throw std::runtime_error("cannot write " + path.string() + ": " + std::strerror(errno));
+    }
+  } catch (...) {
+    remove_quietly(temporaries);
+    throw;
+  }
+  std::vector<fs::path> renamed;
+  for (std::size_t i = 0; i < files.size(); ++i) {
+    std::error_code ec;
+    fs::rename(temporaries[i], files[i].first, ec);
+    if (ec) {
+      remove_quietly(renamed);
+      remove_quietly(std::vector<fs::path>(temporaries.begin() + static_cast<std::ptrdiff_t>(i), temporaries.end()));
+      throw std::runtime_error("cannot write " + files[i].first.string() + ": " + ec.message());
+    }
+    renamed.push_back(files[i].first);
+  }
 }
 
 std::string make_escape(const std::string& s) {
@@ -65,6 +109,10 @@ int run(const Options& opt) {
   CompileOptions copt;
   for (const auto& d : opt.include_dirs) copt.include_dirs.emplace_back(d);
   try {
+    if (opt.dependencies) {
+      for (const auto& file : form_dependencies(opt.form, copt)) std::cout << file.string() << '\n';
+      return 0;
+    }
     const auto t0 = std::chrono::steady_clock::now();
     const CompiledForm form = compile_file(opt.form, copt);
     const GeneratedModule gen = generate(form, fs::path(opt.form).filename().string());
@@ -82,7 +130,7 @@ int run(const Options& opt) {
       }
       files.emplace_back(opt.depfile, dep + "\n");
     }
-    for (const auto& [p, t] : files) write_atomically(p, t);
+    write_all_or_nothing(files);
     const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if (!opt.print_ir)
       std::cerr << "lmeformc: " << opt.form << " -> " << header.string() << " (" << form.outputs.size() << " outputs, "
@@ -111,6 +159,8 @@ int main(int argc, char** argv) {
   app.add_flag("--print-ir", opt.print_ir, "print the IR after differentiation");
   app.add_option("-I", opt.include_dirs, "include search directory")->allow_extra_args(false);
   app.add_option("--depfile", opt.depfile, "write a Makefile dependency file");
+  app.add_flag("--dependencies", opt.dependencies, "print the form's file and its includes (absolute paths), write nothing");
+  app.set_version_flag("--version", kVersionLine);
   app.footer(kUsage);
   CLI11_PARSE(app, argc, argv);
   opt.json = !no_json;
@@ -123,6 +173,8 @@ int main(int argc, char** argv) {
       return args[++i];
     };
     if (a == "-h" || a == "--help") { std::cout << kUsage; return 0; }
+    else if (a == "--version") { std::cout << kVersionLine << "\n"; return 0; }
+    else if (a == "--dependencies") opt.dependencies = true;
     else if (a == "-o" || a == "--output") opt.out_dir = value();
     else if (a == "--json") opt.json = true;
     else if (a == "--no-json") opt.json = false;

@@ -6,6 +6,7 @@
 #include <boost/spirit/home/x3.hpp>
 
 #include <boost/fusion/include/at_c.hpp>
+#include <cstdio>
 #include <optional>
 #include <set>
 
@@ -20,7 +21,16 @@ using Iter = std::string::const_iterator;
 struct ParseState {
   Iter begin;
   int file = 0;
+  int nesting = 0;  ///< open parentheses, brackets, calls, conditionals and prefix operators
   std::vector<Stmt> statements;
+};
+
+/// The grammar is recursive descent: every nesting level costs kilobytes of stack (tens of them in
+/// a sanitizer build), so the depth is bounded (no sensible form comes close) instead of letting a
+/// hostile input overflow it.
+constexpr int kMaxNesting = 128;
+struct NestingTooDeep {
+  std::size_t offset;
 };
 struct state_tag;
 
@@ -77,6 +87,35 @@ token_parser tok(std::vector<std::string> spellings, bool word = false) {
 }
 token_parser kw(const std::string& k) { return tok({k}, true); }
 
+/// nested[p]: p one nesting level deeper; past kMaxNesting the parse stops with NestingTooDeep.
+template <class Subject>
+struct nesting_guard : x3::unary_parser<Subject, nesting_guard<Subject>> {
+  using base_type = x3::unary_parser<Subject, nesting_guard<Subject>>;
+  static bool const is_pass_through_unary = true;
+  constexpr explicit nesting_guard(const Subject& wrapped) : base_type(wrapped) {}
+
+  template <class It, class Ctx, class RCtx, class Attr>
+  bool parse(It& first, const It& last, const Ctx& ctx, RCtx& rctx, Attr& attr) const {
+    ParseState& st = state_of(ctx);
+    if (st.nesting >= kMaxNesting) {
+      x3::skip_over(first, last, ctx);
+      throw NestingTooDeep{static_cast<std::size_t>(first - st.begin)};
+    }
+    ++st.nesting;
+    const bool ok = this->subject.parse(first, last, ctx, rctx, attr);
+    --st.nesting;  // an expectation failure unwinds past this, but it also ends the parse
+    return ok;
+  }
+};
+
+struct nesting_generator {
+  template <class Subject>
+  constexpr nesting_guard<typename x3::extension::as_parser<Subject>::value_type> operator[](const Subject& subject) const {
+    return nesting_guard<typename x3::extension::as_parser<Subject>::value_type>(x3::as_parser(subject));
+  }
+};
+constexpr nesting_generator nested{};
+
 }  // namespace
 }  // namespace lmeform::compiler::ast
 
@@ -89,6 +128,12 @@ struct get_info<lmeform::compiler::ast::token_parser> {
     for (const auto& t : p.spellings) s += (s.empty() ? "" : " or ") + ("'" + t + "'");
     return s;
   }
+};
+/// A nested expression is expected under the name of what it wraps.
+template <class Subject>
+struct get_info<lmeform::compiler::ast::nesting_guard<Subject>> {
+  using result_type = std::string;
+  std::string operator()(const lmeform::compiler::ast::nesting_guard<Subject>& p) const { return what(p.subject); }
 };
 }  // namespace boost::spirit::x3
 
@@ -109,6 +154,7 @@ std::shared_ptr<Expr> make(ExprKind k, Loc loc, std::string name = {}) {
   auto e = std::make_shared<Expr>();
   e->kind = k;
   e->loc = loc;
+  e->begin = loc;
   e->name = std::move(name);
   return e;
 }
@@ -156,11 +202,15 @@ const x3::rule<class power_tag, ExprPtr> power = "expression";
 const x3::rule<class postfix_tag, ExprPtr> postfix = "expression";
 const x3::rule<class primary_tag, ExprPtr> primary = "an operand (number, name, call, '(' or '[')";
 const x3::rule<class args_tag, std::vector<ExprPtr>> arguments = "arguments";
+const x3::rule<class expr_list_tag, std::vector<ExprPtr>> expr_list = "expression";
+const x3::rule<class then_tag> then_kw = "'then'";
+const x3::rule<class else_tag> else_kw = "'else'";
 
 const auto assign = [](auto& ctx) { _val(ctx) = _attr(ctx); };
 const auto fold_binary = [](auto& ctx) {
   const Tok& op = at_c<0>(_attr(ctx));
   auto e = make(ExprKind::Binary, loc_of(state_of(ctx), op.pos), op.text);
+  e->begin = _val(ctx)->begin;
   e->args = {_val(ctx), at_c<1>(_attr(ctx))};
   _val(ctx) = e;
 };
@@ -172,8 +222,10 @@ const auto make_unary = [](auto& ctx) {
 };
 
 const auto if_kw = kw("if");
+const auto then_kw_def = kw("then");
+const auto else_kw_def = kw("else");
 const auto expr_def =
-    (if_kw > expr > x3::omit[kw("then")] > expr > x3::omit[kw("else")] > expr)[([](auto& ctx) {
+    (if_kw > nested[expr] > then_kw > nested[expr] > else_kw > nested[expr])[([](auto& ctx) {
       auto e = make(ExprKind::If, loc_of(state_of(ctx), at_c<0>(_attr(ctx)).pos), "if");
       e->args = {at_c<1>(_attr(ctx)), at_c<2>(_attr(ctx)), at_c<3>(_attr(ctx))};
       _val(ctx) = e;
@@ -181,28 +233,30 @@ const auto expr_def =
     disjunction[assign];
 const auto disjunction_def = conjunction[assign] >> *((kw("or") > conjunction)[fold_binary]);
 const auto conjunction_def = negation[assign] >> *((kw("and") > negation)[fold_binary]);
-const auto negation_def = (kw("not") > negation)[make_unary] | comparison[assign];
+const auto negation_def = (kw("not") > nested[negation])[make_unary] | comparison[assign];
 const auto comparison_def =
     sum[assign] >> -((tok({"<=", ">=", "==", "!=", "<", ">"}) > sum)[fold_binary]);
 const auto sum_def = product[assign] >> *((tok({"+", "-"}) > product)[fold_binary]);
 const auto product_def = unary[assign] >> *((tok({"*", "/"}) > unary)[fold_binary]);
-const auto unary_def = (tok({"-"}) > unary)[make_unary] | power[assign];
-const auto power_def = postfix[assign] >> -((tok({"^"}) > unary)[fold_binary]);
+const auto unary_def = (tok({"-"}) > nested[unary])[make_unary] | power[assign];
+const auto power_def = postfix[assign] >> -((tok({"^"}) > nested[unary])[fold_binary]);
 const auto postfix_def =
-    primary[assign] >> *((pos >> '[' > (expr % ',') > ']')[([](auto& ctx) {
+    primary[assign] >> *((pos >> '[' > nested[expr_list] > ']')[([](auto& ctx) {
       auto e = make(ExprKind::Index, loc_of(state_of(ctx), at_c<0>(_attr(ctx))), "[]");
+      e->begin = _val(ctx)->begin;
       e->args.push_back(_val(ctx));
       for (const auto& i : at_c<1>(_attr(ctx))) e->args.push_back(i);
       _val(ctx) = e;
     })]);
-const auto arguments_def = (expr % ',') | x3::eps;
+const auto arguments_def = expr_list | x3::eps;
+const auto expr_list_def = expr % ',';
 const auto primary_def =
     (pos >> unsigned_number)[([](auto& ctx) {
       auto e = make(ExprKind::Number, loc_of(state_of(ctx), at_c<0>(_attr(ctx))));
       e->number = at_c<1>(_attr(ctx));
       _val(ctx) = e;
     })] |
-    (name >> '(' > arguments > ')')[([](auto& ctx) {
+    (name >> '(' > nested[arguments] > ')')[([](auto& ctx) {
       const Tok& n = at_c<0>(_attr(ctx));
       auto e = make(ExprKind::Call, loc_of(state_of(ctx), n.pos), n.text);
       e->args = at_c<1>(_attr(ctx));
@@ -211,15 +265,20 @@ const auto primary_def =
     name[([](auto& ctx) {
       _val(ctx) = make(ExprKind::Name, loc_of(state_of(ctx), _attr(ctx).pos), _attr(ctx).text);
     })] |
-    ('(' > expr > ')')[assign] |
-    (pos >> '[' > (expr % ',') > ']')[([](auto& ctx) {
+    (pos >> '(' > nested[expr] > ')')[([](auto& ctx) {
+      // The parentheses belong to the sub-expression's extent (diagnostics point at them).
+      auto e = std::make_shared<Expr>(*at_c<1>(_attr(ctx)));
+      e->begin = loc_of(state_of(ctx), at_c<0>(_attr(ctx)));
+      _val(ctx) = e;
+    })] |
+    (pos >> '[' > nested[expr_list] > ']')[([](auto& ctx) {
       auto e = make(ExprKind::List, loc_of(state_of(ctx), at_c<0>(_attr(ctx))), "[]");
       e->args = at_c<1>(_attr(ctx));
       _val(ctx) = e;
     })];
 
 BOOST_SPIRIT_DEFINE(ident_raw, name, string_lit, expr, disjunction, conjunction, negation, comparison,
-                    sum, product, unary, power, postfix, primary, arguments)
+                    sum, product, unary, power, postfix, primary, arguments, expr_list, then_kw, else_kw)
 
 // ---- statements -----------------------------------------------------------------------------
 auto begin_stmt(StmtKind kind) {
@@ -286,19 +345,26 @@ const x3::rule<class path_tag> include_path = "a file name in double quotes";
 const auto include_path_def = string_lit[set_path];
 const x3::rule<class eqeq_tag> equals_target = "'==' and the constraint's target";
 const auto equals_target_def = x3::omit[tok({"=="})];
+const x3::rule<class field_list_tag> field_list = "a name to declare";
+const auto field_list_def = field_item % ',';
+const x3::rule<class const_list_tag> const_list = "a constant name";
+const auto const_list_def = const_item % ',';
+const x3::rule<class dim_list_tag> dimension_list = "a dimension (1, 2 or 3)";
+const auto dimension_list_def = dimension_value % ',';
+const x3::rule<class param_list_tag> param_list = "a parameter name";
+const auto param_list_def = param % ',';
 BOOST_SPIRIT_DEFINE(equals_target, stmt_name, shape_word, item_default, field_item, const_item, target, dimension_value, param,
-                    body, sum_body, include_path)
+                    body, sum_body, include_path, field_list, const_list, dimension_list, param_list)
 
 const auto statement =
     (kw("form")[begin_stmt(StmtKind::Form)] > stmt_name) |
-    (kw("dimension")[begin_stmt(StmtKind::Dimension)] > (dimension_value % ',')) |
-    (tok({"unknown", "test", "trial", "coefficient", "qdata"}, true)[begin_stmt(StmtKind::Field)] >
-     (field_item % ',')) |
-    (kw("constant")[begin_stmt(StmtKind::Constant)] > (const_item % ',')) |
+    (kw("dimension")[begin_stmt(StmtKind::Dimension)] > dimension_list) |
+    (tok({"unknown", "test", "trial", "coefficient", "qdata"}, true)[begin_stmt(StmtKind::Field)] > field_list) |
+    (kw("constant")[begin_stmt(StmtKind::Constant)] > const_list) |
     (kw("coordinate")[begin_stmt(StmtKind::Coordinate)] > stmt_name) |
     (kw("let")[begin_stmt(StmtKind::Let)] > stmt_name > '=' > body) |
     (kw("measure")[begin_stmt(StmtKind::Measure)] > stmt_name > '=' > body) |
-    (kw("def")[begin_stmt(StmtKind::Def)] > stmt_name > '(' > (param % ',') > ')' > '=' > body) |
+    (kw("def")[begin_stmt(StmtKind::Def)] > stmt_name > '(' > param_list > ')' > '=' > body) |
     (kw("include")[begin_stmt(StmtKind::Include)] > include_path) |
     (tok({"energy", "residual", "bilinear", "linear"}, true)[begin_stmt(StmtKind::Output)] > stmt_name > '=' >
      body) |
@@ -307,10 +373,65 @@ const auto statement =
 
 const auto skipper = x3::space | x3::lexeme['#' >> *(x3::char_ - x3::eol)];
 
+/// "U+03C6 (φ)" for the UTF-8 sequence starting at text[at], or "byte 0xCF" if it is not valid UTF-8.
+std::string describe_non_ascii(const std::string& text, std::size_t at) {
+  const auto byte = [&](std::size_t i) { return static_cast<unsigned char>(text[i]); };
+  const unsigned char lead = byte(at);
+  const int length = lead >= 0xC2 && lead <= 0xDF ? 2 : lead >= 0xE0 && lead <= 0xEF ? 3 : lead >= 0xF0 && lead <= 0xF4 ? 4 : 0;
+  char hex[16];
+  bool valid = length > 0 && at + static_cast<std::size_t>(length) <= text.size();
+  char32_t code = length == 4 ? lead & 0x07u : length == 3 ? lead & 0x0Fu : lead & 0x1Fu;
+  for (int k = 1; valid && k < length; ++k) {
+    const unsigned char c = byte(at + static_cast<std::size_t>(k));
+    valid = (c & 0xC0u) == 0x80u;
+    code = (code << 6) | (c & 0x3Fu);
+  }
+  valid = valid && code >= (length == 3 ? 0x800u : length == 4 ? 0x10000u : 0x80u) && code <= 0x10FFFFu &&
+          !(code >= 0xD800u && code <= 0xDFFFu);
+  if (!valid) {
+    std::snprintf(hex, sizeof hex, "0x%02X", static_cast<unsigned>(lead));
+    return std::string("byte ") + hex + " (not valid UTF-8)";
+  }
+  std::snprintf(hex, sizeof hex, "U+%04X", static_cast<unsigned>(code));
+  return std::string(hex) + " (" + text.substr(at, static_cast<std::size_t>(length)) + ")";
+}
+
+/// Spirit's character classes are defined for ASCII only, so any other byte where the grammar
+/// may look at it (anywhere but in comments and strings) is refused before parsing.
+void reject_non_ascii(const SourceSet& sources, int file) {
+  const std::string& text = sources.file(file).text;
+  const auto skip_to_line_end = [&](std::size_t i, char also_stop_at) {
+    while (i < text.size() && text[i] != '\n' && text[i] != '\r' && text[i] != also_stop_at) ++i;
+    return i;
+  };
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (c == '#') i = skip_to_line_end(i + 1, '\n');
+    else if (c == '"') i = skip_to_line_end(i + 1, '"');
+    else if (static_cast<unsigned char>(c) >= 0x80)
+      fail_at(sources, Loc{file, i}, "non-ASCII character " + describe_non_ascii(text, i) + " is not allowed outside comments");
+  }
+}
+
 }  // namespace
+
+Expr::~Expr() {
+  std::vector<ExprPtr> pending = std::move(args);
+  while (!pending.empty()) {
+    ExprPtr e = std::move(pending.back());
+    pending.pop_back();
+    // The last owner takes the operands first, so that e's own destructor has nothing to recurse into.
+    if (e.use_count() == 1) {
+      auto& operands = const_cast<Expr&>(*e).args;  // every Expr is created non-const (make_shared<Expr>)
+      for (auto& a : operands) pending.push_back(std::move(a));
+      operands.clear();
+    }
+  }
+}
 
 std::vector<Stmt> parse_form(const SourceSet& sources, int file) {
   const std::string& text = sources.file(file).text;
+  reject_non_ascii(sources, file);
   ParseState st;
   st.begin = text.begin();
   st.file = file;
@@ -319,6 +440,10 @@ std::vector<Stmt> parse_form(const SourceSet& sources, int file) {
   const auto parser = x3::with<state_tag>(std::ref(st))[*statement];
   try {
     x3::phrase_parse(first, last, parser, skipper);
+  } catch (const NestingTooDeep& deep) {
+    fail_at(sources, Loc{file, deep.offset},
+            "expression nested too deeply: more than " + std::to_string(kMaxNesting) +
+                " levels of parentheses, brackets, calls, conditionals or prefix operators");
   } catch (const x3::expectation_failure<Iter>& e) {
     Iter at = e.where();
     while (at != last && std::isspace(static_cast<unsigned char>(*at))) ++at;

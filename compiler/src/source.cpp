@@ -5,20 +5,21 @@
 namespace lmeform::compiler {
 
 int SourceSet::add(std::filesystem::path path, std::string text) {
-  files_.push_back(SourceFile{std::move(path), std::move(text)});
+  std::vector<std::size_t> line_starts{0};
+  for (std::size_t i = 0; i < text.size(); ++i)
+    if (text[i] == '\n') line_starts.push_back(i + 1);
+  files_.push_back(SourceFile{std::move(path), std::move(text), std::move(line_starts)});
   return static_cast<int>(files_.size()) - 1;
 }
 
 std::pair<int, int> SourceSet::line_col(const Loc& loc) const {
   if (loc.file < 0) return {0, 0};
-  const std::string& t = file(loc.file).text;
-  const std::size_t end = std::min(loc.offset, t.size());
-  int line = 1;
-  std::size_t line_start = 0;
-  for (std::size_t i = 0; i < end; ++i) {
-    if (t[i] == '\n') { ++line; line_start = i + 1; }
-  }
-  return {line, static_cast<int>(end - line_start) + 1};
+  const SourceFile& f = file(loc.file);
+  const std::size_t at = std::min(loc.offset, f.text.size());
+  // The last line starting at or before `at`.
+  const auto next_line = std::upper_bound(f.line_starts.begin(), f.line_starts.end(), at);
+  const std::size_t line_start = *(next_line - 1);
+  return {static_cast<int>(next_line - f.line_starts.begin()), static_cast<int>(at - line_start) + 1};
 }
 
 std::string SourceSet::line_text(const Loc& loc) const {
@@ -38,14 +39,37 @@ std::string SourceSet::where(const Loc& loc) const {
   return file(loc.file).path.string() + ":" + std::to_string(line) + ":" + std::to_string(col);
 }
 
+namespace {
+
+bool is_utf8_continuation(char c) { return (static_cast<unsigned char>(c) & 0xC0u) == 0x80u; }
+
+}  // namespace
+
 std::string format_diagnostic(const SourceSet& sources, const Loc& loc, const std::string& message) {
   std::string out = sources.where(loc) + ": error: " + message + "\n";
   if (loc.file >= 0) {
-    const std::string line = sources.line_text(loc);
+    std::string line = sources.line_text(loc);
+    std::size_t caret = std::min(static_cast<std::size_t>(sources.line_col(loc).second - 1), line.size());
+    // A very long line (a generated sum of thousands of terms) is shown as a window around the
+    // caret, so that the message stays readable.
+    constexpr std::size_t kWindow = 160;
+    if (line.size() > kWindow) {
+      std::size_t first = caret > kWindow / 2 ? caret - kWindow / 2 : 0;
+      while (first > 0 && is_utf8_continuation(line[first])) --first;
+      std::size_t last = std::min(line.size(), first + kWindow);
+      while (last < line.size() && is_utf8_continuation(line[last])) ++last;
+      const std::string head = first > 0 ? "..." : "", tail = last < line.size() ? "..." : "";
+      line = head + line.substr(first, last - first) + tail;
+      caret = caret - first + head.size();
+    }
     out += line + "\n";
-    const int col = sources.line_col(loc).second;
+    // One pad character per displayed character: tabs are kept, UTF-8 continuation bytes (in a
+    // comment or string before the caret) take no column of their own.
     std::string pad;
-    for (int i = 0; i + 1 < col && i < static_cast<int>(line.size()); ++i) pad += (line[static_cast<std::size_t>(i)] == '\t' ? '\t' : ' ');
+    for (std::size_t i = 0; i < caret; ++i) {
+      if (is_utf8_continuation(line[i])) continue;
+      pad += line[i] == '\t' ? '\t' : ' ';
+    }
     out += pad + "^\n";
   }
   return out;

@@ -7,7 +7,7 @@ out=$2
 rm -rf "$out"
 mkdir -p "$out"
 cat "$(dirname "$0")/tiny_scene.toml" - > "$out/scene.toml" <<TOML
-[adaptivity]
+[vesicle.adaptivity]
 stages = [ { eps = 0.01, lloyd_iterations = 0 } ]
 [output]
 directory = "$out/result"

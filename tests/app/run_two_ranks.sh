@@ -7,7 +7,7 @@ out=$2
 rm -rf "$out"
 mkdir -p "$out"
 cat "$(dirname "$0")/tiny_scene.toml" - > "$out/scene.toml" <<TOML
-[adaptivity]
+[vesicle.adaptivity]
 stages = [ { eps = 0.12, f = 10.0 } ]
 TOML
 "$lmeform" run "$out/scene.toml" --json "$out/one.json" > "$out/one.log" 2>&1

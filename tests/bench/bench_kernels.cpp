@@ -8,10 +8,11 @@
 // Baked in at build time: LMEFORMC (path of lmeformc), LMEFORM_CXX + LMEFORM_CXX_FLAGS (the
 // compiler and flags of this build), LMEFORM_KERNEL_INCLUDES (runtime/include and Eigen),
 // LMEFORM_FORMS_DIR and LMEFORM_FORM_LIST (the .form files, '|'-separated).
-#include "cell_fixture.hpp"
-#include "form_check.hpp"
 #include "naive_kernels.hpp"
-#include "test_basis.hpp"
+#include "test_cells.hpp"
+
+#include <lmeform/form_check.hpp>
+#include <lmeform/form_check_setup.hpp>
 
 #include <helfrich_axisymmetric_kernels.hpp>
 #include <helfrich_lagrangian_kernels.hpp>
@@ -187,18 +188,18 @@ int main(int argc, char** argv) {
     const bool axi = r.form == "helfrich_axisymmetric";
     if (!axi && r.form != "helfrich_lagrangian") continue;
     const double cx = axi ? 0.0 : 0.45;
-    fc::TestSetup st = fc::test_setup(cx, 0.45, 0.3);
-    const fc::Cell cell = fc::make_cell(st.cloud, fc::triangle_near(st.cloud, cx + 0.24, 0.63), st.basis, 2);
+    const fc::CheckGeometry& st = fc::testing::test_geometry(cx, 0.45, 0.3);
+    const fc::Cell cell = fc::testing::cell_at(st, cx + 0.24, 0.63, 2);
     fc::State s;
     s.constants = {1.0, 0.08, 0.6};
     const FormKernels& gen = axi ? helfrich_axisymmetric_bending_2d : helfrich_lagrangian_bending_2d;
     FormKernels naive = gen;
     naive.matrix = axi ? &lmeform::naive::helfrich_axisymmetric_hessian : &lmeform::naive::helfrich_lagrangian_hessian;
-    const std::vector<double> phi = fc::phase_field(cell, cx, 0.45, 0.3, 0.08, 0.05, rng);
+    const std::vector<double> phi = fc::testing::phase_field(cell, cx, 0.45, 0.3, 0.08, 0.05, rng);
     if (axi) {
       s.unknowns = phi;
     } else {
-      s.unknowns = fc::deformation(cell, 0.05, 0.002, rng);
+      s.unknowns = fc::testing::deformation(cell, rng);
       s.qdata = fc::reference_qdata(cell, phi);
     }
     std::vector<double> Hg, Hn;

@@ -36,19 +36,21 @@ std::string discocyte_scene(int count, double eps, const std::string& adaptivity
   std::ostringstream s;
   s << "[scene]\nname = \"discocyte\"\ncoordinates = \"axisymmetric\"\n"
     << "[domain]\nlower = [0.0, 0.0]\nupper = [1.5, 2.0]\n"
-    << "[nodes]\ncount = " << count << "\ngamma = 0.5\nquadrature_points = 6\nresolution_factor = 1.6\n"
-    << "[initial]\nshape = \"ellipsoid\"\ncenter = [0.0, 1.0]\nsemi_axes = [0.4987, 0.2059]\n"
-    << "[model]\nform = \"helfrich_axisymmetric\"\neps = " << eps << "\n"
-    << "[constraints]\narea = { radius = 0.4 }\nvolume = { reduced_volume = 0.8 }\n"
-    << "moment = { target = 0.0, z_center = 1.0 }\n"
+    << "[nodes]\ncount = " << count << "\ngamma = 0.5\nquadrature_points = 6\n"
+    << "[model]\nforms = [\"helfrich_axisymmetric\", \"area_axisymmetric\", \"volume_axisymmetric\", \"moment_axisymmetric\"]\n"
+    << "[constants]\neps = " << eps << "\nzc = 1.0\n"
+    << "[constraints]\narea = {}\nvolume = {}\nmoment = 0.0\n"
+    << "[[dirichlet]]\nboundary = [\"r_max\", \"z_min\", \"z_max\"]\nunknown = \"phi\"\nvalue = -1.0\n"
     << "[solver]\naugmented_tolerance = 1e-3\n"
     << "[reference]\nenergy = " << kSharp << "\n"
+    << "[vesicle]\nradius = 0.4\nreduced_volume = 0.8\nresolution_factor = 1.6\n"
+    << "[vesicle.initial]\nshape = \"ellipsoid\"\ncenter = [0.0, 1.0]\nsemi_axes = [0.4987, 0.2059]\n"
     << adaptivity;
   return s.str();
 }
 
 Record record_of(const app::StageRecord& st, const std::string& grid, double wall) {
-  const double e = st.result.solve.energy;
+  const double e = st.result.energy;
   Record r{st.eps, grid, st.nodes, st.h_min, e, (e - kSharp) / kSharp, wall};
   std::printf("%-8s %6d nodes  h_min %.4f  eps %.4f  E %.5f  rel. error %+7.3f %%  %7.1f s\n", grid.c_str(), r.nodes,
               r.h_min, r.eps, r.energy, 100 * r.relative_error_sharp, r.wall_s);
@@ -76,7 +78,7 @@ int main(int argc, char** argv) {
   const std::vector<int> counts = quick ? std::vector<int>{3000, 6124, 12271} : std::vector<int>{3000, 6124, 12271, 24597};
   for (const int n : counts) {
     const double eps = std::ceil(2000.0 * hex_spacing(n)) / 1000.0;
-    const Scene scene = parse_scene(discocyte_scene(n, eps, ""), "bench_statics uniform");
+    const Scene scene = parse_scene(discocyte_scene(n, eps, ""), "bench_statics uniform", app::model_extensions());
     const app::SceneRun run = app::run_scene(PETSC_COMM_WORLD, scene, nullptr);
     records.push_back(record_of(run.stages.back(), "uniform", run.wall_s));
   }
@@ -88,13 +90,13 @@ int main(int argc, char** argv) {
   const double scale = hex_spacing(n) / 0.024;
   auto e = [&](double seed_eps) { return std::round(1000.0 * seed_eps * scale) / 1000.0; };
   std::ostringstream adaptivity;
-  adaptivity << "[adaptivity]\nlloyd_iterations = 40\nstart = \"density\"\nstages = [\n"
+  adaptivity << "[vesicle.adaptivity]\nlloyd_iterations = 40\nstart = \"density\"\nstages = [\n"
              << "  { eps = " << e(0.04) << ", f = 10.0 },\n  { eps = " << e(0.03) << ", lloyd_iterations = 0 },\n"
              << "  { eps = " << e(0.03) << ", f = 100.0 },\n  { eps = " << e(0.025) << ", lloyd_iterations = 0 },\n"
              << "  { eps = " << e(0.025) << ", f = 1000.0 },\n  { eps = " << e(0.02) << ", lloyd_iterations = 0 },\n"
              << "  { eps = " << e(0.015) << ", lloyd_iterations = 0 },\n  { eps = " << e(quick ? 0.012 : 0.01)
              << ", lloyd_iterations = 0 },\n]\n";
-  const Scene scene = parse_scene(discocyte_scene(n, e(0.04), adaptivity.str()), "bench_statics adapted");
+  const Scene scene = parse_scene(discocyte_scene(n, e(0.04), adaptivity.str()), "bench_statics adapted", app::model_extensions());
   const app::SceneRun run = app::run_scene(PETSC_COMM_WORLD, scene, quick ? nullptr : &std::cout);
   double cumulative = run.wall_s;
   for (const auto& st : run.stages) cumulative -= st.wall_s;  // the uniform CVT of the start
@@ -103,9 +105,9 @@ int main(int argc, char** argv) {
     if (st.stage > 0) records.push_back(record_of(st, "adapted", cumulative));
   }
   if (!run.failure.empty()) std::printf("adapted ladder stopped: %s\n", run.failure.c_str());
-  if (!run.stages.back().result.solve.converged) {
+  if (!run.stages.back().result.converged) {
     std::printf("adapted ladder stopped: stage %d did not converge: %s\n", run.stages.back().stage,
-                run.stages.back().result.solve.message.c_str());
+                run.stages.back().result.message.c_str());
   }
 
   if (PetscSession::rank() == 0) {

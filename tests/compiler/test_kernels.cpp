@@ -15,6 +15,7 @@
 #include "phasefield_kernels.hpp"
 #include "poisson_kernels.hpp"
 #include "stokes_kernels.hpp"
+#include "unit_vectors_kernels.hpp"
 #include "lmeform/compiler/ir.hpp"
 
 using lmeform::kernel::CellInputs;
@@ -186,5 +187,32 @@ TEST(GeneratedKernels, PoissonFormsAgree) {
     EXPECT_EQ(R.basis_order, 1);
     EXPECT_EQ(A.matrix != nullptr, true);
     EXPECT_EQ(A.vector, nullptr);
+  }
+}
+
+TEST(GeneratedKernels, UnitVectorsInTwoAndThreeDimensions) {
+  check_all(unit_vectors_all_kernels);
+  for (const FormKernels* k : {&unit_vectors_E_2d, &unit_vectors_E_3d}) {
+    const int dim = k->dim;
+    SCOPED_TRACE(dim);
+    Cell cell(*k, 7);
+    // The value against the integrand evaluated here: b = (sin x0, cos x1[, x2]).
+    double expected = 0;
+    for (int q = 0; q < cell.nq; ++q) {
+      const double* x = cell.points.data() + std::size_t(q) * dim;
+      const double* Bq = cell.basis.data() + std::size_t(q) * lmeform::kernel::jet_size(dim, cell.order) * cell.n;
+      std::vector<double> y(std::size_t(dim), 0.0), b = {std::sin(x[0]), std::cos(x[1])};
+      if (dim == 3) b.push_back(x[2]);
+      for (int a = 0; a < cell.n; ++a)
+        for (int c = 0; c < dim; ++c) y[std::size_t(c)] += Bq[a] * cell.unknowns[std::size_t(a) * dim + c];
+      double yy = 0, bb = 0, yb = 0;
+      for (std::size_t c = 0; c < std::size_t(dim); ++c) {
+        yy += y[c] * y[c];
+        bb += b[c] * b[c];
+        yb += y[c] * b[c];
+      }
+      expected += cell.weights[std::size_t(q)] * (cell.constants[0] / 2 * yy * bb + yb / dim);
+    }
+    EXPECT_NEAR(cell.value(*k, cell.unknowns), expected, 1e-12 * (1 + std::abs(expected)));
   }
 }

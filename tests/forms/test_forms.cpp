@@ -1,15 +1,16 @@
 // FD / Taylor checks of every generated form (project rule, issue 3): on cells of a graded 2D
-// node set with the real LME basis (tests/forms/test_basis.cpp), random states (phase fields near
+// node set with the real LME basis (tests/forms/test_cells.hpp), random states (phase fields near
 // +-1 with a tanh interface plus noise; non-identity deformations with det F well away from 0),
 // the generated gradient matches central differences of the value, the Hessian matches central
 // differences of the gradient, and the Taylor remainders fall at orders 2 and 3.
 // Cross-checks: generated kernels against the hand-written integrands; Lagrangian forms at y = x
 // against their Eulerian counterparts; the dissipation Hessian against the seed's K(y) formula.
-#include "cell_fixture.hpp"
-#include "form_check.hpp"
 #include "handwritten_integrands.hpp"
 #include "jet_kernel.hpp"
-#include "test_basis.hpp"
+#include "test_cells.hpp"
+
+#include <lmeform/form_check.hpp>
+#include <lmeform/form_check_setup.hpp>
 
 #include <area_axisymmetric_kernels.hpp>
 #include <area_kernels.hpp>
@@ -38,6 +39,7 @@
 
 namespace fc = lmeform::formcheck;
 namespace hand = lmeform::formcheck::hand;
+namespace tc = lmeform::formcheck::testing;
 using lmeform::kernel::FormKernels;
 
 namespace {
@@ -57,13 +59,13 @@ double constant_value(const std::string& name) {
   return it->second;
 }
 
-/// Polynomial degree of each functional in its unknown (0: genuinely nonlinear).
-int degree(const FormKernels& f) {
+/// Polynomial degree of each functional in its unknown.
+fc::Degree degree(const FormKernels& f) {
   const std::string m = f.module;
-  if (m == "poisson" || m == "dissipation" || m == "dissipation_axisymmetric") return 2;
-  if (m == "volume" || m == "volume_axisymmetric" || m == "moment" || m == "moment_axisymmetric") return 1;
-  if (m == "volume_lagrangian") return 2;  // (1+phi0)/2 det F: det of a 2x2 F is quadratic in y
-  return 0;
+  if (m == "poisson" || m == "dissipation" || m == "dissipation_axisymmetric") return fc::Degree::quadratic;
+  if (m == "volume" || m == "volume_axisymmetric" || m == "moment" || m == "moment_axisymmetric") return fc::Degree::linear;
+  if (m == "volume_lagrangian") return fc::Degree::quadratic;  // (1+phi0)/2 det F: det of a 2x2 F is quadratic in y
+  return fc::Degree::nonlinear;
 }
 
 struct Case {
@@ -82,19 +84,19 @@ Case make_case(const FormKernels& f, const fc::Cell& cell, std::mt19937_64& rng)
   const int ndof = cell.n * f.dofs_per_node;
   if (f.dofs_per_node == 1) {
     // phase field (or temperature) near +-1 with a tanh interface plus noise
-    c.state.unknowns = fc::phase_field(cell, cx, kCy, kR, kEps, 0.05, rng);
+    c.state.unknowns = tc::phase_field(cell, cx, kCy, kR, kEps, 0.05, rng);
     c.direction = fc::random_vector(static_cast<std::size_t>(ndof), 1.0, rng);
     c.options.taylor_h0 = 0.05;
   } else if (f.coefficient_components_per_node == 2) {
     // dissipation: unknown velocity v, coefficient deformation y
     c.state.unknowns = fc::random_vector(static_cast<std::size_t>(ndof), 1.0, rng);
-    c.state.coefficients = fc::deformation(cell, 0.05, 0.002, rng);
+    c.state.coefficients = tc::deformation(cell, rng);
     c.direction = fc::random_vector(static_cast<std::size_t>(ndof), 1.0, rng);
     c.options.taylor_h0 = 0.5;
   } else {
     // Lagrangian: unknown deformation y, reference phase field data at the quadrature points
-    c.state.unknowns = fc::deformation(cell, 0.05, 0.002, rng);
-    c.state.qdata = fc::reference_qdata(cell, fc::phase_field(cell, cx, kCy, kR, kEps, 0.02, rng));
+    c.state.unknowns = tc::deformation(cell, rng);
+    c.state.qdata = fc::reference_qdata(cell, tc::phase_field(cell, cx, kCy, kR, kEps, 0.02, rng));
     c.direction = fc::random_vector(static_cast<std::size_t>(ndof), 0.03, rng);  // ~ nodal spacing
     c.options.taylor_h0 = 0.1;
     c.options.fd_step = 1e-7;
@@ -104,8 +106,8 @@ Case make_case(const FormKernels& f, const fc::Cell& cell, std::mt19937_64& rng)
 }
 
 struct Setups {
-  fc::TestSetup cartesian = fc::test_setup(0.45, kCy, kR);
-  fc::TestSetup axi = fc::test_setup(0.0, kCy, kR);
+  const fc::CheckGeometry& cartesian = tc::test_geometry(0.45, kCy, kR);
+  const fc::CheckGeometry& axi = tc::test_geometry(0.0, kCy, kR);
 };
 Setups& setups() {
   static Setups s;
@@ -114,13 +116,13 @@ Setups& setups() {
 
 /// Two cells per form: on the interface, and (axisymmetric) near the axis / (Cartesian) inside.
 std::vector<fc::Cell> cells_for(const FormKernels& f) {
-  const fc::TestSetup& s = axisymmetric(f) ? setups().axi : setups().cartesian;
+  const fc::CheckGeometry& s = axisymmetric(f) ? setups().axi : setups().cartesian;
   const double cx = axisymmetric(f) ? 0.0 : 0.45;
   std::vector<std::array<double, 2>> at = {{cx + kR * 0.8, kCy + kR * 0.6}};
   at.push_back(axisymmetric(f) ? std::array<double, 2>{0.06, kCy + kR} : std::array<double, 2>{0.5, 0.4});
   std::vector<fc::Cell> cells;
   for (const auto& p : at)
-    cells.push_back(fc::make_cell(s.cloud, fc::triangle_near(s.cloud, p[0], p[1]), s.basis, 2));
+    cells.push_back(tc::cell_at(s, p[0], p[1], 2));
   return cells;
 }
 
@@ -154,11 +156,6 @@ class GeneratedForm : public ::testing::TestWithParam<const FormKernels*> {};
 
 }  // namespace
 
-TEST(GeneratedForms, UseTheRealLmeBasis) {
-  // The final checks are meant for the real LME basis; the synthetic one is only a stand-in.
-  EXPECT_TRUE(fc::test_basis_is_lme());
-}
-
 TEST_P(GeneratedForm, DerivativesMatchFiniteDifferencesAndTaylorOrders) {
   const FormKernels& f = *GetParam();
   ASSERT_TRUE(f.value && f.vector) << f.module << "::" << f.name << " lacks value/gradient kernels";
@@ -173,7 +170,7 @@ TEST_P(GeneratedForm, DerivativesMatchFiniteDifferencesAndTaylorOrders) {
                               " (n=" + std::to_string(cell.n) + ")";
     if (f.dofs_per_node == 2) {
       const auto& y = f.coefficient_components_per_node == 2 ? c.state.coefficients : c.state.unknowns;
-      const double detF = fc::min_det_F(cell, y);
+      const double detF = fc::min_det_grad(cell, y, 2, 0);
       std::printf("%s: min det F = %.3f\n", label.c_str(), detF);
       ASSERT_GT(detF, 0.5) << "test deformation too close to singular";
     }
@@ -193,7 +190,7 @@ TEST_P(GeneratedForm, StructurallyZeroFlagMatchesTheHessian) {
   for (const fc::Cell& cell : cells_for(f)) {
     Case c = make_case(f, cell, rng);
     fc::Evaluator e(f, c.cell, c.state);
-    for (const double h : e.hessian(c.state.unknowns)) largest = std::max(largest, std::abs(h));
+    for (const double h : e.matrix(c.state.unknowns)) largest = std::max(largest, std::abs(h));
   }
   if (f.matrix_structurally_zero) {
     EXPECT_EQ(largest, 0.0) << f.module << "::" << f.name << " is flagged structurally zero";
@@ -220,8 +217,8 @@ void expect_same(const FormKernels& gen, const FormKernels& ref, const fc::Cell&
     for (std::size_t i = 0; i < x.size(); ++i) { m = std::max(m, std::abs(y[i])); e = std::max(e, std::abs(x[i] - y[i])); }
     EXPECT_LE(e, tol * std::max(m, 1e-300)) << what << ": " << k << " max diff " << e << " of " << m;
   };
-  cmp(a.gradient(s.unknowns), b.gradient(s.unknowns), "gradient");
-  if (gen.matrix && ref.matrix) cmp(a.hessian(s.unknowns), b.hessian(s.unknowns), "Hessian");
+  cmp(a.vector(s.unknowns), b.vector(s.unknowns), "gradient");
+  if (gen.matrix && ref.matrix) cmp(a.matrix(s.unknowns), b.matrix(s.unknowns), "Hessian");
 }
 
 }  // namespace
@@ -230,10 +227,10 @@ TEST(GeneratedForms, AgreeWithHandWrittenIntegrands) {
   std::mt19937_64 rng(99);
   const auto& cs = setups().cartesian;
   const auto& as = setups().axi;
-  const fc::Cell cc = fc::make_cell(cs.cloud, fc::triangle_near(cs.cloud, 0.69, 0.63), cs.basis, 2);
-  const fc::Cell ca = fc::make_cell(as.cloud, fc::triangle_near(as.cloud, 0.24, 0.63), as.basis, 2);
+  const fc::Cell cc = tc::cell_at(cs, 0.69, 0.63, 2);
+  const fc::Cell ca = tc::cell_at(as, 0.24, 0.63, 2);
   fc::State s;
-  s.unknowns = fc::phase_field(cc, 0.45, kCy, kR, kEps, 0.05, rng);
+  s.unknowns = tc::phase_field(cc, 0.45, kCy, kR, kEps, 0.05, rng);
   expect_same(poisson_heat_2d, fc::make_form<hand::Poisson<2>>("p"), cc, s, 1e-12, "poisson");
   s.constants = {1.0, kEps, 0.6};
   expect_same(helfrich_bending_2d, fc::make_form<hand::Helfrich<2>>("h"), cc, s, 1e-12, "helfrich");
@@ -241,7 +238,7 @@ TEST(GeneratedForms, AgreeWithHandWrittenIntegrands) {
   sa.constants = {kEps, 1.0};
   expect_same(area_area_2d, fc::make_form<hand::Area<2>>("a"), cc, sa, 1e-12, "area");
   fc::State sx;
-  sx.unknowns = fc::phase_field(ca, 0.0, kCy, kR, kEps, 0.05, rng);
+  sx.unknowns = tc::phase_field(ca, 0.0, kCy, kR, kEps, 0.05, rng);
   sx.constants = {1.0, kEps, 0.6};
   expect_same(helfrich_axisymmetric_bending_2d, fc::make_form<hand::Helfrich<2, true>>("ha"), ca, sx, 1e-12,
               "helfrich_axisymmetric");
@@ -254,8 +251,8 @@ TEST(GeneratedForms, LagrangianAtIdentityEqualsEulerian) {
   for (bool axi : {false, true}) {
     const auto& st = axi ? setups().axi : setups().cartesian;
     const double cx = axi ? 0.0 : 0.45;
-    const fc::Cell cell = fc::make_cell(st.cloud, fc::triangle_near(st.cloud, cx + 0.24, 0.63), st.basis, 2);
-    const std::vector<double> phi0 = fc::phase_field(cell, cx, kCy, kR, kEps, 0.05, rng);
+    const fc::Cell cell = tc::cell_at(st, cx + 0.24, 0.63, 2);
+    const std::vector<double> phi0 = tc::phase_field(cell, cx, kCy, kR, kEps, 0.05, rng);
     fc::State lag, eul;
     lag.unknowns = cell.nodes;  // y_a = x_a
     lag.qdata = fc::reference_qdata(cell, phi0);
@@ -282,14 +279,14 @@ TEST(GeneratedForms, DissipationHessianIsTheSeedMatrixK) {
   //                  + lambda Fi_Ii d_I p_a Fi_Jj d_J p_b] det F     (seed 1807-1830)
   std::mt19937_64 rng(8);
   const auto& st = setups().cartesian;
-  const fc::Cell cell = fc::make_cell(st.cloud, fc::triangle_near(st.cloud, 0.6, 0.5), st.basis, 2);
+  const fc::Cell cell = tc::cell_at(st, 0.6, 0.5, 2);
   fc::State s;
   s.unknowns = fc::random_vector(static_cast<std::size_t>(2 * cell.n), 1.0, rng);
-  s.coefficients = fc::deformation(cell, 0.05, 0.002, rng);
+  s.coefficients = tc::deformation(cell, rng);
   const double mu = 1.3, lam = 2.5;
   s.constants = {mu, lam};
   fc::Evaluator ev(dissipation_dissipation_2d, cell, s);
-  const std::vector<double> H = ev.hessian(s.unknowns);
+  const std::vector<double> H = ev.matrix(s.unknowns);
   const int n = cell.n, N = 2 * n, Js = lmeform::kernel::jet_size(2, cell.basis_order);
   std::vector<double> K(static_cast<std::size_t>(N) * N, 0.0);
   for (int q = 0; q < cell.nq; ++q) {
@@ -330,12 +327,12 @@ TEST(GeneratedForms, NaiveThesisStyleHessiansAgree) {
   for (const Item& it : items) {
     const auto& st = it.axi ? setups().axi : setups().cartesian;
     const double cx = it.axi ? 0.0 : 0.45;
-    const fc::Cell cell = fc::make_cell(st.cloud, fc::triangle_near(st.cloud, cx + 0.24, 0.63), st.basis, 2);
+    const fc::Cell cell = tc::cell_at(st, cx + 0.24, 0.63, 2);
     Case c = make_case(*it.gen, cell, rng);
     FormKernels naive = *it.gen;
     naive.matrix = it.naive;
     fc::Evaluator eg(*it.gen, cell, c.state), en(naive, cell, c.state);
-    const auto Hg = eg.hessian(c.state.unknowns), Hn = en.hessian(c.state.unknowns);
+    const auto Hg = eg.matrix(c.state.unknowns), Hn = en.matrix(c.state.unknowns);
     double e = 0, m = 0;
     for (std::size_t i = 0; i < Hg.size(); ++i) { m = std::max(m, std::abs(Hg[i])); e = std::max(e, std::abs(Hg[i] - Hn[i])); }
     std::printf("%s: max |H_generated - H_naive| = %.3e of max |H| = %.3e\n", it.gen->module, e, m);

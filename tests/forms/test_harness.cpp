@@ -1,10 +1,11 @@
 // Validates the derivative checker itself with hand-written kernels that follow kernel.hpp:
 // correct kernels must pass with the expected Taylor slopes, and deliberately broken ones must fail.
-#include "cell_fixture.hpp"
-#include "form_check.hpp"
 #include "handwritten_integrands.hpp"
 #include "jet_kernel.hpp"
-#include "test_basis.hpp"
+#include "test_cells.hpp"
+
+#include <lmeform/form_check.hpp>
+#include <lmeform/form_check_setup.hpp>
 
 #include <gtest/gtest.h>
 
@@ -12,14 +13,14 @@
 
 namespace fc = lmeform::formcheck;
 namespace hand = lmeform::formcheck::hand;
+namespace tc = lmeform::formcheck::testing;
 
 namespace {
 
 struct Fixture {
-  fc::TestSetup setup = fc::test_setup();
-  fc::NodeCloud& cloud = setup.cloud;
-  fc::BasisChoice& basis = setup.basis;
+  const fc::CheckGeometry& geometry = tc::test_geometry();
   std::mt19937_64 rng{2024};
+  [[nodiscard]] fc::Cell cell_at(double x, double y, int order) const { return tc::cell_at(geometry, x, y, order); }
 };
 
 fc::Report run(const lmeform::kernel::FormKernels& f, const fc::Cell& cell, const fc::State& s,
@@ -33,11 +34,11 @@ fc::Report run(const lmeform::kernel::FormKernels& f, const fc::Cell& cell, cons
 
 TEST(FormCheckHarness, PoissonIsQuadratic) {
   Fixture fx;
-  const fc::Cell cell = fc::make_cell(fx.cloud, fc::triangle_near(fx.cloud, 0.3, 0.4), fx.basis, 1);
+  const fc::Cell cell = fx.cell_at(0.3, 0.4, 1);
   fc::State s;
   s.unknowns = fc::random_vector(cell.n, 1.0, fx.rng);
   fc::Options o;
-  o.expect_degree = 2;
+  o.expect_degree = fc::Degree::quadratic;
   const auto rep = run(fc::make_form<hand::Poisson<2>>("poisson"), cell, s, fc::random_vector(cell.n, 1.0, fx.rng),
                        o, "hand poisson");
   EXPECT_TRUE(rep.ok()) << rep.summary("poisson");
@@ -46,16 +47,16 @@ TEST(FormCheckHarness, PoissonIsQuadratic) {
 
 TEST(FormCheckHarness, LinearFunctionalIsExact) {
   Fixture fx;
-  const fc::Cell cell = fc::make_cell(fx.cloud, 10, fx.basis, 0);
+  const fc::Cell cell = fx.geometry.cell(10, 0);
   fc::State s;
   s.unknowns = fc::random_vector(cell.n, 1.0, fx.rng);
   fc::Options o;
-  o.expect_degree = 1;
+  o.expect_degree = fc::Degree::linear;
   const auto rep = run(fc::make_form<hand::HalfValue<2>>("half"), cell, s, fc::random_vector(cell.n, 1.0, fx.rng), o,
                        "hand volume-like");
   EXPECT_TRUE(rep.ok()) << rep.summary("half");
   // The same linear functional declared nonlinear must be flagged (no slope can be fitted).
-  o.expect_degree = 0;
+  o.expect_degree = fc::Degree::nonlinear;
   EXPECT_FALSE(fc::check_form(fc::make_form<hand::HalfValue<2>>("half"), cell, s,
                               fc::random_vector(cell.n, 1.0, fx.rng), o).ok());
 }
@@ -66,9 +67,9 @@ TEST(FormCheckHarness, HelfrichCartesianAndAxisymmetric) {
   for (bool axi : {false, true}) {
     // Cells on the interface of a circle (Cartesian) / a sphere centred on the axis (axisymmetric).
     const double cx = axi ? 0.0 : 0.45, cy = 0.45, R = 0.3;
-    const fc::Cell cell = fc::make_cell(fx.cloud, fc::triangle_near(fx.cloud, cx + R * 0.8, cy + R * 0.6), fx.basis, 2);
+    const fc::Cell cell = fx.cell_at(cx + R * 0.8, cy + R * 0.6, 2);
     fc::State s;
-    s.unknowns = fc::phase_field(cell, cx, cy, R, eps, 0.05, fx.rng);
+    s.unknowns = tc::phase_field(cell, cx, cy, R, eps, 0.05, fx.rng);
     s.constants = {1.0, eps, 0.7};
     fc::Options o;
     o.taylor_h0 = 0.1;
@@ -82,9 +83,9 @@ TEST(FormCheckHarness, HelfrichCartesianAndAxisymmetric) {
 
 TEST(FormCheckHarness, AreaNonlinear) {
   Fixture fx;
-  const fc::Cell cell = fc::make_cell(fx.cloud, fc::triangle_near(fx.cloud, 0.6, 0.5), fx.basis, 1);
+  const fc::Cell cell = fx.cell_at(0.6, 0.5, 1);
   fc::State s;
-  s.unknowns = fc::phase_field(cell, 0.45, 0.45, 0.2, 0.08, 0.05, fx.rng);
+  s.unknowns = tc::phase_field(cell, 0.45, 0.45, 0.2, 0.08, 0.05, fx.rng);
   s.constants = {0.08, 1.0};
   const auto rep = run(fc::make_form<hand::Area<2>>("area"), cell, s, fc::random_vector(cell.n, 1.0, fx.rng),
                        fc::Options{}, "hand area");
@@ -93,11 +94,11 @@ TEST(FormCheckHarness, AreaNonlinear) {
 
 TEST(FormCheckHarness, VectorUnknownInterleaving) {
   Fixture fx;
-  const fc::Cell cell = fc::make_cell(fx.cloud, fc::triangle_near(fx.cloud, 0.5, 0.5), fx.basis, 1);
+  const fc::Cell cell = fx.cell_at(0.5, 0.5, 1);
   fc::State s;
-  s.unknowns = fc::deformation(cell, 0.05, 0.002, fx.rng);
+  s.unknowns = tc::deformation(cell, fx.rng);
   s.constants = {1.0, 3.0};
-  const double detF = fc::min_det_F(cell, s.unknowns);
+  const double detF = fc::min_det_grad(cell, s.unknowns, 2, 0);
   std::printf("vector cell: n = %d, min det F = %.3f\n", cell.n, detF);
   ASSERT_GT(detF, 0.3);
   fc::Options o;
@@ -110,9 +111,9 @@ TEST(FormCheckHarness, VectorUnknownInterleaving) {
 TEST(FormCheckHarness, DetectsWrongHessianAndGradient) {
   Fixture fx;
   const double eps = 0.08;
-  const fc::Cell cell = fc::make_cell(fx.cloud, fc::triangle_near(fx.cloud, 0.69, 0.63), fx.basis, 2);
+  const fc::Cell cell = fx.cell_at(0.69, 0.63, 2);
   fc::State s;
-  s.unknowns = fc::phase_field(cell, 0.45, 0.45, 0.3, eps, 0.05, fx.rng);
+  s.unknowns = tc::phase_field(cell, 0.45, 0.45, 0.3, eps, 0.05, fx.rng);
   s.constants = {1.0, eps, 0.0};
   const auto v = fc::random_vector(cell.n, 1.0, fx.rng);
   fc::Options o;

@@ -1,10 +1,15 @@
-// The axisymmetric phase-field vesicle with the generated forms and the constrained minimizer.
+// The axisymmetric phase-field vesicle through the generic path (a scene bound to the built-in
+// forms, solve_problem), with the vesicle model's helpers.
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <iostream>
 #include <numbers>
+#include <string>
 
+#include "problem.hpp"
+#include "run_scene.hpp"
 #include "vesicle.hpp"
 
 namespace lmeform {
@@ -13,29 +18,82 @@ namespace {
 constexpr double pi = std::numbers::pi;
 constexpr double kR = 0.4;
 
-// A sphere of radius kR on the axis of the box [0, 0.8] x [0, 1.2] (centre z = 0.6), gamma 0.8.
-app::VesicleSetup sphere_box(double eps, double spacing) {
-  app::VesicleSetup s;
-  s.lower = {0.0, 0.0};
-  s.upper = {0.8, 1.2};
-  s.z_center = 0.6;
-  s.semi_axes = {kR, kR};
-  s.gamma = 0.8;
-  s.eps = eps;
-  s.spacing = spacing;
-  return s;
+std::string num(double v) {
+  char buffer[32];
+  std::snprintf(buffer, sizeof buffer, "%.17g", v);
+  return buffer;
+}
+
+// A vesicle in the box [0, 0.8] x [0, 1.2] (centre z = 0.6), gamma 0.8, phi = -1 on the outer
+// boundary; `constraints` is the [constraints] table.
+struct SphereBox {
+  double eps = 0.08;
+  double spacing = 0.04;
+  std::array<double, 2> semi_axes{kR, kR};
+  std::string constraints;  // "" : none (the forms are still loaded, for their values)
+  bool outer_boundary_fixed = true;  // phi = -1 on r_max, z_min, z_max
+
+  [[nodiscard]] Scene scene() const {
+    const std::string text = fmt_scene();
+    return parse_scene(text, "sphere_box.toml", app::model_extensions());
+  }
+  [[nodiscard]] std::string fmt_scene() const {
+    return "[scene]\nname = \"sphere\"\ncoordinates = \"axisymmetric\"\n"
+           "[domain]\nlower = [0.0, 0.0]\nupper = [0.8, 1.2]\n"
+           "[nodes]\nspacing = " + num(spacing) + "\ngamma = 0.8\n"
+           "[model]\nforms = [\"helfrich_axisymmetric\", \"area_axisymmetric\", \"volume_axisymmetric\", \"moment_axisymmetric\"]\n"
+           "energy = \"bending\"\n"
+           "[constants]\neps = " + num(eps) + "\nzc = 0.6\n" +
+           "[solver]\naugmented_tolerance = 1e-3\n" +
+           (constraints.empty() ? std::string() : "[constraints]\n" + constraints) +
+           (outer_boundary_fixed ? "[[dirichlet]]\nboundary = [\"r_max\", \"z_min\", \"z_max\"]\nunknown = \"phi\"\nvalue = -1.0\n"
+                                 : "");
+  }
+};
+
+/// The bound scene and the vesicle's initial profile for it.
+struct Problem {
+  Scene scene;
+  app::BoundScene bound;
+  explicit Problem(const SphereBox& box) : scene(box.scene()), bound(app::bind_scene(scene, PETSC_COMM_SELF, nullptr)) {}
+  [[nodiscard]] app::ProblemInput input(const SphereBox& box) const {
+    app::ProblemInput in;
+    in.nodes = app::initial_nodes(scene);
+    app::VesicleModel model;
+    model.eps = box.eps;
+    model.center = {0.0, 0.6, 0.0};
+    model.semi_axes = {box.semi_axes[0], box.semi_axes[1], 0.0};
+    for (std::size_t a = 0; a < in.nodes.size(); ++a) in.initial.push_back(app::initial_profile(model, in.nodes.point(a), 2));
+    in.lme = app::vesicle_lme_options(scene);
+    return in;
+  }
+};
+
+/// Energy, area, volume and moment of the initial tanh profile as it is (no solve, no boundary values).
+struct Functionals {
+  double energy, area, volume, moment;
+};
+Functionals evaluate(const SphereBox& box) {
+  SphereBox all = box;
+  all.outer_boundary_fixed = false;
+  all.constraints = "area = 0.0\nvolume = 0.0\nmoment = 0.0\n";  // only to load and evaluate them
+  const Problem p(all);
+  app::ProblemInput in = p.input(all);
+  in.evaluate_only = true;
+  const auto r = app::solve_problem(PETSC_COMM_SELF, p.bound, in);
+  return {r.values.at("helfrich_axisymmetric.bending"), r.values.at("area"), r.values.at("volume"), r.values.at("moment")};
 }
 
 // With the smooth γ = 0.8 basis the energy of a prescribed tanh sphere tends to 2π as h → 0 at
 // fixed ε (larger γ has inconsistent basis Hessians: the energy plateaus above 2π), and area and
 // volume differ from the sharp values by the diffuse interface's O(ε²) terms.
 TEST(Vesicle, PrescribedTanhSphereMatchesSharpInterfaceValues) {
-  app::VesicleSetup s = sphere_box(0.08, 0.04);
+  SphereBox s;
   const double R = kR;
   double previous_error = 1e300;
   for (const double ratio : {2.0, 4.0}) {
     s.spacing = s.eps / ratio;
-    const auto f = app::evaluate_vesicle(PETSC_COMM_SELF, s);
+    const auto f = evaluate(s);
     const double error = std::abs(f.energy / (2 * pi) - 1);
     std::printf("tanh sphere eps %.3f h %.3f: E %.5f (2pi, rel %.2e)  A %.5f (sharp %.5f)  V %.5f (sharp %.5f)  M %.1e\n",
                 s.eps, s.spacing, f.energy, error, f.area, 4 * pi * R * R, f.volume, 4.0 / 3 * pi * R * R * R, f.moment);
@@ -54,28 +112,30 @@ TEST(Vesicle, PrescribedTanhSphereMatchesSharpInterfaceValues) {
 // ½(|Ω| + ∫φ) exceeds the sharp one by ≈ 3.1 (ε/R)², so sharp targets force a deflated,
 // non-spherical minimizer — the modelling error of ε, not a solver error.)
 TEST(Vesicle, SphereConvergesToTwoPiWithinTheModellingError) {
-  app::VesicleSetup s = sphere_box(0.08, 0.04);
+  SphereBox s;
   const double R = kR;
-  const auto diffuse = app::evaluate_vesicle(PETSC_COMM_SELF, s);
-  s.area_target = diffuse.area;
-  s.volume_target = diffuse.volume;
-  s.moment_target = 0.0;
+  const auto diffuse = evaluate(s);
+  s.constraints = "area = " + num(diffuse.area) + "\nvolume = " + num(diffuse.volume) +
+                  "\nmoment = { target = 0.0, scale = " + num(diffuse.volume) + " }\n";
   s.semi_axes = {1.1 * R, 0.85 * R};  // start away from the sphere: the constraints must bring it back
-  s.solver.log = &std::cout;
-  const auto result = app::solve_vesicle(PETSC_COMM_SELF, s);
-  const double error = result.solve.energy / (2 * pi) - 1;
-  std::printf("sphere: E = %.6f (2 pi = %.6f, rel %.3e; prescribed tanh profile %.6f), %d nodes, AL %d, KKT %d, %.1f s, %s\n",
-              result.solve.energy, 2 * pi, error, diffuse.energy, result.nodes_count, result.solve.augmented_iterations,
-              result.solve.newton_iterations, result.seconds_solve, result.solve.message.c_str());
-  EXPECT_TRUE(result.solve.converged) << result.solve.message;
-  for (const double r : result.solve.relative_residuals) EXPECT_LT(r, 1e-8);
+  const Problem p(s);
+  app::ProblemInput in = p.input(s);
+  in.log = &std::cout;
+  const auto r = app::solve_problem(PETSC_COMM_SELF, p.bound, in);
+  const auto& result = r.minimization;
+  const double error = result.energy / (2 * pi) - 1;
+  std::printf("sphere: E = %.6f (2 pi = %.6f, rel %.3e; prescribed tanh profile %.6f), %zu nodes, AL %d, KKT %d, %.1f s, %s\n",
+              result.energy, 2 * pi, error, diffuse.energy, r.nodes.size(), result.augmented_iterations,
+              result.newton_iterations, r.seconds_solve, result.message.c_str());
+  EXPECT_TRUE(result.converged) << result.message;
+  for (const double residual : result.relative_residuals) EXPECT_LT(residual, 1e-8);
   // The minimizer does at least as well as the prescribed profile, and lands within the
   // discretization error of this coarse grid (ε/h = 2) from 2π.
-  EXPECT_LT(result.solve.energy, diffuse.energy * (1 + 1e-6));
+  EXPECT_LT(result.energy, diffuse.energy * (1 + 1e-6));
   EXPECT_LT(std::abs(error), 0.06);
   // Newton on the KKT system converges superlinearly: the residual ratios shrink.
   std::vector<double> kkt;
-  for (const auto& it : result.solve.history) {
+  for (const auto& it : result.history) {
     if (it.stage == "KKT" && it.gradient_norm > 1e-11) kkt.push_back(it.gradient_norm);
   }
   ASSERT_GE(kkt.size(), 3u);
@@ -104,28 +164,32 @@ TEST(Vesicle, RescaledInterfaceIsTheTanhProfileOfTheNewWidth) {
 TEST(Vesicle, WarmStartedMultipliersSaveIterations) {
   // A continuation (eps 0.1 -> 0.09 on the same grid) from the previous solution: starting from the
   // previous multipliers converges in fewer augmented-Lagrangian steps than starting from zero.
-  app::VesicleSetup s = sphere_box(0.1, 0.045);
+  SphereBox s;
+  s.eps = 0.1;
+  s.spacing = 0.045;
   const double R = kR;
   s.semi_axes = {1.1 * R, 0.85 * R};
-  s.area_target = 4 * pi * R * R;
-  s.volume_target = 0.95 * 4.0 / 3 * pi * R * R * R;
-  s.moment_target = 0.0;
-  const auto first = app::solve_vesicle(PETSC_COMM_SELF, s);
-  ASSERT_TRUE(first.solve.converged) << first.solve.message;
-  s.eps = 0.09;
-  s.nodes = first.nodes;
-  s.initial_phi = app::rescale_interface(first.phi, 0.1, 0.09);
-  const auto cold = app::solve_vesicle(PETSC_COMM_SELF, s);
-  s.initial_multipliers = first.solve.multipliers;
-  const auto warm = app::solve_vesicle(PETSC_COMM_SELF, s);
+  const double V0 = 0.95 * 4.0 / 3 * pi * R * R * R;
+  s.constraints = "area = " + num(4 * pi * R * R) + "\nvolume = " + num(V0) +
+                  "\nmoment = { target = 0.0, scale = " + num(V0) + " }\n";
+  const Problem p(s);
+  app::ProblemInput in = p.input(s);
+  const auto first = app::solve_problem(PETSC_COMM_SELF, p.bound, in);
+  ASSERT_TRUE(first.converged) << first.message;
+  in.constants["eps"] = 0.09;
+  in.nodes = first.nodes;
+  in.initial = app::rescale_interface(first.state, 0.1, 0.09);
+  const auto cold = app::solve_problem(PETSC_COMM_SELF, p.bound, in);
+  in.initial_multipliers = first.minimization.multipliers;
+  const auto warm = app::solve_problem(PETSC_COMM_SELF, p.bound, in);
   std::printf("continuation: cold start %d AL + %d KKT, warm start %d AL + %d KKT; E %.8f vs %.8f\n",
-              cold.solve.augmented_iterations, cold.solve.newton_iterations, warm.solve.augmented_iterations,
-              warm.solve.newton_iterations, cold.solve.energy, warm.solve.energy);
-  ASSERT_TRUE(cold.solve.converged && warm.solve.converged);
-  EXPECT_LT(warm.solve.augmented_iterations, cold.solve.augmented_iterations);
-  EXPECT_NEAR(warm.solve.energy, cold.solve.energy, 1e-6 * cold.solve.energy);  // the same minimizer
-  s.initial_multipliers = {1.0};
-  EXPECT_THROW((void)app::solve_vesicle(PETSC_COMM_SELF, s), std::invalid_argument);
+              cold.minimization.augmented_iterations, cold.minimization.newton_iterations,
+              warm.minimization.augmented_iterations, warm.minimization.newton_iterations, cold.energy, warm.energy);
+  ASSERT_TRUE(cold.converged && warm.converged);
+  EXPECT_LT(warm.minimization.augmented_iterations, cold.minimization.augmented_iterations);
+  EXPECT_NEAR(warm.energy, cold.energy, 1e-6 * cold.energy);  // the same minimizer
+  in.initial_multipliers = {1.0};
+  EXPECT_THROW((void)app::solve_problem(PETSC_COMM_SELF, p.bound, in), std::invalid_argument);
 }
 
 }  // namespace

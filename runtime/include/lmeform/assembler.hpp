@@ -76,6 +76,8 @@ class Assembler {
   /// accumulated into one matrix (any matrix from an Assembler of the same discretization and
   /// block size) without temporaries.
   void add_vector(Vec u, Vec out, double scale);
+  /// out += scale * vector, returning the value (unscaled): one pass, as value_and_vector.
+  [[nodiscard]] double add_value_and_vector(Vec u, Vec out, double scale);
   void add_matrix(Vec u, Mat out, double scale);
 
   /// One weighted form of a sum (see matrix_sum).

@@ -68,6 +68,10 @@ class ConstrainedMinimizer {
  public:
   ConstrainedMinimizer(Assembler& energy, std::vector<ScalarConstraint> constraints,
                        ConstrainedMinimizerOptions options = {});
+  /// E = Σ terms (e.g. bending + adhesion), assembled term by term into one gradient and, in one
+  /// pass, one Hessian; the terms share one discretization and dof layout.
+  ConstrainedMinimizer(std::vector<Assembler*> energy_terms, std::vector<ScalarConstraint> constraints,
+                       ConstrainedMinimizerOptions options = {});
 
   /// Dofs held at their current values in u (owned, global, renumbered).
   void set_fixed_dofs(std::vector<PetscInt> dofs) { fixed_ = std::move(dofs); }
@@ -86,7 +90,8 @@ class ConstrainedMinimizer {
   void zero_fixed(Vec v);
   void log_iterate(const ConstrainedIterate& it);
 
-  Assembler* energy_;
+  Assembler* energy_;                   // the first term: owns the layout (vectors, matrix)
+  std::vector<Assembler*> energy_terms_;
   std::vector<ScalarConstraint> constraints_;
   ConstrainedMinimizerOptions options_;
   std::vector<PetscInt> fixed_;

@@ -34,7 +34,7 @@
 
 namespace lmeform::kernel {
 
-inline constexpr int kContractVersion = 1;
+inline constexpr int kContractVersion = 2;
 
 /// Number of jet slots of a scalar field for dimension d and derivative order k (0, 1, 2).
 constexpr int jet_size(int dim, int order) noexcept {
@@ -141,7 +141,24 @@ struct FormKernels {
   /// The matrix kernel adds nothing (a functional linear in its unknowns, e.g. a volume):
   /// the runtime skips its assembly.
   bool matrix_structurally_zero = false;
+  /// [n_constants]: the form's default of each constant, NaN where it declares none (the runtime
+  /// must then be given a value).
+  const double* constant_defaults = nullptr;
 };
+
+/// A compiled form module: every functional it defines (each output in each declared dimension).
+/// Built-in modules are linked into the runtime; a module compiled at run time (JIT) exports it
+/// through the C symbol kModuleEntrySymbol, a function of type ModuleEntry.
+struct ModuleTable {
+  int contract_version = kContractVersion;
+  const char* module = "";                     ///< the form's module name
+  const char* source = "";                     ///< the .form file it was generated from
+  const FormKernels* const* kernels = nullptr;
+  int n_kernels = 0;
+};
+
+inline constexpr const char* kModuleEntrySymbol = "lmeform_module_table";
+using ModuleEntry = const ModuleTable* (*)();
 
 // ---- Contraction helpers used by generated kernels (added by the compiler, issue 3) ------------
 // The generated code evaluates, per quadrature point, the derivatives of the integrand with respect

@@ -30,7 +30,8 @@ struct Box {
 /// Reads one point per line: numbers separated by commas, semicolons, spaces or tabs. Blank lines and
 /// lines starting with '#' are skipped. dim = 0 takes the dimension from the first point.
 /// A bad line throws std::runtime_error "<file>:<line>: <what is wrong>".
-[[nodiscard]] NodeSet read_points(const std::filesystem::path& path, int dim = 0);
+/// With `domain`, a point outside it (beyond 1e-9 of its extent) is an error naming its line.
+[[nodiscard]] NodeSet read_points(const std::filesystem::path& path, int dim = 0, const Box* domain = nullptr);
 
 /// Writes one point per line, comma separated, with round-trip precision (17 significant digits).
 void write_points(const std::filesystem::path& path, const NodeSet& nodes);

@@ -1,21 +1,28 @@
-// Scenes: the TOML files that describe a run (docs/scenes.md lists every key).
+// Scenes: the TOML files that describe a run of any model (docs/scenes.md lists every key).
 //
-// A scene says what a run needs and nothing more: coordinates and domain, the node set, the initial
-// phase field, the model constants, the constraints with their targets, solver settings, an optional
-// CVT adaptivity schedule, an optional reference energy and optional outputs. An absent optional
-// section means "not used" (no [adaptivity]: the uniform grid; no moment constraint: none).
+// A scene names its forms (built-in modules or .form files), which outputs make the problem (a sum
+// of energies with constraints, a residual, or a bilinear + linear pair), every constant by its
+// name in the forms, constraint targets, Dirichlet conditions on named parts of the boundary,
+// initial fields, runtime-supplied quadrature data, the node set and the coordinates. Reading is
+// strict: a key that is missing, unknown (with a did-you-mean) or of the wrong type, and every
+// number out of range, throws SceneError "FILE:LINE: <what is wrong with which key>". Names that
+// refer to the forms (constants, outputs, unknowns, quadrature data) are checked when the forms are
+// loaded (app::bind_scene), with the same kind of message.
 //
-// Reading is strict: a key that is missing, unknown (with a did-you-mean suggestion) or of the wrong
-// type, and every number out of range, throws SceneError "FILE:LINE: <what is wrong with which key>".
+// Model-specific conveniences live with their model, not here: a scene may carry extension tables
+// (e.g. [vesicle]) that this reader keeps, unread, for the model that owns them (scene_table.hpp).
 #pragma once
 
 #include <array>
 #include <filesystem>
+#include <map>
+#include <memory>
 #include <optional>
 #include <span>
 #include <stdexcept>
 #include <string>
 #include <string_view>
+#include <variant>
 #include <vector>
 
 #include "lmeform/node_sets.hpp"
@@ -44,41 +51,81 @@ struct SceneNodes {
   double gamma = 0.8;                  ///< LME locality gamma (seed: 0.8)
   int spacing_smoothing = 5;           ///< smoothing passes on the nodal spacing h_a (smooth_spacing)
   int quadrature_points = 6;           ///< points of the simplex rule per background cell
-  double resolution_factor = 2.0;      ///< eps >= resolution_factor * h_min is required (seed App. B)
 };
 
-/// [initial]: phi0(x) = tanh(d(x) / (sqrt(2) eps)), d the signed distance to the shape, > 0 inside.
-struct SceneInitial {
-  enum class Shape { sphere, ellipsoid };
-  Shape shape = Shape::ellipsoid;
-  std::array<double, 3> center{};
-  std::array<double, 3> semi_axes{};   ///< sphere: every entry is the radius
-  std::optional<double> eps;           ///< interface width of the profile; unset: model.eps
+/// What the problem is, from the outputs the scene names (app::bind_scene checks them).
+enum class ProblemKind {
+  minimization,  ///< Σ energies, subject to the constraints: the constrained Newton minimizer
+  residual,      ///< R(u; v) = 0 for all v: Newton (PETSc SNES)
+  linear,        ///< a(u, v) = l(v) for all v: one linear solve (PETSc KSP)
 };
 
-/// [model]: the phase-field Helfrich model (forms helfrich / helfrich_axisymmetric).
+/// A name as written in the scene, with where it was written (for messages about it).
+struct SceneName {
+  std::string name;
+  std::string where;                   ///< "FILE:LINE: key 'model.energy[1]'"
+};
+
+/// [model]: the forms and the outputs that make the problem.
 struct SceneModel {
-  std::string form;                    ///< compiled energy form, e.g. "helfrich_axisymmetric"
-  double k = 1.0;                      ///< bending modulus
-  double eps = 0;                      ///< interface width (first solve; adaptivity stages lower it)
-  double C0 = 0.0;                     ///< spontaneous curvature
-  double boundary_phi = -1.0;          ///< phi imposed on the outer boundary (not on the axis r = 0)
+  /// Built-in module names, or paths of .form files (resolved against the scene's folder).
+  std::vector<SceneName> forms;
+  ProblemKind kind = ProblemKind::minimization;
+  /// minimization: energy outputs summed; empty in the file means every energy output of the forms.
+  std::vector<SceneName> energy;
+  std::optional<SceneName> residual;
+  std::optional<SceneName> bilinear, linear;
 };
 
-struct SceneMoment {
-  double target = 0.0;                 ///< M0
-  double z_center = 0.0;               ///< zc in M = int phi (z - zc)
+/// A value given as a number or as an expression of the coordinates `x` and the scene's constants
+/// (compiled by lmeformc at run time, e.g. "sin(pi*x[0]) * e(0)").
+struct SceneValue {
+  std::variant<double, std::string> value;
+  std::string where;
+  [[nodiscard]] bool is_number() const noexcept { return value.index() == 0; }
+  [[nodiscard]] double number() const { return std::get<double>(value); }
+  [[nodiscard]] const std::string& expression() const { return std::get<std::string>(value); }
 };
 
-/// [constraints]: every target resolved to a number; unset: the constraint is not used.
-struct SceneConstraints {
-  std::optional<double> area;          ///< A0
-  std::optional<double> volume;        ///< V0
-  std::optional<SceneMoment> moment;
-  std::optional<double> reduced_volume;  ///< v = V0 / V_sphere(A0) when area and volume are both set
+/// [constraints.NAME]: the target of the form's `constraint NAME` (the constant it compares with).
+struct SceneConstraint {
+  std::string name;
+  std::string where;
+  std::optional<double> target;        ///< unset: the form's target constant, as given in [constants]
+  std::optional<double> scale;         ///< |C − c| / scale is the relative residual; unset: |target| or 1
 };
 
-/// [solver]: defaults are those of ConstrainedMinimizerOptions.
+/// [[dirichlet]]: prescribed nodal values of chosen components of an unknown on parts of the boundary.
+struct SceneDirichlet {
+  /// Box sides ("x_min", "x_max", "y_min", ..., axisymmetric "r_max", "z_min", "z_max"), "hull" (every
+  /// node of the convex hull), "axis" (r = 0 of an axisymmetric scene).
+  std::vector<std::string> boundary;
+  std::string unknown;
+  std::vector<int> components;         ///< empty: every component
+  SceneValue value;                    ///< one number for every component, or an expression (scalar or vector)
+  std::string where;
+};
+
+/// [initial]: the starting value of one unknown.
+struct SceneInitialField {
+  std::string unknown;
+  enum class Kind { value, file } kind = Kind::value;
+  SceneValue value;                    ///< Kind::value
+  std::filesystem::path file;          ///< Kind::file: a previous run's HDF5 output
+  std::string field;                   ///< Kind::file: its dataset name (default: the unknown's name)
+  std::string where;
+};
+
+/// [qdata]: runtime-supplied quadrature data by the name the form declares.
+struct SceneQdata {
+  std::string name;
+  /// "support_size": rho-bar, the mean support radius of the point's LME neighbours weighted by their
+  /// basis values; "zero": zeros (e.g. a reference field to be set by a model).
+  std::string provider;
+  std::string where;
+};
+
+/// [solver]: the constrained minimizer, the Newton iteration and PETSc options.
 struct SceneSolver {
   double penalty = 1e-3;
   double augmented_tolerance = 1e-4;
@@ -88,78 +135,67 @@ struct SceneSolver {
   double newton_tolerance = 1e-9;
   double constraint_tolerance = 1e-10;
   int max_newton_iterations = 25;
+  /// Appended to the PETSc options database before the solve ("-ksp_type gmres -pc_type ...").
+  std::string petsc_options;
 };
 
-/// One stage of the progressive CVT schedule (seed Table B.6): relocate the nodes by Lloyd
-/// iterations for the density rho = 1 + f |grad phi| of the current solution, then solve at eps.
-/// lloyd_iterations = 0: no relocation, the stage only lowers eps on the current grid.
-struct AdaptivityStage {
-  double eps = 0;
-  double f = 0;
-  int lloyd_iterations = 20;
-  /// A side solve: it starts from the previous stage like any other, but later stages that are not
-  /// branches continue from the last stage that is not one (seed Table 3 reports O12 at eps = 0.02,
-  /// while O13 is adapted with the phase field of O12 at eps = 0.025).
-  bool branch = false;
-};
-
-struct SceneAdaptivity {
-  std::vector<AdaptivityStage> stages;  ///< non-empty, eps non-increasing
-  /// Where each stage's Lloyd iterations start: from the current nodes (the seed: "CVT starting
-  /// from grid O1") or from nodes re-placed with the CVT node density of rho (CvtStart::density).
-  bool start_from_density = false;
-  double samples_per_node = 64;          ///< CVT samples per node
+/// [reference]: what the result is compared with.
+struct SceneReference {
+  std::optional<double> energy;        ///< e.g. the sharp-interface energy
+  /// Exact solution per unknown (expressions of x): the run reports L2 and H1 errors.
+  std::vector<std::pair<std::string, SceneValue>> solution;
 };
 
 struct SceneOutput {
   std::filesystem::path directory;     ///< relative paths: against the working directory
   bool hdf5 = true;                    ///< HDF5 + XDMF sidecar
-  bool png = true;                     ///< node set coloured by phi with the phi = 0 contour
+  bool png = true;                     ///< a picture of the first scalar field (2D)
 };
+
+struct SceneDocument;  // the parsed TOML, for model extensions (scene_table.hpp)
 
 struct Scene {
   std::string source;                  ///< the file name used in messages
+  std::filesystem::path folder;        ///< the scene's folder: relative paths resolve against it
   std::string name;
-  Coordinates coordinates = Coordinates::axisymmetric;
-  Box domain;                          ///< dim 2 or 3 (axisymmetric: 2, (r, z))
+  Coordinates coordinates = Coordinates::cartesian;
+  Box domain;                          ///< dim 1, 2 or 3 (axisymmetric: 2, (r, z))
   SceneNodes nodes;
-  SceneInitial initial;
   SceneModel model;
-  SceneConstraints constraints;
+  std::map<std::string, double, std::less<>> constants;  ///< [constants], by name
+  std::map<std::string, std::string, std::less<>> constant_where;
+  std::vector<SceneConstraint> constraints;
+  std::vector<SceneDirichlet> dirichlet;
+  std::vector<SceneInitialField> initial;
+  std::vector<SceneQdata> qdata;
   SceneSolver solver;
-  std::optional<SceneAdaptivity> adaptivity;
-  std::optional<double> reference_energy;
+  SceneReference reference;
   std::optional<SceneOutput> output;
+  /// Extension tables (e.g. "vesicle") kept for the model that reads them.
+  std::vector<std::string> extensions;
+  std::shared_ptr<const SceneDocument> document;
 
   [[nodiscard]] int dim() const noexcept { return domain.dim; }
   [[nodiscard]] bool axisymmetric() const noexcept { return coordinates == Coordinates::axisymmetric; }
-  /// eps of the last solve: the last adaptivity stage's, else model.eps.
-  [[nodiscard]] double final_eps() const noexcept;
-  /// The smallest spacing of the uniform grid the node keys describe; nullopt for a node file or a
-  /// CVT node count (checked by the run once the nodes exist).
-  [[nodiscard]] std::optional<double> uniform_min_spacing() const;
-  /// Signed distance to the initial shape at x (dim entries), > 0 inside.
-  [[nodiscard]] double initial_distance(std::span<const double> x) const;
-  /// The initial phase field tanh(d / (sqrt(2) eps)) at x, eps = initial.eps or model.eps.
-  [[nodiscard]] double initial_phi(std::span<const double> x) const;
+  [[nodiscard]] bool has_extension(std::string_view table) const;
+  /// "FILE:LINE: key 'constants.eps'" for messages about a constant (FILE alone if absent).
+  [[nodiscard]] std::string where_constant(std::string_view name) const;
 };
 
-/// Reads and validates a scene file. Throws SceneError.
-[[nodiscard]] Scene load_scene(const std::filesystem::path& path);
+/// Reads and validates a scene file. Throws SceneError. `extensions`: top-level tables a model
+/// reads itself (kept unread here).
+[[nodiscard]] Scene load_scene(const std::filesystem::path& path, std::span<const std::string_view> extensions = {});
 
-/// Parses scene text; source_name is used in messages and its folder resolves relative node files.
-[[nodiscard]] Scene parse_scene(std::string_view text, std::string source_name);
+/// Parses scene text; source_name is used in messages and its folder resolves relative paths.
+[[nodiscard]] Scene parse_scene(std::string_view text, std::string source_name,
+                                std::span<const std::string_view> extensions = {});
 
-/// The largest volume bounded by area A0 (the sphere's): A0^{3/2} / (6 sqrt(pi)).
-/// dim = 2 (Cartesian 2D): the largest area bounded by a curve of length A0, A0^2 / (4 pi).
-[[nodiscard]] double max_volume_for_area(double A0, int dim = 3);
-
-/// Throws SceneError unless 0 < V0 <= max_volume_for_area(A0, dim); the message gives V0, V_max, A0 and
-/// the reduced volume V0 / V_max.
-void check_feasible(double A0, double V0, int dim = 3);
-
-/// Signed distance from x to the ellipsoid with the given center and semi-axes (dim 1-3), > 0 inside.
+/// The signed distance from x to the ellipsoid with the given center and semi-axes (dim 1-3), > 0 inside.
 [[nodiscard]] double ellipsoid_signed_distance(std::span<const double> x, std::span<const double> center,
                                                std::span<const double> semi_axes);
+
+/// The edit-distance suggestion among candidates ("" when none is close): the did-you-mean of every
+/// name check.
+[[nodiscard]] std::string closest_name(std::string_view word, std::span<const std::string> candidates);
 
 }  // namespace lmeform

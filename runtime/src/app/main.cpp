@@ -1,87 +1,129 @@
-// lmeform — run a scene.
+// lmeform — run any model from its .form files and a scene, and check forms.
 //
-//   lmeform run SCENE.toml [--json OUT.json] [--output DIR]
+//   lmeform run SCENE.toml [--json OUT.json] [--output DIR] [PETSc options]
+//   lmeform check FORM.form [--dim D] [--set NAME=VALUE] [--json OUT.json] ...
 //
-// Reads the scene, builds the node set (uniform, from a file, or adapted by CVT stages),
-// minimizes the phase-field Helfrich energy under the scene's constraints, prints progress and a
-// closing table, and writes HDF5 + XDMF, a PNG and (with --json) the run's figures.
+// `run` reads the scene, loads its forms (built-in or compiled at run time), builds the node set,
+// solves the problem the scene's outputs describe (constrained minimization, a residual, or a
+// linear problem), prints progress and a closing table, and writes HDF5 + XDMF (ParaView), a PNG
+// and (with --json) the run's figures.
 #include <CLI/CLI.hpp>
 
-#include <algorithm>
+#include <unistd.h>
+
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
-#include <numeric>
-#include <sstream>
+#include <limits>
 #include <string>
 
-#include "lmeform/cvt.hpp"
-#include "lmeform/lme_basis.hpp"
-#include "lmeform/node_sets.hpp"
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#if __has_include("check_command.hpp")
+#include "check_command.hpp"
+#define LMEFORM_HAVE_CHECK 1
+#endif
+#include "lmeform/form_registry.hpp"
 #include "lmeform/output.hpp"
 #include "lmeform/petsc.hpp"
 #include "lmeform/scene.hpp"
 #include "run_scene.hpp"
-#include "vesicle.hpp"
 
 namespace {
 
 using namespace lmeform;
+namespace fs = std::filesystem;
 
-std::string json_number(double v) {
-  if (!std::isfinite(v)) return "null";
-  std::ostringstream os;
-  os.precision(12);
-  os << v;
-  return os.str();
+/// A JSON number, or null for NaN / infinity (JSON has neither).
+nlohmann::json number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); }
+
+/// Refuses, before any work, an output that could not be written at the end.
+void check_writable(const fs::path& json_path, const fs::path& out_dir, bool writes_files) {
+  if (!json_path.empty()) {
+    const fs::path dir = json_path.parent_path().empty() ? fs::path(".") : json_path.parent_path();
+    if (fs::is_directory(json_path)) throw std::runtime_error(fmt::format("--json {}: is a directory", json_path.string()));
+    if (!fs::is_directory(dir)) throw std::runtime_error(fmt::format("--json {}: the folder {} does not exist", json_path.string(), dir.string()));
+    if (::access(dir.c_str(), W_OK) != 0) throw std::runtime_error(fmt::format("--json {}: the folder {} is not writable", json_path.string(), dir.string()));
+  }
+  if (writes_files) {
+    std::error_code ec;
+    fs::create_directories(out_dir, ec);
+    if (ec || !fs::is_directory(out_dir) || ::access(out_dir.c_str(), W_OK) != 0)
+      throw std::runtime_error(fmt::format("the output directory {} cannot be created or written{}", out_dir.string(),
+                                           ec ? " (" + ec.message() + ")" : ""));
+  }
 }
 
 int run(const std::string& scene_path, const std::string& json_path, const std::string& output_override) {
   const int rank = PetscSession::rank();
   std::ostream* log = rank == 0 ? &std::cout : nullptr;
   const auto t_start = std::chrono::steady_clock::now();
-  const Scene scene = load_scene(scene_path);
-  app::check_runnable(scene);  // before any directory is made
-  std::filesystem::path out_dir = !output_override.empty() ? std::filesystem::path(output_override)
-                                  : scene.output ? scene.output->directory
-                                                 : std::filesystem::path("out") / scene.name;
+  const Scene scene = load_scene(scene_path, app::model_extensions());
+  const fs::path out_dir = !output_override.empty() ? fs::path(output_override)
+                           : scene.output         ? scene.output->directory
+                                                  : fs::path("out") / scene.name;
   const bool write_hdf5 = !scene.output || scene.output->hdf5;
-  const bool write_png = !scene.output || scene.output->png;
-  if (rank == 0) std::filesystem::create_directories(out_dir);
+  const bool write_png = write_hdf5 && (!scene.output || scene.output->png) && scene.dim() == 2;
+  int ok = 1;
+  std::string why;
+  if (rank == 0) {
+    try {
+      check_writable(json_path, out_dir, write_hdf5);
+    } catch (const std::exception& e) {
+      ok = 0;
+      why = e.what();
+    }
+  }
+  MPI_Bcast(&ok, 1, MPI_INT, 0, PETSC_COMM_WORLD);
+  if (ok == 0) throw std::runtime_error(rank == 0 ? why : "an output cannot be written");
 
   const app::SceneRun run = app::run_scene(PETSC_COMM_WORLD, scene, log);
-  const std::vector<app::StageRecord>& stages = run.stages;
-  const std::string& failure = run.failure;
+  const auto& stages = run.stages;
   const app::StageRecord& last = stages.back();
-  const auto& r = last.result;
-  const bool converged = failure.empty() && r.solve.converged;
-  const std::string status = !failure.empty()        ? "FAILED: " + failure
-                             : r.solve.converged ? std::string("converged")
-                                                 : "FAILED: " + r.solve.message;
-  const double reference = scene.reference_energy.value_or(std::nan(""));
-  const double rel_error = scene.reference_energy ? (r.solve.energy - reference) / reference : std::nan("");
+  const app::ProblemResult& r = last.result;
+  const bool converged = run.failure.empty() && r.converged;
+  const std::string status = !run.failure.empty() ? "FAILED: " + run.failure
+                             : r.converged       ? std::string("converged")
+                                                 : "FAILED: " + r.message;
+  const double reference = scene.reference.energy.value_or(std::nan(""));
+  auto rel_error = [&](double e) { return scene.reference.energy ? (e - reference) / reference : std::nan(""); };
+  const bool minimization = scene.model.kind == ProblemKind::minimization;
 
   // Outputs: the final (or last) state, atomically.
   std::string h5_name, png_name;
   if (rank == 0 && write_hdf5) {
     const auto h5 = out_dir / (scene.name + ".h5");
+    // One field per unknown (its components), |∇u| of the first scalar unknown.
+    std::map<std::string, std::vector<double>, std::less<>> storage;
     FieldViews fields;
-    fields.emplace("phi", FieldView{r.phi, 1});
-    fields.emplace("grad_phi_norm", FieldView{r.grad_phi_norm, 1});
+    const std::size_t n = r.nodes.size();
+    const std::size_t bs = n == 0 ? 0 : r.state.size() / n;
+    std::size_t offset = 0;
+    for (const auto& u : run.unknowns) {
+      auto& values = storage[u.name];
+      values.resize(n * std::size_t(u.components));
+      for (std::size_t a = 0; a < n; ++a)
+        for (int c = 0; c < u.components; ++c) values[a * std::size_t(u.components) + std::size_t(c)] = r.state[a * bs + offset + std::size_t(c)];
+      offset += std::size_t(u.components);
+      fields.emplace(u.name, FieldView{values, u.components});
+    }
+    if (!r.gradient_norm.empty()) fields.emplace("grad_" + run.unknowns.front().name + "_norm", FieldView{r.gradient_norm, 1});
     OutputAttributes attributes;
-    attributes.emplace("energy", r.solve.energy);
-    attributes.emplace("eps", last.eps);
+    if (minimization) attributes.emplace("energy", r.energy);
+    if (run.vesicle) attributes.emplace("eps", last.eps);
     attributes.emplace("converged", static_cast<std::int64_t>(converged ? 1 : 0));
     attributes.emplace("status", status);
     attributes.emplace("scene", scene.source);
     write_field_hdf5(h5, r.nodes, r.cells, fields, attributes);
     h5_name = h5.string();
-    if (write_png) {
+    if (write_png && !run.unknowns.empty() && run.unknowns.front().components == 1) {
       const auto png = out_dir / (scene.name + ".png");
-      const std::string command = "/usr/bin/python3 " LMEFORM_SOURCE_DIR "/scripts/plot_vesicle.py '" + h5.string() +
-                                  "' '" + png.string() + "' --mirror > /dev/null";
+      const std::string command = fmt::format("/usr/bin/python3 {}/scripts/plot_vesicle.py '{}' '{}' --field '{}'{} > /dev/null",
+                                              LMEFORM_SOURCE_DIR, h5.string(), png.string(), run.unknowns.front().name,
+                                              scene.axisymmetric() ? " --mirror" : "");
       if (std::system(command.c_str()) == 0) png_name = png.string();
       else std::cerr << "lmeform: warning: the plot script failed (" << command << ")\n";
     }
@@ -91,73 +133,94 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
   if (rank == 0) {
     std::printf("\n%-26s %s\n", "scene", scene.source.c_str());
     std::printf("%-26s %s\n", "status", status.c_str());
-    std::printf("%-26s %.6f\n", "energy", r.solve.energy);
-    if (scene.reference_energy) {
-      std::printf("%-26s %.6f (relative error %+.3f %%)\n", "sharp-interface reference", reference, 100 * rel_error);
+    if (minimization) {
+      std::printf("%-26s %.6f\n", "energy", r.energy);
+      if (scene.reference.energy)
+        std::printf("%-26s %.6f (relative error %+.3f %%)\n", "reference energy", reference, 100 * rel_error(r.energy));
+      for (std::size_t i = 0; i < r.constraint_names.size(); ++i) {
+        // The vesicle's area multiplier is the membrane tension, its volume multiplier the pressure difference.
+        const std::string& c = r.constraint_names[i];
+        const char* meaning = !run.vesicle ? "" : c == "area" ? " (tension)" : c == "volume" ? " (pressure)" : "";
+        std::printf("%-26s %.6g (relative residual %.1e), multiplier%s %.6g\n", (c + " constraint").c_str(),
+                    r.minimization.constraint_values[i], r.minimization.relative_residuals[i], meaning,
+                    r.minimization.multipliers[i]);
+      }
+    } else {
+      std::printf("%-26s %s\n", "solver", r.message.c_str());
     }
-    for (std::size_t i = 0; i < r.constraint_names.size(); ++i) {
-      // The area multiplier is the membrane tension, the volume multiplier the pressure difference.
-      const std::string& c = r.constraint_names[i];
-      const char* meaning = c == "area" ? " (tension)" : c == "volume" ? " (pressure)" : "";
-      std::printf("%-26s %.6g (relative residual %.1e), multiplier%s %.6g\n", (c + " constraint").c_str(),
-                  r.solve.constraint_values[i], r.solve.relative_residuals[i], meaning, r.solve.multipliers[i]);
-    }
+    for (const auto& e : r.errors)
+      std::printf("%-26s L2 %.6e, H1 semi-norm %.6e\n", ("error of " + e.unknown).c_str(), e.l2, e.h1);
     std::printf("%-26s %d (h_min %.4g, h_mean %.4g)\n", "nodes", last.nodes, r.h_min, r.h_mean);
-    std::printf("%-26s %g\n", "eps", last.eps);
-    std::printf("%-26s %d augmented Lagrangian + %d KKT\n", "Newton iterations", r.solve.augmented_iterations,
-                r.solve.newton_iterations);
-    std::printf("\n%-20s %8s %8s %9s %10s %12s %8s %10s %9s %9s %9s\n", "stage", "nodes", "eps", "h_min", "energy",
-                "rel. error", "AL+KKT", "adapt s", "setup s", "AL s", "KKT s");
-    for (const auto& s : stages) {
-      const double e = s.result.solve.energy;
-      const std::string its = std::to_string(s.result.solve.augmented_iterations) + "+" +
-                              std::to_string(s.result.solve.newton_iterations);
-      char error[32] = "-";
-      if (scene.reference_energy) std::snprintf(error, sizeof error, "%+.3f%%", 100 * (e - reference) / reference);
-      const std::string name = std::to_string(s.stage) + " " + s.grid + s.label;
-      std::printf("%-20s %8d %8g %9.4g %10.5f %12s %8s %10.2f %9.2f %9.2f %9.2f\n", name.c_str(), s.nodes, s.eps,
-                  s.h_min, e, error, its.c_str(), s.adapt_s, s.result.seconds_setup, s.result.solve.seconds_augmented,
-                  s.result.solve.seconds_newton);
+    if (run.vesicle) std::printf("%-26s %g\n", "eps", last.eps);
+    if (minimization)
+      std::printf("%-26s %d augmented Lagrangian + %d KKT\n", "Newton iterations", r.minimization.augmented_iterations,
+                  r.minimization.newton_iterations);
+    if (run.vesicle) {
+      std::printf("\n%-20s %8s %8s %9s %10s %12s %8s %10s %9s %9s %9s\n", "stage", "nodes", "eps", "h_min", "energy",
+                  "rel. error", "AL+KKT", "adapt s", "setup s", "AL s", "KKT s");
+      for (const auto& s : stages) {
+        const std::string its = std::to_string(s.result.minimization.augmented_iterations) + "+" +
+                                std::to_string(s.result.minimization.newton_iterations);
+        const std::string error = scene.reference.energy ? fmt::format("{:+.3f}%", 100 * rel_error(s.result.energy)) : "-";
+        const std::string name = std::to_string(s.stage) + " " + s.grid + s.label;
+        std::printf("%-20s %8d %8g %9.4g %10.5f %12s %8s %10.2f %9.2f %9.2f %9.2f\n", name.c_str(), s.nodes, s.eps, s.h_min,
+                    s.result.energy, error.c_str(), its.c_str(), s.adapt_s, s.result.seconds_setup,
+                    s.result.minimization.seconds_augmented, s.result.minimization.seconds_newton);
+      }
+    } else {
+      std::printf("%-26s setup %.2f s, solve %.2f s\n", "times", r.seconds_setup, r.seconds_solve);
     }
     std::printf("%-26s %.1f s\n", "total wall time", total_s);
     if (!h5_name.empty()) std::printf("%-26s %s (+ .xmf for ParaView)\n", "fields", h5_name.c_str());
     if (!png_name.empty()) std::printf("%-26s %s\n", "figure", png_name.c_str());
     if (!json_path.empty()) {
-      std::ostringstream js;
-      std::string message;  // JSON-escaped status
-      for (const char c : status) {
-        if (c == '"' || c == '\\') message += '\\';
-        message += c == '\n' ? ' ' : c;
+      nlohmann::json js;
+      js["scene"] = scene.name;
+      js["problem"] = minimization ? "minimization" : scene.model.kind == ProblemKind::residual ? "residual" : "linear";
+      js["converged"] = converged;
+      js["status"] = status;
+      js["nodes"] = last.nodes;
+      js["h_min"] = number(r.h_min);
+      js["energy"] = number(r.energy);
+      js["relative_error_reference"] = number(rel_error(r.energy));
+      js["wall_s"] = number(total_s);
+      js["setup_s"] = number(r.seconds_setup);
+      js["solve_s"] = number(r.seconds_solve);
+      js["iterations"] = r.iterations;
+      js["residual_norm"] = number(r.residual_norm);
+      js["errors"] = nlohmann::json::array();
+      for (const auto& e : r.errors) js["errors"].push_back({{"unknown", e.unknown}, {"l2", number(e.l2)}, {"h1", number(e.h1)}});
+      if (minimization) {
+        js["newton_iterations"] = r.minimization.newton_iterations;
+        js["augmented_iterations"] = r.minimization.augmented_iterations;
+        js["multipliers"] = nlohmann::json::object();
+        js["constraint_residuals"] = nlohmann::json::object();
+        for (std::size_t i = 0; i < r.constraint_names.size(); ++i) {
+          js["multipliers"][r.constraint_names[i]] = number(r.minimization.multipliers[i]);
+          js["constraint_residuals"][r.constraint_names[i]] = number(r.minimization.relative_residuals[i]);
+        }
       }
-      js << "{\n  \"scene\": \"" << scene.name << "\",\n  \"converged\": " << (converged ? "true" : "false")
-         << ",\n  \"status\": \"" << message << "\""
-         << ",\n  \"eps\": " << json_number(last.eps) << ",\n  \"grid\": \""
-         << (stages.size() > 1 ? "adapted" : "uniform") << "\",\n  \"nodes\": " << last.nodes
-         << ",\n  \"energy\": " << json_number(r.solve.energy)
-         << ",\n  \"relative_error_sharp\": " << json_number(rel_error) << ",\n  \"wall_s\": " << json_number(total_s)
-         << ",\n  \"newton_iterations\": " << r.solve.newton_iterations
-         << ",\n  \"augmented_iterations\": " << r.solve.augmented_iterations << ",\n  \"multipliers\": {";
-      for (std::size_t i = 0; i < r.constraint_names.size(); ++i) {
-        js << (i ? ", " : "") << "\"" << r.constraint_names[i] << "\": " << json_number(r.solve.multipliers[i]);
+      if (run.vesicle) {
+        js["eps"] = number(last.eps);
+        js["grid"] = stages.size() > 1 ? "adapted" : "uniform";
+        js["relative_error_sharp"] = number(rel_error(r.energy));
       }
-      js << "},\n  \"constraint_residuals\": {";
-      for (std::size_t i = 0; i < r.constraint_names.size(); ++i) {
-        js << (i ? ", " : "") << "\"" << r.constraint_names[i] << "\": " << json_number(r.solve.relative_residuals[i]);
+      js["stages"] = nlohmann::json::array();
+      for (const auto& s : stages) {
+        js["stages"].push_back({{"stage", s.stage},
+                                {"grid", s.grid},
+                                {"branch", !s.label.empty()},
+                                {"eps", number(s.eps)},
+                                {"nodes", s.nodes},
+                                {"h_min", number(s.h_min)},
+                                {"energy", number(s.result.energy)},
+                                {"relative_error_sharp", number(rel_error(s.result.energy))},
+                                {"augmented_iterations", s.result.minimization.augmented_iterations},
+                                {"newton_iterations", s.result.minimization.newton_iterations},
+                                {"adapt_s", number(s.adapt_s)},
+                                {"wall_s", number(s.wall_s)}});
       }
-      js << "},\n  \"stages\": [";
-      for (std::size_t i = 0; i < stages.size(); ++i) {
-        const double e = stages[i].result.solve.energy;
-        js << (i ? ",\n    " : "\n    ") << "{\"stage\": " << stages[i].stage << ", \"grid\": \"" << stages[i].grid << "\", \"branch\": "
-           << (stages[i].label.empty() ? "false" : "true") << ", \"eps\": " << json_number(stages[i].eps)
-           << ", \"nodes\": " << stages[i].nodes << ", \"h_min\": " << json_number(stages[i].h_min)
-           << ", \"energy\": " << json_number(e) << ", \"relative_error_sharp\": "
-           << json_number(scene.reference_energy ? (e - reference) / reference : std::nan(""))
-           << ", \"augmented_iterations\": " << stages[i].result.solve.augmented_iterations
-           << ", \"newton_iterations\": " << stages[i].result.solve.newton_iterations
-           << ", \"adapt_s\": " << json_number(stages[i].adapt_s) << ", \"wall_s\": " << json_number(stages[i].wall_s) << "}";
-      }
-      js << "]\n}\n";
-      write_text_atomically(json_path, js.str());
+      write_text_atomically(json_path, js.dump(2) + "\n");
     }
   }
   return converged ? 0 : 2;
@@ -166,14 +229,18 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App cli{"lmeform: phase-field vesicles on local maximum-entropy meshfree discretizations"};
+  CLI::App cli{"lmeform: models from .form files on local maximum-entropy meshfree discretizations"};
   cli.require_subcommand(1);
-  auto* run_cmd = cli.add_subcommand("run", "Minimize the energy of a scene (TOML) and write its results");
+  auto* run_cmd = cli.add_subcommand("run", "Solve the problem of a scene (TOML) and write its results");
   std::string scene_path, json_path, output_dir;
   run_cmd->add_option("scene", scene_path, "scene file (.toml)")->required()->check(CLI::ExistingFile);
-  run_cmd->add_option("--json", json_path, "write the run's figures (eps, grid, nodes, energy, relative_error_sharp, wall_s)");
+  run_cmd->add_option("--json", json_path, "write the run's figures (energy, errors, iterations, stages, wall_s)");
   run_cmd->add_option("--output", output_dir, "output directory (default: the scene's [output] directory)");
-  run_cmd->allow_extras();  // PETSc options (-constrained_pc_factor_mat_solver_type ...) pass through
+  run_cmd->allow_extras();  // PETSc options (-ksp_type gmres, -snes_monitor, ...) pass through
+#ifdef LMEFORM_HAVE_CHECK
+  CheckCommandOptions check_options;
+  auto* check_cmd = add_check_subcommand(cli, check_options);
+#endif
   try {
     cli.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -181,9 +248,15 @@ int main(int argc, char** argv) {
   }
   try {
     PetscSession session(&argc, &argv);
+#ifdef LMEFORM_HAVE_CHECK
+    if (check_cmd->parsed()) return run_check_command(check_options);
+#endif
     return run(scene_path, json_path, output_dir);
   } catch (const SceneError& e) {
     std::cerr << "lmeform: scene error: " << e.what() << "\n";
+    return 1;
+  } catch (const FormLoadError& e) {
+    std::cerr << "lmeform: form error: " << e.what() << "\n";
     return 1;
   } catch (const std::exception& e) {
     std::cerr << "lmeform: error: " << e.what() << "\n";

@@ -2,26 +2,182 @@
 
 #include <algorithm>
 #include <cmath>
-#include <numeric>
+#include <numbers>
 #include <stdexcept>
 
-#include "area_axisymmetric_kernels.hpp"
-#include "helfrich_axisymmetric_kernels.hpp"
-#include "lmeform/assembler.hpp"
+#include <fmt/format.h>
+
 #include "lmeform/cvt.hpp"
-#include "lmeform/discretization.hpp"
-#include "lmeform/node_sets.hpp"
-#include "lmeform/scene.hpp"
-#include "moment_axisymmetric_kernels.hpp"
-#include "volume_axisymmetric_kernels.hpp"
+#include "lmeform/scene_table.hpp"
 
 namespace lmeform::app {
 
-double ellipsoid_profile(double r, double z, std::array<double, 2> semi_axes, double z_center, double eps) {
-  // The exact signed distance to the ellipse (positive inside), as the scenes use it.
-  const std::array<double, 2> x{r, z}, center{0.0, z_center};
-  const double inside = ellipsoid_signed_distance(x, center, semi_axes);
-  return std::tanh(inside / (std::sqrt(2.0) * eps));
+namespace {
+
+using scene_detail::format_number;
+
+void read_initial_shape(const Scene& s, const SceneTable& t, VesicleModel& m) {
+  const std::string shape = t.choice_of("shape", t.string("shape"), {"ellipsoid", "sphere"});
+  const std::vector<double> c = t.numbers("center", s.dim());
+  for (std::size_t i = 0; i < c.size(); ++i) m.center[i] = c[i];
+  if (shape == "ellipsoid") {
+    m.shape = VesicleModel::Shape::ellipsoid;
+    if (t.has("radius")) t.fail_key("radius", "belongs to shape 'sphere'; an ellipsoid takes 'semi_axes'");
+    const std::vector<double> a = t.numbers("semi_axes", s.dim());
+    for (std::size_t i = 0; i < a.size(); ++i) m.semi_axes[i] = t.positive("semi_axes", a[i]);
+  } else {
+    m.shape = VesicleModel::Shape::sphere;
+    if (t.has("semi_axes")) t.fail_key("semi_axes", "belongs to shape 'ellipsoid'; a sphere takes 'radius'");
+    const double r = t.positive("radius", t.number("radius"));
+    for (int i = 0; i < s.dim(); ++i) m.semi_axes[std::size_t(i)] = r;
+  }
+  if (t.has("eps")) m.profile_eps = t.positive("eps", t.number("eps"));
+  if (s.axisymmetric() && m.center[0] != 0.0)
+    t.fail_key("center", "must lie on the axis (r = 0) in an axisymmetric scene, got r = " + format_number(m.center[0]));
+  for (int i = 0; i < s.dim(); ++i) {
+    const auto k = std::size_t(i);
+    const std::string key = m.shape == VesicleModel::Shape::sphere ? "radius" : "semi_axes";
+    const double lo = m.center[k] - m.semi_axes[k], hi = m.center[k] + m.semi_axes[k];
+    if (hi > s.domain.hi[k])
+      t.fail_key(key, fmt::format("puts the initial shape outside the domain: it reaches {} on axis {} > upper bound {}", hi, i,
+                                  s.domain.hi[k]));
+    if (!(s.axisymmetric() && i == 0) && lo < s.domain.lo[k])
+      t.fail_key(key, fmt::format("puts the initial shape outside the domain: it reaches {} on axis {} < lower bound {}", lo, i,
+                                  s.domain.lo[k]));
+  }
+}
+
+void read_adaptivity(const SceneTable& t, VesicleModel& m) {
+  const int lloyd = t.at_least("lloyd_iterations", t.integer("lloyd_iterations", 20), 1);
+  VesicleAdaptivity a;
+  a.start_from_density = t.choice_of("start", t.optional_string("start").value_or("nodes"), {"nodes", "density"}) == "density";
+  a.samples_per_node = t.positive("samples_per_node", t.number("samples_per_node", a.samples_per_node));
+  if (a.samples_per_node < 1) t.fail_key("samples_per_node", "must be at least 1, got " + format_number(a.samples_per_node));
+  const toml::node& n = t.require("stages");
+  const auto* arr = n.as_array();
+  if (arr == nullptr) t.wrong_type("stages", n, "an array of tables");
+  if (arr->empty()) t.fail_key("stages", "must list at least one stage (or leave out [vesicle.adaptivity])");
+  double previous = m.eps, main_eps = m.eps;
+  for (std::size_t i = 0; i < arr->size(); ++i) {
+    const std::string key = "stages[" + std::to_string(i) + "]";
+    const SceneTable st = t.table_of(key, (*arr)[i], {"eps", "f", "lloyd_iterations", "branch"});
+    AdaptivityStage stage;
+    stage.eps = st.positive("eps", st.number("eps"));
+    stage.lloyd_iterations = st.at_least("lloyd_iterations", st.integer("lloyd_iterations", lloyd), 0);
+    stage.f = stage.lloyd_iterations == 0 && !st.has("f") ? 0.0 : st.non_negative("f", st.number("f"));
+    stage.branch = st.boolean("branch", false);
+    // Each stage lowers eps from the stage it continues from.
+    const bool after_branch = !a.stages.empty() && a.stages.back().branch;
+    const double from = after_branch && !stage.branch ? main_eps : previous;
+    if (stage.eps > from)
+      st.fail_key("eps", fmt::format("= {} exceeds the previous eps ({}{}): the schedule lowers eps", stage.eps, from,
+                                     i == 0 ? ", constants.eps" : ""));
+    previous = stage.eps;
+    if (!stage.branch) main_eps = stage.eps;
+    a.stages.push_back(stage);
+  }
+  m.adaptivity = std::move(a);
+}
+
+}  // namespace
+
+std::optional<VesicleModel> read_vesicle(const Scene& s) {
+  const auto t = extension_table(s, kVesicleExtension,
+                                 {"field", "width", "radius", "reduced_volume", "resolution_factor", "initial", "adaptivity"});
+  if (!t) return std::nullopt;
+  VesicleModel m;
+  m.field = t->optional_string("field").value_or(m.field);
+  m.width = t->optional_string("width").value_or(m.width);
+  const auto eps = s.constants.find(m.width);
+  if (eps == s.constants.end())
+    t->fail_key("width", fmt::format("names the constant '{}', which [constants] does not give: the vesicle model needs "
+                                     "the interface width",
+                                     m.width));
+  m.eps = eps->second;
+  if (!(m.eps > 0)) throw SceneError(fmt::format("{}: must be positive, got {}", s.where_constant(m.width), m.eps));
+  m.resolution_factor = t->positive("resolution_factor", t->number("resolution_factor", m.resolution_factor));
+
+  // Targets from a sphere: area 4πR² (2πR in 2D), volume v · 4/3 πR³ (v · πR² in 2D).
+  const int measure_dim = s.axisymmetric() ? 3 : s.dim();
+  const double pi = std::numbers::pi;
+  if (t->has("radius")) {
+    const double r = t->positive("radius", t->number("radius"));
+    m.area = measure_dim == 3 ? 4 * pi * r * r : 2 * pi * r;
+    if (t->has("reduced_volume")) {
+      const double v = t->positive("reduced_volume", t->number("reduced_volume"));
+      if (v > 1)
+        t->fail_key("reduced_volume", fmt::format("= {} must not exceed 1: no closed surface encloses more volume than the "
+                                                  "sphere of the same area",
+                                                  v));
+      m.reduced_volume = v;
+      m.volume = v * (measure_dim == 3 ? 4.0 / 3.0 * pi * r * r * r : pi * r * r);
+      try {
+        check_feasible(*m.area, *m.volume, measure_dim);
+      } catch (const SceneError& e) {
+        t->fail_key("reduced_volume", e.what());
+      }
+    }
+  } else if (t->has("reduced_volume")) {
+    t->fail_key("reduced_volume", "needs the sphere it refers to: add 'vesicle.radius'");
+  }
+  for (const auto& c : s.constraints) {
+    if ((c.name == "area" && m.area && c.target) || (c.name == "volume" && m.volume && c.target))
+      throw SceneError(fmt::format("{}: the target is already set by [vesicle] (radius / reduced_volume); give it once",
+                                   c.where));
+  }
+  if (const auto init = t->optional_table("initial", {"shape", "center", "semi_axes", "radius", "eps"})) {
+    read_initial_shape(s, *init, m);
+  } else {
+    t->fail_key("initial", "is missing: the vesicle model starts from [vesicle.initial] (shape, center, semi_axes or radius)");
+  }
+  if (const auto adapt = t->optional_table("adaptivity", {"stages", "lloyd_iterations", "start", "samples_per_node"})) {
+    if (s.dim() != 2) adapt->fail_key("stages", "CVT adaptivity is available in 2D and axisymmetric scenes only");
+    read_adaptivity(*adapt, m);
+  }
+  // The first solve must be resolved by the grid when the scene describes it completely.
+  if (s.nodes.kind == SceneNodes::Kind::spacing || s.nodes.kind == SceneNodes::Kind::counts) {
+    double h = std::numeric_limits<double>::infinity();
+    for (int i = 0; i < s.dim(); ++i) {
+      const auto k = std::size_t(i);
+      const double len = s.domain.hi[k] - s.domain.lo[k];
+      const double intervals = s.nodes.kind == SceneNodes::Kind::counts ? double(s.nodes.counts[k] - 1)
+                                                                        : std::max(1.0, std::round(len / s.nodes.spacing));
+      h = std::min(h, len / intervals);
+    }
+    try {
+      check_resolution(m.eps, h, m.resolution_factor, "constant '" + m.width + "'");
+    } catch (const std::invalid_argument& e) {
+      throw SceneError(fmt::format("{}: {} (the uniform grid of [nodes]; lower nodes.spacing or raise {})",
+                                   s.where_constant(m.width), e.what(), m.width));
+    }
+  }
+  return m;
+}
+
+double max_volume_for_area(double A0, int dim) {
+  const double pi = std::numbers::pi;
+  if (dim == 2) return A0 * A0 / (4 * pi);
+  return std::pow(A0, 1.5) / (6 * std::sqrt(pi));
+}
+
+void check_feasible(double A0, double V0, int dim) {
+  const char* area = dim == 2 ? "perimeter" : "area";
+  const char* volume = dim == 2 ? "area" : "volume";
+  const char* sphere = dim == 2 ? "circle" : "sphere";
+  if (!(A0 > 0)) throw SceneError(fmt::format("{} A0 = {} must be positive", area, A0));
+  if (!(V0 > 0)) throw SceneError(fmt::format("{} V0 = {} must be positive", volume, V0));
+  const double vmax = max_volume_for_area(A0, dim);
+  if (V0 > vmax * (1 + 1e-12))
+    throw SceneError(fmt::format("infeasible targets: {} V0 = {} exceeds V_max = {}, the {} of the {} with {} A0 = {} "
+                                 "(reduced volume {} > 1)",
+                                 volume, V0, vmax, volume, sphere, area, A0, V0 / vmax));
+}
+
+double initial_profile(const VesicleModel& m, std::span<const double> x, int dim) {
+  const auto d = std::size_t(dim);
+  const double inside = ellipsoid_signed_distance(x.first(d), std::span<const double>(m.center).first(d),
+                                                  std::span<const double>(m.semi_axes).first(d));
+  return std::tanh(inside / (std::numbers::sqrt2 * m.profile_eps.value_or(m.eps)));
 }
 
 std::vector<double> rescale_interface(std::span<const double> phi, double eps_from, double eps_to) {
@@ -32,165 +188,27 @@ std::vector<double> rescale_interface(std::span<const double> phi, double eps_fr
   return out;
 }
 
-LmeOptions axisymmetric_lme_options(int spacing_smoothing) {
-  // φ of a body of revolution is even in r: the basis is mirrored across the axis r = 0, so
-  // φ_r = 0 there exactly and φ_r / r stays finite (without it φ_r(0, z) ≠ 0 and the bending
-  // density ε² φ_r² / r grows without bound as quadrature points approach the axis).
+LmeOptions vesicle_lme_options(const Scene& scene) {
   LmeOptions o;
-  o.mirror_axis = 0;
-  o.mirror_position = 0.0;
-  // On CVT-graded node sets the distance to the few nearest nodes scatters from node to node;
-  // a smooth h_a keeps beta_a = gamma / h_a^2, and so the basis, regular (measured: the discocyte
-  // at eps = 0.04 on a graded 6124-node grid, +0.36 % from the converged energy with the raw
-  // spacing, +0.10 % with 5 passes; neutral on uniform grids).
-  o.spacing_smoothing = spacing_smoothing;
+  if (scene.axisymmetric()) {
+    // φ of a body of revolution is even in r: the basis is mirrored across the axis r = 0, so
+    // φ_r = 0 there exactly and φ_r / r stays finite (without it φ_r(0, z) ≠ 0 and the bending
+    // density ε² φ_r² / r grows without bound as quadrature points approach the axis).
+    o.mirror_axis = 0;
+    o.mirror_position = 0.0;
+  }
+  // On CVT-graded node sets the distance to the few nearest nodes scatters from node to node; a
+  // smooth h_a keeps β_a = γ / h_a², and so the basis, regular (measured: the discocyte at
+  // ε = 0.04 on a graded 6124-node grid, +0.36 % from the converged energy with the raw spacing,
+  // +0.10 % with 5 passes; neutral on uniform grids).
+  o.spacing_smoothing = scene.nodes.spacing_smoothing;
   return o;
 }
 
-VesicleFunctionals evaluate_vesicle(MPI_Comm comm, const VesicleSetup& setup) {
-  Box box;
-  box.dim = 2;
-  box.lo = {setup.lower[0], setup.lower[1], 0};
-  box.hi = {setup.upper[0], setup.upper[1], 0};
-  const NodeSet nodes = setup.nodes.size() > 0 ? setup.nodes : uniform_grid(box, setup.spacing);
-  DiscretizationOptions options;
-  options.gamma = {setup.gamma};
-  options.lme = axisymmetric_lme_options(setup.spacing_smoothing);
-  options.quadrature_points = setup.quadrature_points;
-  options.basis_order = 2;
-  const Discretization disc(comm, nodes, options);
-  std::vector<double> phi0(nodes.size());
-  for (std::size_t a = 0; a < nodes.size(); ++a) {
-    phi0[a] = setup.initial_phi.empty()
-                  ? ellipsoid_profile(nodes.coords[2 * a], nodes.coords[2 * a + 1], setup.semi_axes, setup.z_center, setup.eps)
-                  : setup.initial_phi[a];
-  }
-  Assembler energy(disc, helfrich_axisymmetric_bending_2d);
-  energy.set_constants(std::vector<double>{setup.k, setup.eps, setup.C0});
-  Assembler area(disc, area_axisymmetric_area_2d);
-  area.set_constant("eps", setup.eps);
-  area.set_constant("A0", 0.0);
-  Assembler volume(disc, volume_axisymmetric_volume_2d);
-  volume.set_constant("V0", 0.0);
-  Assembler moment(disc, moment_axisymmetric_moment_2d);
-  moment.set_constant("zc", setup.z_center);
-  moment.set_constant("M0", 0.0);
-  PetscVector phi = energy.create_vector();
-  set_from_original(disc, phi0, 1, phi);
-  return {energy.value(phi), area.value(phi), volume.value(phi), moment.value(phi)};
-}
-
-VesicleResult solve_vesicle(MPI_Comm comm, const VesicleSetup& setup) {
-  const double t0 = MPI_Wtime();
-  VesicleResult result;
-  Box box;
-  box.dim = 2;
-  box.lo = {setup.lower[0], setup.lower[1], 0};
-  box.hi = {setup.upper[0], setup.upper[1], 0};
-  result.nodes = setup.nodes.size() > 0 ? setup.nodes : uniform_grid(box, setup.spacing);
-  const NodeSet& nodes = result.nodes;
-  result.nodes_count = static_cast<int>(nodes.size());
-
-  DiscretizationOptions options;
-  options.gamma = {setup.gamma};
-  options.lme = axisymmetric_lme_options(setup.spacing_smoothing);
-  options.quadrature_points = setup.quadrature_points;
-  options.basis_order = 2;  // the Helfrich energy needs Laplacians of φ
-  const Discretization disc(comm, nodes, options);
-  {
-    const auto h = disc.basis().spacing();
-    result.h_min = *std::min_element(h.begin(), h.end());
-    result.h_mean = std::accumulate(h.begin(), h.end(), 0.0) / static_cast<double>(h.size());
-  }
-
-  Assembler energy(disc, helfrich_axisymmetric_bending_2d);
-  energy.set_constant("k", setup.k);
-  energy.set_constant("eps", setup.eps);
-  energy.set_constant("C0", setup.C0);
-
-  // Only the constraints the setup declares are built.
-  std::vector<std::unique_ptr<Assembler>> functionals;
-  std::vector<ScalarConstraint> constraints;
-  if (setup.area_target) {
-    functionals.push_back(std::make_unique<Assembler>(disc, area_axisymmetric_area_2d));
-    functionals.back()->set_constant("eps", setup.eps);
-    functionals.back()->set_constant("A0", *setup.area_target);
-    constraints.push_back({"area", functionals.back().get(), *setup.area_target, std::abs(*setup.area_target)});
-  }
-  if (setup.volume_target) {
-    functionals.push_back(std::make_unique<Assembler>(disc, volume_axisymmetric_volume_2d));
-    functionals.back()->set_constant("V0", *setup.volume_target);
-    constraints.push_back({"volume", functionals.back().get(), *setup.volume_target, std::abs(*setup.volume_target)});
-  }
-  if (setup.moment_target) {
-    functionals.push_back(std::make_unique<Assembler>(disc, moment_axisymmetric_moment_2d));
-    functionals.back()->set_constant("zc", setup.z_center);
-    functionals.back()->set_constant("M0", *setup.moment_target);
-    // The moment's natural size: the vesicle volume times its half-height.
-    const double size = setup.volume_target ? std::abs(*setup.volume_target) : 1.0;
-    constraints.push_back({"moment", functionals.back().get(), *setup.moment_target, size});
-  }
-  for (const auto& c : constraints) result.constraint_names.push_back(c.name);
-
-  // Initial field and the Dirichlet nodes: φ = −1 on r = r_max, z = z_min, z = z_max.
-  std::vector<double> phi0(nodes.size());
-  std::vector<int> boundary;
-  const double tol = 1e-9 * std::max(setup.upper[0] - setup.lower[0], setup.upper[1] - setup.lower[1]);
-  for (std::size_t a = 0; a < nodes.size(); ++a) {
-    const double r = nodes.coords[2 * a], z = nodes.coords[2 * a + 1];
-    phi0[a] = setup.initial_phi.empty() ? ellipsoid_profile(r, z, setup.semi_axes, setup.z_center, setup.eps)
-                                        : setup.initial_phi[a];
-    if (r >= setup.upper[0] - tol || z <= setup.lower[1] + tol || z >= setup.upper[1] - tol) {
-      boundary.push_back(static_cast<int>(a));
-      phi0[a] = -1.0;
-    }
-  }
-  PetscVector phi = energy.create_vector();
-  set_from_original(disc, phi0, 1, phi);
-
-  ConstrainedMinimizer minimizer(energy, constraints, setup.solver);
-  minimizer.set_fixed_dofs(owned_dofs_of_nodes(disc, boundary, 1));
-  result.seconds_setup = MPI_Wtime() - t0;
-  const double t1 = MPI_Wtime();
-  std::vector<double> nu;  // the minimizer works with multipliers of the scaled constraints
-  if (!setup.initial_multipliers.empty()) {
-    if (setup.initial_multipliers.size() != constraints.size()) {
-      throw std::invalid_argument("solve_vesicle: " + std::to_string(setup.initial_multipliers.size()) +
-                                  " starting multipliers for " + std::to_string(constraints.size()) + " constraints");
-    }
-    for (std::size_t i = 0; i < constraints.size(); ++i) nu.push_back(setup.initial_multipliers[i] * constraints[i].scale);
-  }
-  result.solve = minimizer.minimize(phi, nu);
-  result.seconds_solve = MPI_Wtime() - t1;
-
-  result.phi = to_original(disc, phi, 1);
-  // |∇φ| at the nodes (0 on the Dirichlet boundary, where φ is fixed; the axis is no boundary
-  // of the mirrored basis).
-  result.grad_phi_norm.assign(nodes.size(), 0.0);
-  std::vector<int> boundary_mask(nodes.size(), 0);
-  for (const int a : boundary) boundary_mask[static_cast<std::size_t>(a)] = 1;
-  for (std::size_t b = 0; b < nodes.size(); ++b) {
-    const auto o = static_cast<std::size_t>(disc.original_index()[b]);
-    if (boundary_mask[o] != 0) continue;
-    const auto x = disc.nodes().point(b);
-    const auto list = disc.basis().neighbours(x);
-    const auto jet = disc.basis().evaluate(x, list, 1);
-    double gr = 0, gz = 0;
-    for (std::size_t m = 0; m < list.size(); ++m) {
-      const double value = result.phi[static_cast<std::size_t>(disc.original_index()[static_cast<std::size_t>(list[m])])];
-      gr += jet[1 * list.size() + m] * value;
-      gz += jet[2 * list.size() + m] * value;
-    }
-    result.grad_phi_norm[o] = std::sqrt(gr * gr + gz * gz);
-  }
-  result.cells = delaunay(nodes);
-  return result;
-}
-
-std::vector<double> transfer_phi(const NodeSet& old_nodes, std::span<const double> phi, double gamma,
-                                 int spacing_smoothing, const NodeSet& new_nodes) {
+std::vector<double> transfer_phi(const NodeSet& old_nodes, std::span<const double> phi, double gamma, const LmeOptions& lme,
+                                 const NodeSet& new_nodes) {
   const std::vector<double> gammas(old_nodes.size(), gamma);
-  const LmeBasis basis(old_nodes, gammas, axisymmetric_lme_options(spacing_smoothing));
+  const LmeBasis basis(old_nodes, gammas, lme);
   std::vector<double> out(new_nodes.size());
   for (std::size_t a = 0; a < new_nodes.size(); ++a) {
     const auto x = new_nodes.point(a);
@@ -203,13 +221,8 @@ std::vector<double> transfer_phi(const NodeSet& old_nodes, std::span<const doubl
   return out;
 }
 
-NodeSet adapt_nodes(const VesicleResult& solved, std::array<double, 2> lower, std::array<double, 2> upper, double f,
-                    const CvtOptions& cvt, CvtReport* report) {
-  Box box;
-  box.dim = 2;
-  box.lo = {lower[0], lower[1], 0};
-  box.hi = {upper[0], upper[1], 0};
-  const auto density = phase_field_density(f, solved.nodes, solved.grad_phi_norm);
+NodeSet adapt_nodes(const ProblemResult& solved, const Box& box, double f, const CvtOptions& cvt, CvtReport* report) {
+  const auto density = phase_field_density(f, solved.nodes, solved.gradient_norm);
   return cvt_relocate(solved.nodes, box, density, cvt, report);
 }
 

@@ -1,10 +1,16 @@
-// The axisymmetric phase-field vesicle (seed statics, eq. (1) of Paper A): minimize the Helfrich
-// energy of φ on a (r, z) box subject to area, volume and static-moment constraints, φ = −1 on
-// the outer boundary (r = r_max, z = z_min, z = z_max; the axis r = 0 is free).
+// The phase-field vesicle model (seed statics, eq. (1) of Paper A): what belongs to it and to no
+// other model lives here. A scene opts in with a [vesicle] table; its forms and constants are
+// ordinary ([model], [constants]); this model adds
+//   * the targets from a sphere: area A0 of the sphere of `radius`, volume V0 = v · its volume
+//     (reduced_volume), with the feasibility check V0 <= V_max(A0);
+//   * the initial phase field tanh(d / (√2 ε)) of an ellipsoid or sphere;
+//   * the resolution rule ε ≥ resolution_factor · h_min, checked before each solve;
+//   * the adaptivity schedule (seed Table B.6): CVT relocations with the density ρ = 1 + f |∇φ| and
+//     continuation in ε (interface re-profiled, multipliers warm-started);
+//   * the axisymmetric basis mirrored across the axis.
 #pragma once
 
 #include <array>
-#include <iosfwd>
 #include <optional>
 #include <span>
 #include <string>
@@ -12,73 +18,76 @@
 
 #include "lmeform/cvt.hpp"
 #include "lmeform/lme_basis.hpp"
-#include "lmeform/constrained_minimizer.hpp"
-#include "lmeform/delaunay.hpp"
 #include "lmeform/node_set.hpp"
+#include "lmeform/scene.hpp"
+#include "problem.hpp"
 
 namespace lmeform::app {
 
-struct VesicleSetup {
-  std::array<double, 2> lower{0.0, 0.0}, upper{1.5, 2.0};  ///< (r, z) box
-  NodeSet nodes;                                           ///< given, or a uniform grid of `spacing`
-  double spacing = 0.03;
-  double gamma = 1.6;
-  int spacing_smoothing = 5;                               ///< LmeOptions::spacing_smoothing
-  int quadrature_points = 6;
-  // Model.
-  double k = 1.0, eps = 0.04, C0 = 0.0;
-  // Constraints (those not wanted are std::nullopt: nothing is computed for them).
-  std::optional<double> area_target, volume_target, moment_target;
-  double z_center = 1.0;
-  // Initial field: tanh profile of an ellipsoid with semi-axes (a_r, a_z) centred on the axis.
-  std::array<double, 2> semi_axes{0.55, 0.25};
-  std::vector<double> initial_phi;                         ///< overrides the ellipsoid when set
-  /// Starting Lagrange multipliers in physical units, one per declared constraint in the order
-  /// area, volume, moment (a previous solve's ConstrainedResult::multipliers); empty: zero.
-  std::vector<double> initial_multipliers;
-  ConstrainedMinimizerOptions solver{};
+/// One stage of the progressive CVT schedule: relocate the nodes by Lloyd iterations for the
+/// density ρ = 1 + f |∇φ| of the current solution, then solve at eps. lloyd_iterations = 0: no
+/// relocation, the stage only lowers eps on the current grid.
+struct AdaptivityStage {
+  double eps = 0;
+  double f = 0;
+  int lloyd_iterations = 20;
+  /// A side solve: later stages that are not branches continue from the last stage that is not one
+  /// (seed Table 3 reports O12 at ε = 0.02 while O13 is adapted from O12 at ε = 0.025).
+  bool branch = false;
 };
 
-struct VesicleResult {
-  ConstrainedResult solve;
-  NodeSet nodes;                 ///< original order
-  BackgroundCells cells;         ///< original numbering
-  std::vector<double> phi;       ///< original order
-  std::vector<double> grad_phi_norm;  ///< |∇φ| at the nodes (for adaptivity)
-  std::vector<std::string> constraint_names;
-  double h_min = 0, h_mean = 0;
-  double seconds_setup = 0, seconds_solve = 0;
-  int nodes_count = 0;
+struct VesicleAdaptivity {
+  std::vector<AdaptivityStage> stages;
+  bool start_from_density = false;     ///< Lloyd from the density's node placement, else from the current nodes
+  double samples_per_node = 64;
 };
 
-/// Energy and constraint values of the setup's initial field, without minimizing.
-struct VesicleFunctionals {
-  double energy = 0, area = 0, volume = 0, moment = 0;
+/// The [vesicle] table of a scene.
+struct VesicleModel {
+  std::string field = "phi";           ///< the phase field (a scalar unknown of the forms)
+  std::string width = "eps";           ///< the constant that is the interface width ε
+  double eps = 0;                      ///< ε of the first solve ([constants])
+  std::optional<double> area;          ///< A0 (from radius), set as the target of constraint "area"
+  std::optional<double> volume;        ///< V0 (from reduced_volume), target of constraint "volume"
+  std::optional<double> reduced_volume;
+  enum class Shape { ellipsoid, sphere } shape = Shape::ellipsoid;
+  std::array<double, 3> center{};
+  std::array<double, 3> semi_axes{};
+  std::optional<double> profile_eps;   ///< width of the initial profile (default: eps)
+  double resolution_factor = 2.0;      ///< ε ≥ resolution_factor · h_min (seed App. B)
+  std::optional<VesicleAdaptivity> adaptivity;
 };
-VesicleFunctionals evaluate_vesicle(MPI_Comm comm, const VesicleSetup& setup);
 
-/// Builds the discretization and forms for the setup and minimizes. Collective over `comm`.
-VesicleResult solve_vesicle(MPI_Comm comm, const VesicleSetup& setup);
+/// The extension tables this model reads (for load_scene).
+inline constexpr std::string_view kVesicleExtension = "vesicle";
+
+/// Reads [vesicle]; nullopt when the scene has none. Throws SceneError.
+[[nodiscard]] std::optional<VesicleModel> read_vesicle(const Scene& scene);
+
+/// The largest volume bounded by area A0 (the sphere's): A0^{3/2} / (6 sqrt(pi)); dim = 2: the
+/// largest area bounded by a curve of length A0, A0^2 / (4 pi).
+[[nodiscard]] double max_volume_for_area(double A0, int dim = 3);
+
+/// Throws SceneError unless 0 < V0 <= max_volume_for_area(A0, dim).
+void check_feasible(double A0, double V0, int dim = 3);
+
+/// tanh(d / (√2 ε)) with d the signed distance to the model's initial shape (> 0 inside).
+[[nodiscard]] double initial_profile(const VesicleModel& model, std::span<const double> x, int dim);
 
 /// A phase field of interface width eps_from re-profiled to eps_to: tanh(atanh(phi) eps_from / eps_to)
 /// (phi clamped into (-1, 1)). Exact for a tanh profile; the start of a continuation in eps.
 [[nodiscard]] std::vector<double> rescale_interface(std::span<const double> phi, double eps_from, double eps_to);
 
-/// The LME options of every axisymmetric basis: mirror symmetry across the axis r = 0, and
-/// `spacing_smoothing` passes on the nodal spacing.
-[[nodiscard]] LmeOptions axisymmetric_lme_options(int spacing_smoothing);
+/// The LME options of a vesicle scene: mirror symmetry across the axis r = 0 when axisymmetric,
+/// and `spacing_smoothing` passes on the nodal spacing.
+[[nodiscard]] LmeOptions vesicle_lme_options(const Scene& scene);
 
-/// φ_h of a finished solve evaluated at new points (values only): the starting field on an
-/// adapted grid.
+/// φ_h of a finished solve evaluated at new points (values only): the starting field on an adapted grid.
 [[nodiscard]] std::vector<double> transfer_phi(const NodeSet& old_nodes, std::span<const double> phi, double gamma,
-                                               int spacing_smoothing, const NodeSet& new_nodes);
+                                               const LmeOptions& lme, const NodeSet& new_nodes);
 
-/// One CVT adaptation of a solved state: Lloyd iterations (cvt.iterations, from cvt.start) with
-/// density ρ = 1 + f·|∇φ| on the box.
-[[nodiscard]] NodeSet adapt_nodes(const VesicleResult& solved, std::array<double, 2> lower, std::array<double, 2> upper,
-                                  double f, const CvtOptions& cvt, CvtReport* report = nullptr);
-
-/// tanh(d / (√2 ε)) with d ≈ the signed distance to the ellipse (a_r, a_z) centred at (0, z_c).
-[[nodiscard]] double ellipsoid_profile(double r, double z, std::array<double, 2> semi_axes, double z_center, double eps);
+/// One CVT adaptation of a solved state: Lloyd iterations with density ρ = 1 + f·|∇φ| on the box.
+[[nodiscard]] NodeSet adapt_nodes(const ProblemResult& solved, const Box& box, double f, const CvtOptions& cvt,
+                                  CvtReport* report = nullptr);
 
 }  // namespace lmeform::app

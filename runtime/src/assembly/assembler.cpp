@@ -303,6 +303,11 @@ void Assembler::vector(Vec u, Vec out) {
 
 void Assembler::add_vector(Vec u, Vec out, double scale) { (void)vector_pass(u, out, scale, /*with_value=*/false); }
 
+double Assembler::add_value_and_vector(Vec u, Vec out, double scale) {
+  if (form_->value == nullptr) throw std::logic_error(describe() + ": add_value_and_vector needs a value kernel");
+  return vector_pass(u, out, scale, /*with_value=*/true);
+}
+
 double Assembler::vector_pass(Vec u, Vec out, double scale, bool with_value) {
   if (form_->vector == nullptr) throw std::logic_error(describe() + ": has no vector kernel");
   const auto start = std::chrono::steady_clock::now();

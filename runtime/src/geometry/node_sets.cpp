@@ -92,7 +92,7 @@ NodeSet uniform_grid(const Box& box, double spacing) {
   return uniform_grid(box, counts);
 }
 
-NodeSet read_points(const std::filesystem::path& path, int dim) {
+NodeSet read_points(const std::filesystem::path& path, int dim, const Box* domain) {
   if (dim != 0) check_dim(dim, "read_points");
   std::ifstream in(path);
   if (!in) throw std::runtime_error("read_points: cannot open " + path.string());
@@ -138,6 +138,21 @@ NodeSet read_points(const std::filesystem::path& path, int dim) {
     }
     if (p.size() != static_cast<std::size_t>(dim)) {
       fail("expected " + std::to_string(dim) + " coordinates, found " + std::to_string(p.size()));
+    }
+    if (domain != nullptr) {
+      // A node outside the domain lies outside every boundary condition and every picture.
+      double extent = 0;
+      for (int i = 0; i < domain->dim; ++i) extent = std::max(extent, domain->hi[std::size_t(i)] - domain->lo[std::size_t(i)]);
+      const double tol = 1e-9 * extent;
+      for (std::size_t i = 0; i < p.size(); ++i) {
+        if (p[i] < domain->lo[i] - tol || p[i] > domain->hi[i] + tol) {
+          std::ostringstream what;
+          what << "the point (";
+          for (std::size_t k = 0; k < p.size(); ++k) what << (k ? ", " : "") << p[k];
+          what << ") lies outside the domain: coordinate " << i << " is outside [" << domain->lo[i] << ", " << domain->hi[i] << "]";
+          fail(what.str());
+        }
+      }
     }
     coords.insert(coords.end(), p.begin(), p.end());
   }

@@ -22,7 +22,19 @@ struct ConstrainedMinimizer::Evaluation {
 
 ConstrainedMinimizer::ConstrainedMinimizer(Assembler& energy, std::vector<ScalarConstraint> constraints,
                                            ConstrainedMinimizerOptions options)
-    : energy_(&energy), constraints_(std::move(constraints)), options_(options) {
+    : ConstrainedMinimizer(std::vector<Assembler*>{&energy}, std::move(constraints), options) {}
+
+ConstrainedMinimizer::ConstrainedMinimizer(std::vector<Assembler*> energy_terms, std::vector<ScalarConstraint> constraints,
+                                           ConstrainedMinimizerOptions options)
+    : energy_(energy_terms.empty() ? nullptr : energy_terms.front()), energy_terms_(std::move(energy_terms)),
+      constraints_(std::move(constraints)), options_(options) {
+  if (energy_ == nullptr) throw std::invalid_argument("constrained minimizer: no energy");
+  Assembler& energy = *energy_;
+  for (const Assembler* term : energy_terms_) {
+    if (term->block_size() != energy.block_size() || &term->discretization() != &energy.discretization())
+      throw std::invalid_argument("energy term " + term->describe() + " does not share the discretization and dofs of " +
+                                  energy.describe());
+  }
   for (const auto& c : constraints_) {
     if (c.functional == nullptr) throw std::invalid_argument("constraint '" + c.name + "' has no functional");
     if (c.functional->block_size() != energy.block_size()) {
@@ -60,6 +72,7 @@ void ConstrainedMinimizer::evaluate(Vec u, const std::vector<double>& sigma, boo
     for (std::size_t i = 0; i < k; ++i) ev.gradients.push_back(energy_->create_vector());
   }
   ev.energy = energy_->value_and_vector(u, ev.energy_gradient);
+  for (std::size_t t = 1; t < energy_terms_.size(); ++t) ev.energy += energy_terms_[t]->add_value_and_vector(u, ev.energy_gradient, 1.0);
   zero_fixed(ev.energy_gradient);
   ev.values.resize(k);
   ev.residuals.resize(k);
@@ -79,7 +92,8 @@ void ConstrainedMinimizer::assemble_hessian(Vec u, const std::vector<double>& si
   const std::size_t k = constraints_.size();
   {
     // ∇²E − Σ σ_i ∇²C_i in one pass (linear constraints such as the volume add nothing).
-    std::vector<Assembler::MatrixTerm> terms{{energy_, 1.0}};
+    std::vector<Assembler::MatrixTerm> terms;
+    for (Assembler* term : energy_terms_) terms.push_back({term, 1.0});
     for (std::size_t i = 0; i < k; ++i) terms.push_back({constraints_[i].functional, -sigma[i] / constraints_[i].scale});
     energy_->matrix_sum(u, terms, hessian_);
     // Fixed dofs: identity rows and columns, so the Newton step leaves them alone.

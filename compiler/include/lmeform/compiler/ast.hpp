@@ -18,9 +18,17 @@ using ExprPtr = std::shared_ptr<const Expr>;
 struct Expr {
   ExprKind kind = ExprKind::Number;
   Loc loc;                    ///< operator / name / first token position
+  Loc begin;                  ///< first character of the whole sub-expression (its '(' if parenthesized)
   std::string name;           ///< identifier, function name or operator spelling
   double number = 0.0;
   std::vector<ExprPtr> args;  ///< operands; Index: [base, i, j, ...]; If: [cond, then, else]
+
+  Expr() = default;
+  Expr(const Expr&) = default;
+  Expr& operator=(const Expr&) = default;
+  /// Releases the operands iteratively: a sum of thousands of terms is a left spine that deep,
+  /// and the implicit destructor would recurse once per term.
+  ~Expr();
 };
 
 enum class StmtKind { Form, Dimension, Field, Constant, Coordinate, Let, Def, Measure, Include, Output };

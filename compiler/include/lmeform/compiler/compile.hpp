@@ -73,8 +73,15 @@ struct CompiledForm {
 
 /// Compiles a .form file. Throws CompileError (already formatted) on any error.
 CompiledForm compile_file(const std::filesystem::path& path, const CompileOptions& options = {});
-/// Same for text held in memory (tests); `path` is used in messages and to resolve includes.
+/// Same for text held in memory (tests); `path` is used in messages and to resolve includes, and
+/// names the module as a file would. An empty path names none: the text must then say `form NAME`.
 CompiledForm compile_source(const std::string& text, const std::filesystem::path& path,
                             const CompileOptions& options = {});
+
+/// The form file and every file it includes, depth first, each once, as absolute normalized paths:
+/// what its generated code depends on. Only parses and resolves includes (milliseconds, for cache
+/// keys and build systems); throws CompileError on syntax and include errors, and leaves every
+/// other check to compile_file.
+std::vector<std::filesystem::path> form_dependencies(const std::filesystem::path& path, const CompileOptions& options = {});
 
 }  // namespace lmeform::compiler

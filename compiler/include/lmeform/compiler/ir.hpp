@@ -11,6 +11,7 @@
 #include <span>
 #include <string>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include "lmeform/compiler/source.hpp"
@@ -118,10 +119,19 @@ class Differentiator {
   NodeId derivative(NodeId id);
 
  private:
+  /// The derivative of node id from its children's (already memoized) derivatives.
+  NodeId apply_rule(NodeId id, const Node& n);
+
   Graph& g_;
   TerminalRule rule_;
   std::unordered_map<NodeId, NodeId> memo_;
 };
+
+/// Reverse-mode symbolic differentiation: the non-zero ∂f/∂t for the terminals t of `wrt`, as
+/// (index into wrt, derivative) in increasing index, from one sweep over the nodes f depends on.
+/// Forward mode (Differentiator) needs one sweep per terminal, which makes the gradient of a
+/// functional of many unknowns quadratic in their number; this stays linear.
+std::vector<std::pair<std::size_t, NodeId>> gradient(Graph& graph, NodeId f, std::span<const NodeId> wrt);
 
 /// Numerical evaluation of the DAG (tests, constant defaults): terminal values from a callback.
 class Interpreter {

@@ -19,6 +19,7 @@ struct Loc {
 struct SourceFile {
   std::filesystem::path path;   ///< as given / resolved (used in messages)
   std::string text;
+  std::vector<std::size_t> line_starts;  ///< offset of the first character of each line
 };
 
 /// All files of one compilation (the main form and its includes), so that a Loc can be printed.
@@ -27,7 +28,7 @@ class SourceSet {
   int add(std::filesystem::path path, std::string text);
   const SourceFile& file(int index) const { return files_.at(static_cast<std::size_t>(index)); }
   int size() const { return static_cast<int>(files_.size()); }
-  /// 1-based line and column of a location.
+  /// 1-based line and column of a location (a binary search: the code generator asks once per node).
   std::pair<int, int> line_col(const Loc& loc) const;
   /// The text of the line holding loc (without newline).
   std::string line_text(const Loc& loc) const;

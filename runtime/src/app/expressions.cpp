@@ -1,0 +1,150 @@
+#include "expressions.hpp"
+
+#include <cstdint>
+#include <sstream>
+
+#include <fmt/format.h>
+
+#include "lmeform/output.hpp"
+#include "lmeform/scene.hpp"
+
+namespace lmeform::app {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::uint64_t fnv1a(std::string_view bytes) {
+  std::uint64_t h = 0xcbf29ce484222325ull;
+  for (const unsigned char c : bytes) {
+    h ^= c;
+    h *= 0x100000001b3ull;
+  }
+  return h;
+}
+
+/// Writes a generated form into the cache's expression folder (named by its text, so an unchanged
+/// scene reuses the compiled module) and loads it. The module name must equal the file name.
+const FormModule& load_generated(const std::string& prefix, const std::string& body, MPI_Comm comm, std::ostream* log) {
+  const std::string module = fmt::format("{}_{:016x}", prefix, fnv1a(body));
+  const fs::path dir = form_cache_dir() / "expressions";
+  const fs::path path = dir / (module + ".form");
+  int rank = 0;
+  MPI_Comm_rank(comm, &rank);
+  std::string failure;
+  if (rank == 0 && !fs::exists(path)) {
+    try {
+      fs::create_directories(dir);
+      write_text_atomically(path, "form " + module + "\n" + body);
+    } catch (const std::exception& e) {
+      failure = e.what();
+    }
+  }
+  int failed = failure.empty() ? 0 : 1;
+  MPI_Bcast(&failed, 1, MPI_INT, 0, comm);
+  if (failed != 0) throw FormLoadError(rank == 0 ? failure : "cannot write a generated form in " + dir.string());
+  FormLoadOptions options;
+  options.comm = comm;
+  options.log = log;
+  return load_form(path.string(), options);
+}
+
+std::string constant_declarations(const std::map<std::string, double, std::less<>>& constants) {
+  if (constants.empty()) return {};
+  std::string s = "constant ";
+  bool first = true;
+  for (const auto& [name, value] : constants) {
+    (void)value;
+    s += (first ? "" : ", ") + name;
+    first = false;
+  }
+  return s + "\n";
+}
+
+}  // namespace
+
+PointExpressions::PointExpressions(int dim, std::map<std::string, double, std::less<>> constants)
+    : dim_(dim), constants_(std::move(constants)) {}
+
+int PointExpressions::add(const std::string& expression, int components, std::string where) {
+  items_.push_back({expression, components, std::move(where)});
+  return static_cast<int>(items_.size()) - 1;
+}
+
+void PointExpressions::compile(MPI_Comm comm, std::ostream* log) {
+  if (items_.empty()) return;
+  std::ostringstream body;
+  body << "dimension " << dim_ << "\ncoordinate x\n" << constant_declarations(constants_)
+       << "test point_value_scalar, point_value_vector : vector\n";
+  for (std::size_t i = 0; i < items_.size(); ++i) {
+    const Item& it = items_[i];
+    if (it.components == 1)
+      body << "linear value" << i << " = (" << it.expression << ") * point_value_scalar * dx\n";
+    else
+      body << "linear value" << i << " = dot(" << it.expression << ", point_value_vector) * dx\n";
+  }
+  try {
+    module_ = &load_generated("scene_expressions", body.str(), comm, log);
+  } catch (const FormLoadError& e) {
+    // Compile the expressions one by one to name the one at fault.
+    for (const Item& it : items_) {
+      std::ostringstream one;
+      one << "dimension " << dim_ << "\ncoordinate x\n" << constant_declarations(constants_)
+          << "test point_value_scalar, point_value_vector : vector\n";
+      if (it.components == 1) one << "linear value = (" << it.expression << ") * point_value_scalar * dx\n";
+      else one << "linear value = dot(" << it.expression << ", point_value_vector) * dx\n";
+      try {
+        (void)load_generated("scene_expression", one.str(), comm, nullptr);
+      } catch (const FormLoadError& single) {
+        throw SceneError(fmt::format("{}: the expression \"{}\" ({}) does not compile:\n{}", it.where, it.expression,
+                                     it.components == 1 ? "a scalar" : fmt::format("a vector of {} components", it.components),
+                                     single.what()));
+      }
+    }
+    throw;
+  }
+  const auto& k0 = module_->at("value0", dim_);
+  constant_values_.clear();
+  for (int i = 0; i < k0.n_constants; ++i) constant_values_.push_back(constants_.at(k0.constants[i]));
+}
+
+void PointExpressions::evaluate(int handle, std::span<const double> x, std::span<double> out) const {
+  const Item& it = items_.at(static_cast<std::size_t>(handle));
+  const auto& k = module_->at("value" + std::to_string(handle), dim_);
+  const int dofs = k.dofs_per_node;  // 1 + dim: the scalar and the vector test function
+  std::vector<double> workspace(k.workspace_doubles != nullptr ? k.workspace_doubles(1, 1) + 1 : 1);
+  std::vector<double> local(static_cast<std::size_t>(dofs), 0.0);
+  const double weight = 1.0, basis = 1.0;
+  kernel::CellInputs in;
+  in.n_nodes = 1;
+  in.n_points = 1;
+  in.basis_order = 0;
+  in.weights = &weight;
+  in.points = x.data();
+  in.basis = &basis;
+  in.constants = constant_values_.empty() ? nullptr : constant_values_.data();
+  in.workspace = workspace.data();
+  k.vector(in, local.data());
+  if (it.components == 1) out[0] = local[0];
+  else
+    for (int c = 0; c < it.components; ++c) out[static_cast<std::size_t>(c)] = local[static_cast<std::size_t>(1 + c)];
+}
+
+const FormModule& compile_error_form(int dim, const std::string& unknown, int components, const std::string& exact,
+                                     const std::map<std::string, double, std::less<>>& constants, const std::string& where,
+                                     MPI_Comm comm, std::ostream* log) {
+  std::ostringstream body;
+  body << "dimension " << dim << "\ncoordinate x\n" << constant_declarations(constants) << "unknown " << unknown
+       << (components > 1 ? " : vector" : "") << "\n"
+       << "let error_value = " << unknown << " - (" << exact << ")\n"
+       << "let error_gradient = grad(" << unknown << ") - grad(" << exact << ")\n"
+       << "energy l2 = inner(error_value, error_value) * dx\n"
+       << "energy h1 = inner(error_gradient, error_gradient) * dx\n";
+  try {
+    return load_generated("scene_errors", body.str(), comm, log);
+  } catch (const FormLoadError& e) {
+    throw SceneError(fmt::format("{}: the exact solution \"{}\" does not compile:\n{}", where, exact, e.what()));
+  }
+}
+
+}  // namespace lmeform::app

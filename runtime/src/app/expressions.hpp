@@ -1,0 +1,57 @@
+// Expressions of the coordinates in scenes ("sin(pi*x[0])", "tanh((0.3 - norm(x))/eps)"), compiled
+// by lmeformc like any form: the runtime never includes the parser. A scene's point expressions
+// become the `linear` outputs of one generated module, evaluated on a one-node "cell" whose single
+// quadrature point is the point of interest (weight 1, basis value 1), so l(v) = expr(x).
+// Errors against an exact solution are the `energy` outputs of a second generated module,
+// (u − u_exact)² and |∇u − ∇u_exact|² integrated with the run's quadrature.
+#pragma once
+
+#include <mpi.h>
+
+#include <filesystem>
+#include <map>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "lmeform/form_registry.hpp"
+
+namespace lmeform::app {
+
+/// Point expressions of one scene, compiled together (one JIT module, cached).
+class PointExpressions {
+ public:
+  /// dim: the spatial dimension; constants: names usable in the expressions (with their values).
+  PointExpressions(int dim, std::map<std::string, double, std::less<>> constants);
+  /// Registers an expression with `components` values (1: scalar, dim: vector); `where` prefixes
+  /// errors ("scene.toml:12: key 'initial.phi'"). Returns its handle.
+  int add(const std::string& expression, int components, std::string where);
+  /// Compiles every registered expression (collective over comm). A compile error names the
+  /// expression's key and carries lmeformc's message.
+  void compile(MPI_Comm comm, std::ostream* log);
+  /// Values of expression `handle` at x (components values).
+  void evaluate(int handle, std::span<const double> x, std::span<double> out) const;
+  [[nodiscard]] int components(int handle) const { return items_[static_cast<std::size_t>(handle)].components; }
+  [[nodiscard]] bool empty() const noexcept { return items_.empty(); }
+
+ private:
+  struct Item {
+    std::string expression;
+    int components;
+    std::string where;
+  };
+  int dim_;
+  std::map<std::string, double, std::less<>> constants_;
+  std::vector<Item> items_;
+  const FormModule* module_ = nullptr;
+  std::vector<double> constant_values_;
+};
+
+/// The generated form of errors of `unknown` (components 1 or dim) against `exact`: outputs
+/// "l2" = ∫ |u − u_exact|² and "h1" = ∫ |∇u − ∇u_exact|² (dx, no axisymmetric weight).
+[[nodiscard]] const FormModule& compile_error_form(int dim, const std::string& unknown, int components,
+                                                   const std::string& exact,
+                                                   const std::map<std::string, double, std::less<>>& constants,
+                                                   const std::string& where, MPI_Comm comm, std::ostream* log);
+
+}  // namespace lmeform::app

@@ -1,0 +1,813 @@
+#include "problem.hpp"
+
+#include <petscsnes.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <numeric>
+#include <ostream>
+#include <set>
+#include <sstream>
+#include <cstdlib>
+
+#include <fmt/format.h>
+
+#include "lmeform/assembler.hpp"
+#include "lmeform/convex_hull.hpp"
+#include "lmeform/cvt.hpp"
+#include "lmeform/discretization.hpp"
+#include "lmeform/node_sets.hpp"
+#include "lmeform/output.hpp"
+
+// PETSc callbacks of the residual problem, at global scope: inside namespace lmeform the name
+// PetscError would find lmeform::PetscError, not the PETSc function PETSc's macros call.
+namespace {
+
+struct SnesContext {
+  lmeform::Assembler* residual;
+  const std::vector<PetscInt>* fixed;
+};
+
+PetscErrorCode snes_residual(SNES, Vec u, Vec r, void* ctx) {
+  auto* c = static_cast<SnesContext*>(ctx);
+  try {
+    c->residual->vector(u, r);
+    // Fixed dofs hold their prescribed values: their equations are u_i − g_i = 0, satisfied from the start.
+    std::vector<PetscScalar> zeros(c->fixed->size(), 0.0);
+    PetscCall(VecSetValues(r, static_cast<PetscInt>(c->fixed->size()), c->fixed->data(), zeros.data(), INSERT_VALUES));
+    PetscCall(VecAssemblyBegin(r));
+    PetscCall(VecAssemblyEnd(r));
+  } catch (const std::exception& e) {
+    SETERRQ(PETSC_COMM_SELF, PETSC_ERR_LIB, "%s", e.what());
+  }
+  return 0;
+}
+
+PetscErrorCode snes_jacobian(SNES, Vec u, Mat J, Mat, void* ctx) {
+  auto* c = static_cast<SnesContext*>(ctx);
+  try {
+    c->residual->matrix(u, J);
+    PetscCall(MatZeroRowsColumns(J, static_cast<PetscInt>(c->fixed->size()), c->fixed->data(), 1.0, nullptr, nullptr));
+  } catch (const std::exception& e) {
+    SETERRQ(PETSC_COMM_SELF, PETSC_ERR_LIB, "%s", e.what());
+  }
+  return 0;
+}
+
+}  // namespace
+
+namespace lmeform::app {
+
+namespace {
+
+const char* kind_name(kernel::FunctionalKind k) {
+  switch (k) {
+    case kernel::FunctionalKind::Energy: return "energy";
+    case kernel::FunctionalKind::Constraint: return "constraint";
+    case kernel::FunctionalKind::Residual: return "residual";
+    case kernel::FunctionalKind::Bilinear: return "bilinear";
+    case kernel::FunctionalKind::Linear: return "linear";
+  }
+  return "?";
+}
+
+/// "module.output" or "output" of `kind` among the modules, in the scene's dimension.
+const kernel::FormKernels* find_output(const BoundScene& b, const SceneName& name, kernel::FunctionalKind kind) {
+  const int dim = b.scene->dim();
+  std::string module_name, output = name.name;
+  if (const auto dot = name.name.find('.'); dot != std::string::npos && !name.name.ends_with(".form")) {
+    module_name = name.name.substr(0, dot);
+    output = name.name.substr(dot + 1);
+  }
+  std::vector<const kernel::FormKernels*> found;
+  std::vector<std::string> candidates;
+  for (const FormModule* m : b.modules) {
+    if (!module_name.empty() && m->name != module_name) continue;
+    for (const auto* k : m->kernels) {
+      if (k->kind != kind) continue;
+      if (std::find(candidates.begin(), candidates.end(), k->name) == candidates.end()) candidates.emplace_back(k->name);
+      if (k->name == output && k->dim == dim) found.push_back(k);
+    }
+  }
+  if (found.size() == 1) return found.front();
+  if (found.size() > 1)
+    throw SceneError(fmt::format("{} = '{}' is ambiguous: several forms define a {} '{}'; write 'module.{}'", name.where,
+                                 name.name, kind_name(kind), output, output));
+  // Not found: in another dimension, of another kind, or not at all.
+  for (const FormModule* m : b.modules)
+    for (const auto* k : m->kernels)
+      if (k->name == output && (module_name.empty() || m->name == module_name)) {
+        if (k->kind != kind)
+          throw SceneError(fmt::format("{}: '{}' of form {} is a {} output, not a {} output", name.where, output, m->name,
+                                       kind_name(k->kind), kind_name(kind)));
+        std::string dims;
+        for (const int d : m->dimensions()) dims += (dims.empty() ? "" : ", ") + std::to_string(d);
+        throw SceneError(fmt::format("{}: form {} declares '{}' in dimension {} only; this scene is {}D", name.where,
+                                     m->name, output, dims, dim));
+      }
+  std::string list;
+  for (const auto& c : candidates) list += (list.empty() ? "'" : ", '") + c + "'";
+  const std::string guess = closest_name(output, candidates);
+  throw SceneError(fmt::format("{}: no {} output '{}' in the scene's forms{}{}", name.where, kind_name(kind), output,
+                               guess.empty() ? "" : "; did you mean '" + guess + "'?",
+                               list.empty() ? fmt::format(" (they define no {} output)", kind_name(kind))
+                                            : fmt::format(" ({} outputs: {})", kind_name(kind), list)));
+}
+
+std::vector<UnknownField> unknowns_of(const kernel::FormKernels& k) {
+  std::vector<UnknownField> out;
+  int offset = 0;
+  for (int i = 0; i < k.n_unknowns; ++i) {
+    out.push_back({k.unknowns[i].name, k.unknowns[i].components, offset});
+    offset += k.unknowns[i].components;
+  }
+  return out;
+}
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+}  // namespace
+
+const UnknownField& BoundScene::unknown(std::string_view name) const {
+  for (const auto& u : unknowns)
+    if (u.name == name) return u;
+  throw std::out_of_range("no unknown " + std::string(name));
+}
+
+std::vector<const kernel::FormKernels*> BoundScene::kernels() const {
+  std::vector<const kernel::FormKernels*> out = energy;
+  for (const auto& c : constraints) out.push_back(c.kernel);
+  for (const auto* k : {residual, bilinear, linear})
+    if (k != nullptr) out.push_back(k);
+  return out;
+}
+
+BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, const std::vector<std::string>& provided_constants,
+                      const std::vector<std::string>& provided_qdata) {
+  BoundScene b;
+  b.scene = &scene;
+  b.kind = scene.model.kind;
+  FormLoadOptions load;
+  load.comm = comm;
+  load.log = log;
+  if (!scene.folder.empty()) load.include_dirs.push_back(scene.folder);
+  for (const auto& f : scene.model.forms) {
+    try {
+      b.modules.push_back(&load_form(f.name, load));
+    } catch (const FormLoadError& e) {
+      throw FormLoadError(fmt::format("{} = '{}':\n{}", f.where, f.name, e.what()));
+    }
+  }
+  const int dim = scene.dim();
+
+  // The outputs that make the problem.
+  switch (b.kind) {
+    case ProblemKind::minimization:
+      if (scene.model.energy.empty()) {
+        for (const FormModule* m : b.modules)
+          for (const auto* k : m->kernels)
+            if (k->kind == kernel::FunctionalKind::Energy && k->dim == dim) b.energy.push_back(k);
+        if (b.energy.empty())
+          throw SceneError(fmt::format("{}: key 'model': the forms define no energy output in dimension {}; name the "
+                                       "problem's outputs with model.energy, model.residual or model.bilinear + model.linear",
+                                       scene.source, dim));
+      } else {
+        for (const auto& e : scene.model.energy) b.energy.push_back(find_output(b, e, kernel::FunctionalKind::Energy));
+      }
+      break;
+    case ProblemKind::residual: b.residual = find_output(b, *scene.model.residual, kernel::FunctionalKind::Residual); break;
+    case ProblemKind::linear:
+      b.bilinear = find_output(b, *scene.model.bilinear, kernel::FunctionalKind::Bilinear);
+      b.linear = find_output(b, *scene.model.linear, kernel::FunctionalKind::Linear);
+      break;
+  }
+  if (b.kind != ProblemKind::minimization && !scene.constraints.empty())
+    throw SceneError(fmt::format("{}: [constraints] apply to energy minimization; this scene solves a {} problem",
+                                 scene.constraints.front().where, b.kind == ProblemKind::residual ? "residual" : "linear"));
+
+  // Constraints, by the form's constraint output names.
+  for (const auto& c : scene.constraints) {
+    BoundConstraint bc;
+    bc.name = c.name;
+    bc.kernel = find_output(b, {c.name, c.where}, kernel::FunctionalKind::Constraint);
+    if (bc.kernel->target_constant >= 0) bc.target_constant = bc.kernel->constants[bc.kernel->target_constant];
+    b.constraints.push_back(bc);
+  }
+
+  // One layout of unknowns for every kernel.
+  const kernel::FormKernels* primary = b.kind == ProblemKind::minimization ? b.energy.front()
+                                       : b.kind == ProblemKind::residual   ? b.residual
+                                                                           : b.bilinear;
+  b.unknowns = unknowns_of(*primary);
+  b.dofs_per_node = primary->dofs_per_node;
+  for (const auto* k : b.kernels()) {
+    const auto u = k->kind == kernel::FunctionalKind::Linear ? unknowns_of(*k) : unknowns_of(*k);
+    bool same = u.size() == b.unknowns.size();
+    for (std::size_t i = 0; same && i < u.size(); ++i)
+      same = u[i].components == b.unknowns[i].components &&
+             (k->kind == kernel::FunctionalKind::Linear || primary->kind == kernel::FunctionalKind::Bilinear ||
+              u[i].name == b.unknowns[i].name);
+    if (!same)
+      throw SceneError(fmt::format("{}: the outputs {}.{} and {}.{} have different unknowns: a scene's outputs share "
+                                   "one set of unknown fields (names, shapes and order)",
+                                   scene.source, primary->module, primary->name, k->module, k->name));
+    if (k->n_coefficients > 0)
+      throw SceneError(fmt::format("{}: {}.{} reads the coefficient field '{}': known nodal fields are not set by "
+                                   "scenes yet (a model driver sets them)",
+                                   scene.source, k->module, k->name, k->coefficients[0].name));
+    b.basis_order = std::max({b.basis_order, k->basis_order, k->coefficient_basis_order});
+  }
+
+  // Constants: the scene's value, else the form's default; every scene constant must be a form's.
+  std::vector<std::string> form_constants;
+  for (const auto* k : b.kernels())
+    for (int i = 0; i < k->n_constants; ++i)
+      if (std::find(form_constants.begin(), form_constants.end(), k->constants[i]) == form_constants.end())
+        form_constants.emplace_back(k->constants[i]);
+  auto list_constants = [&]() {
+    std::string list;
+    for (const auto& c : form_constants) list += (list.empty() ? "" : ", ") + c;
+    return list.empty() ? std::string("they have none") : list;
+  };
+  for (const auto& [name, value] : scene.constants) {
+    if (std::find(form_constants.begin(), form_constants.end(), name) != form_constants.end()) continue;
+    const std::string guess = closest_name(name, form_constants);
+    throw SceneError(fmt::format("{}: no form of the problem has a constant '{}'{} (the forms' constants: {})",
+                                 scene.where_constant(name), name, guess.empty() ? "" : "; did you mean '" + guess + "'?",
+                                 list_constants()));
+  }
+  for (const auto* k : b.kernels()) {
+    for (int i = 0; i < k->n_constants; ++i) {
+      const std::string name = k->constants[i];
+      if (b.constants.contains(name)) continue;
+      if (const auto it = scene.constants.find(name); it != scene.constants.end()) {
+        b.constants[name] = it->second;
+        continue;
+      }
+      const bool is_target = std::any_of(b.constraints.begin(), b.constraints.end(),
+                                         [&](const BoundConstraint& c) { return c.target_constant == name; });
+      const bool provided = std::find(provided_constants.begin(), provided_constants.end(), name) != provided_constants.end();
+      if (k->constant_defaults != nullptr && !std::isnan(k->constant_defaults[i])) {
+        b.constants[name] = k->constant_defaults[i];
+      } else if (is_target || provided) {
+        b.constants[name] = std::numeric_limits<double>::quiet_NaN();  // set from the target / by the model
+      } else {
+        throw SceneError(fmt::format("{}: missing key 'constants.{}': form {} ({}) needs the constant '{}' and gives it "
+                                     "no default (the forms' constants: {})",
+                                     scene.source, name, k->module, k->source, name, list_constants()));
+      }
+    }
+  }
+  // Constraint targets: [constraints] NAME = target, else the form's target constant or number.
+  for (std::size_t i = 0; i < b.constraints.size(); ++i) {
+    BoundConstraint& bc = b.constraints[i];
+    const SceneConstraint& sc = scene.constraints[i];
+    if (sc.target) {
+      bc.target = *sc.target;
+      if (!bc.target_constant.empty()) {
+        if (scene.constants.contains(bc.target_constant) && scene.constants.at(bc.target_constant) != *sc.target)
+          throw SceneError(fmt::format("{}: the target {} differs from {} = {} in [constants] (the constant is the "
+                                       "constraint's target: give it once)",
+                                       sc.where, *sc.target, bc.target_constant, scene.constants.at(bc.target_constant)));
+        b.constants[bc.target_constant] = *sc.target;
+      }
+    } else if (bc.target_constant.empty()) {
+      bc.target = bc.kernel->target_value;
+    } else {
+      bc.target = b.constants.at(bc.target_constant);
+      const bool provided = std::find(provided_constants.begin(), provided_constants.end(), bc.target_constant) !=
+                            provided_constants.end();
+      if (std::isnan(bc.target) && !provided)
+        throw SceneError(fmt::format("{}: constraint '{}' compares with the constant '{}', which has no value: give "
+                                     "constraints.{} = TARGET or constants.{}",
+                                     sc.where, bc.name, bc.target_constant, bc.name, bc.target_constant));
+    }
+    bc.scale = sc.scale.value_or(std::abs(bc.target) > 0 ? std::abs(bc.target) : 1.0);
+  }
+
+  // Quadrature data: every datum the kernels read is supplied by the scene or by the model.
+  std::vector<std::string> needed;
+  for (const auto* k : b.kernels())
+    for (int i = 0; i < k->n_qdata; ++i)
+      if (std::find(needed.begin(), needed.end(), k->qdata[i].name) == needed.end()) needed.emplace_back(k->qdata[i].name);
+  for (const auto& q : scene.qdata) {
+    if (std::find(needed.begin(), needed.end(), q.name) != needed.end()) continue;
+    const std::string guess = closest_name(q.name, needed);
+    std::string list;
+    for (const auto& n : needed) list += (list.empty() ? "" : ", ") + n;
+    throw SceneError(fmt::format("{}: no form of the problem reads quadrature data '{}'{} ({})", q.where, q.name,
+                                 guess.empty() ? "" : "; did you mean '" + guess + "'?",
+                                 list.empty() ? "they read none" : "they read: " + list));
+  }
+  for (const auto& n : needed) {
+    const bool given = std::any_of(scene.qdata.begin(), scene.qdata.end(), [&](const SceneQdata& q) { return q.name == n; });
+    const bool provided = std::find(provided_qdata.begin(), provided_qdata.end(), n) != provided_qdata.end();
+    if (!given && !provided)
+      throw SceneError(fmt::format("{}: missing key 'qdata.{}': the forms read the quadrature datum '{}' (give a "
+                                   "provider: \"support_size\" or \"zero\")",
+                                   scene.source, n, n));
+  }
+
+  // Unknown names in [initial], [[dirichlet]] and [reference.solution]; their expressions.
+  std::vector<std::string> unknown_names;
+  for (const auto& u : b.unknowns) unknown_names.push_back(u.name);
+  auto check_unknown = [&](const std::string& name, const std::string& where) -> const UnknownField& {
+    for (const auto& u : b.unknowns)
+      if (u.name == name) return u;
+    const std::string guess = closest_name(name, unknown_names);
+    std::string list;
+    for (const auto& n : unknown_names) list += (list.empty() ? "" : ", ") + n;
+    throw SceneError(fmt::format("{}: '{}' is no unknown of the problem{} (unknowns: {})", where, name,
+                                 guess.empty() ? "" : "; did you mean '" + guess + "'?", list));
+  };
+  std::map<std::string, double, std::less<>> expression_constants = b.constants;
+  for (auto& [name, value] : expression_constants)
+    if (std::isnan(value)) value = 0;  // a model's constant: set at solve time, not usable in expressions
+  b.expressions = std::make_shared<PointExpressions>(dim, expression_constants);
+  for (const auto& f : scene.initial) {
+    const UnknownField& u = check_unknown(f.unknown, f.where);
+    int handle = -1;
+    if (f.kind == SceneInitialField::Kind::value && !f.value.is_number())
+      handle = b.expressions->add(f.value.expression(), u.components, f.where);
+    b.initial_expression.push_back(handle);
+  }
+  for (const auto& d : scene.dirichlet) {
+    const UnknownField& u = check_unknown(d.unknown, d.where + ": key 'unknown'");
+    for (const int c : d.components)
+      if (c >= u.components)
+        throw SceneError(fmt::format("{}: key 'components' lists component {} of '{}', which has {}", d.where, c, u.name,
+                                     u.components));
+    int handle = -1;
+    if (!d.value.is_number()) handle = b.expressions->add(d.value.expression(), u.components, d.value.where);
+    b.dirichlet_expression.push_back(handle);
+  }
+  b.expressions->compile(comm, log);
+  for (const auto& [name, value] : scene.reference.solution) {
+    const UnknownField& u = check_unknown(name, value.where);
+    if (value.is_number()) throw SceneError(fmt::format("{}: an exact solution is an expression string", value.where));
+    // Compiled now, so that a typo is reported before the solve, not after it.
+    (void)compile_error_form(dim, name, u.components, value.expression(), expression_constants, value.where, comm, log);
+  }
+  return b;
+}
+
+NodeSet initial_nodes(const Scene& scene, std::ostream* log) {
+  switch (scene.nodes.kind) {
+    case SceneNodes::Kind::spacing: return uniform_grid(scene.domain, scene.nodes.spacing);
+    case SceneNodes::Kind::counts: return uniform_grid(scene.domain, scene.nodes.counts);
+    case SceneNodes::Kind::count: {
+      const auto t0 = std::chrono::steady_clock::now();
+      CvtOptions cvt;
+      cvt.iterations = scene.nodes.lloyd_iterations;
+      CvtReport report;
+      NodeSet nodes = uniform_cvt(scene.domain, static_cast<std::size_t>(scene.nodes.count), cvt, &report);
+      if (log != nullptr) {
+        *log << "uniform CVT of " << nodes.size() << " nodes: " << report.iterations.size() << " Lloyd iterations"
+             << (report.iterations.empty() ? std::string()
+                                           : ", last mean move " + std::to_string(report.iterations.back().mean_displacement / report.h_bar) + " h")
+             << ", " << seconds_since(t0) << " s\n";
+      }
+      return nodes;
+    }
+    case SceneNodes::Kind::file: {
+      try {
+        return read_points(scene.nodes.file, scene.dim(), &scene.domain);
+      } catch (const std::runtime_error& e) {
+        throw SceneError(fmt::format("{}: key 'nodes.file': {}", scene.source, e.what()));
+      }
+    }
+  }
+  throw std::logic_error("unknown node kind");
+}
+
+std::vector<int> boundary_nodes(const Scene& scene, const NodeSet& nodes, const std::string& part) {
+  if (part == "hull") return hull_boundary_nodes(nodes);
+  const Box& box = scene.domain;
+  double extent = 0;
+  for (int i = 0; i < box.dim; ++i) extent = std::max(extent, box.hi[std::size_t(i)] - box.lo[std::size_t(i)]);
+  const double tol = 1e-9 * extent;
+  int axis = 0;
+  bool upper = false;
+  if (part == "axis") {
+    axis = 0;
+  } else {
+    static const std::string names[] = {"x", "y", "z"};
+    const std::string a = part.substr(0, part.find('_'));
+    axis = a == "r" ? 0 : (scene.axisymmetric() && a == "z") ? 1 : static_cast<int>(std::find(names, names + 3, a) - names);
+    upper = part.ends_with("_max");
+  }
+  const auto k = static_cast<std::size_t>(axis);
+  std::vector<int> out;
+  for (std::size_t n = 0; n < nodes.size(); ++n) {
+    const double x = nodes.point(n)[k];
+    if (upper ? x >= box.hi[k] - tol : x <= box.lo[k] + tol) out.push_back(static_cast<int>(n));
+  }
+  return out;
+}
+
+std::vector<double> initial_state(const BoundScene& b, const NodeSet& nodes) {
+  const Scene& scene = *b.scene;
+  const auto bs = static_cast<std::size_t>(b.dofs_per_node);
+  std::vector<double> state(nodes.size() * bs, 0.0);
+  std::vector<double> value(3);
+  for (std::size_t i = 0; i < scene.initial.size(); ++i) {
+    const SceneInitialField& f = scene.initial[i];
+    const UnknownField& u = b.unknown(f.unknown);
+    const auto off = static_cast<std::size_t>(u.offset);
+    if (f.kind == SceneInitialField::Kind::file) {
+      const FieldFile file = read_field_hdf5(f.file);
+      const auto it = file.fields.find(f.field);
+      if (it == file.fields.end()) throw SceneError(fmt::format("{}: {} has no field '{}'", f.where, f.file.string(), f.field));
+      if (it->second.components != u.components)
+        throw SceneError(fmt::format("{}: field '{}' of {} has {} components, unknown '{}' has {}", f.where, f.field,
+                                     f.file.string(), it->second.components, u.name, u.components));
+      if (file.nodes.size() != nodes.size() || file.nodes.coords != nodes.coords)
+        throw SceneError(fmt::format("{}: {} was computed on other nodes ({} nodes); a field is read back on the node set "
+                                     "it was written with (same [nodes])",
+                                     f.where, f.file.string(), file.nodes.size()));
+      for (std::size_t a = 0; a < nodes.size(); ++a)
+        for (int c = 0; c < u.components; ++c)
+          state[a * bs + off + std::size_t(c)] = it->second.values[a * std::size_t(u.components) + std::size_t(c)];
+      continue;
+    }
+    const int handle = b.initial_expression[i];
+    for (std::size_t a = 0; a < nodes.size(); ++a) {
+      if (handle >= 0) b.expressions->evaluate(handle, nodes.point(a), value);
+      else std::fill(value.begin(), value.end(), f.value.number());
+      for (int c = 0; c < u.components; ++c) state[a * bs + off + std::size_t(c)] = value[std::size_t(c)];
+    }
+  }
+  return state;
+}
+
+namespace {
+
+/// ρ̄ at every quadrature point: Σ_a p_a(x_q) h_a over the point's LME neighbours, the partition of
+/// unity weighting each nodal spacing by the node's share of the point. It is the local length
+/// scale of the basis the point actually sees (a plain mean over the support would count far, barely
+/// contributing nodes as much as the nearest ones, and jump as nodes enter the support).
+std::vector<double> support_size_qdata(const Discretization& disc) {
+  const auto& quad = disc.quadrature();
+  const auto& lists = disc.point_lists();
+  const auto h = disc.basis().spacing();
+  std::vector<double> out(quad.size());
+  for (std::size_t q = 0; q < quad.size(); ++q) {
+    const auto list = lists[q];
+    const auto p = disc.basis().evaluate(quad.point(q), list, 0);
+    double s = 0;
+    for (std::size_t m = 0; m < list.size(); ++m) s += p[m] * h[static_cast<std::size_t>(list[m])];
+    out[q] = s;
+  }
+  return out;
+}
+
+/// Owned global (renumbered) dofs of (original node, component) pairs.
+std::vector<PetscInt> owned_dofs(const Discretization& disc, const std::vector<std::pair<int, int>>& node_components, int bs) {
+  std::vector<PetscInt> dofs;
+  const auto renumbered = disc.renumbered_index();
+  for (const auto& [node, comp] : node_components) {
+    const int r = renumbered[static_cast<std::size_t>(node)];
+    if (disc.owns(r)) dofs.push_back(static_cast<PetscInt>(r) * bs + comp);
+  }
+  std::sort(dofs.begin(), dofs.end());
+  dofs.erase(std::unique(dofs.begin(), dofs.end()), dofs.end());
+  return dofs;
+}
+
+/// PETSc options of the scene, set for the solve and cleared after it. The command line wins: an
+/// option it already sets is left as it is.
+class ScopedPetscOptions {
+ public:
+  explicit ScopedPetscOptions(const std::string& options) {
+    std::vector<std::string> tokens;
+    std::istringstream in(options);
+    for (std::string t; in >> t;) tokens.push_back(t);
+    auto is_value = [](const std::string& t) {
+      if (t.empty() || t[0] != '-') return true;
+      char* end = nullptr;
+      (void)std::strtod(t.c_str(), &end);  // a negative number is a value, not an option
+      return end != nullptr && *end == '\0';
+    };
+    for (std::size_t i = 0; i < tokens.size(); ++i) {
+      if (is_value(tokens[i])) throw SceneError("key 'solver.petsc_options': '" + tokens[i] + "' is not an option (options start with '-')");
+      const std::string key = tokens[i];
+      std::string value;
+      if (i + 1 < tokens.size() && is_value(tokens[i + 1])) value = tokens[++i];
+      PetscBool set = PETSC_FALSE;
+      LMEFORM_PETSC_CHECK(PetscOptionsHasName(nullptr, nullptr, key.c_str(), &set));
+      if (set) continue;
+      LMEFORM_PETSC_CHECK(PetscOptionsSetValue(nullptr, key.c_str(), value.empty() ? nullptr : value.c_str()));
+      set_.push_back(key);
+    }
+  }
+  ~ScopedPetscOptions() {
+    for (const auto& key : set_) PetscOptionsClearValue(nullptr, key.c_str());
+  }
+  ScopedPetscOptions(const ScopedPetscOptions&) = delete;
+  ScopedPetscOptions& operator=(const ScopedPetscOptions&) = delete;
+
+ private:
+  std::vector<std::string> set_;
+};
+
+void configure_direct_solver(KSP ksp) {
+  // MUMPS LU by default (direct, robust for the indefinite saddle points of mixed problems); the
+  // options database overrides it (-ksp_type gmres -pc_type fieldsplit ...).
+  LMEFORM_PETSC_CHECK(KSPSetType(ksp, KSPPREONLY));
+  PC pc = nullptr;
+  LMEFORM_PETSC_CHECK(KSPGetPC(ksp, &pc));
+  LMEFORM_PETSC_CHECK(PCSetType(pc, PCLU));
+  LMEFORM_PETSC_CHECK(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
+}
+
+}  // namespace
+
+ProblemResult solve_problem(MPI_Comm comm, const BoundScene& b, const ProblemInput& input) {
+  const Scene& scene = *b.scene;
+  const auto t0 = std::chrono::steady_clock::now();
+  ProblemResult result;
+  result.nodes = input.nodes;
+  const NodeSet& nodes = result.nodes;
+  const int bs = b.dofs_per_node;
+
+  DiscretizationOptions options;
+  options.gamma = {scene.nodes.gamma};
+  options.lme = input.lme;
+  options.quadrature_points = scene.nodes.quadrature_points;
+  options.basis_order = std::max(b.basis_order, 1);  // |∇u| at the nodes and H1 errors need gradients
+  const Discretization disc(comm, nodes, options);
+  {
+    const auto h = disc.basis().spacing();
+    result.h_min = *std::min_element(h.begin(), h.end());
+    result.h_mean = std::accumulate(h.begin(), h.end(), 0.0) / static_cast<double>(h.size());
+  }
+
+  // Constants: the bound values, the input's overrides, the constraint targets.
+  std::map<std::string, double, std::less<>> constants = b.constants;
+  for (const auto& [name, value] : input.constants) constants[name] = value;
+  std::vector<double> targets, scales;
+  for (const auto& c : b.constraints) {
+    double target = c.target;
+    if (!c.target_constant.empty() && input.constants.contains(c.target_constant)) target = input.constants.at(c.target_constant);
+    if (const auto it = input.targets.find(c.name); it != input.targets.end()) target = it->second;
+    if (!c.target_constant.empty()) constants[c.target_constant] = target;
+    const auto s = input.scales.find(c.name);
+    targets.push_back(target);
+    scales.push_back(s != input.scales.end() ? s->second : c.scale);
+  }
+  std::vector<double> rho_bar;
+  auto make = [&](const kernel::FormKernels* k) {
+    auto a = std::make_unique<Assembler>(disc, *k);
+    for (int i = 0; i < k->n_constants; ++i) {
+      const double v = constants.at(k->constants[i]);
+      if (std::isnan(v))
+        throw SceneError(fmt::format("{}: the constant '{}' of {}.{} has no value", scene.source, k->constants[i], k->module, k->name));
+      a->set_constant(k->constants[i], v);
+    }
+    if (k->qdata_per_point > 0) {
+      std::vector<double> data(disc.quadrature().size() * static_cast<std::size_t>(k->qdata_per_point), 0.0);
+      int offset = 0;
+      for (int i = 0; i < k->n_qdata; ++i) {
+        const auto provider = std::find_if(scene.qdata.begin(), scene.qdata.end(),
+                                           [&](const SceneQdata& q) { return q.name == k->qdata[i].name; });
+        if (provider != scene.qdata.end() && provider->provider == "support_size") {
+          if (k->qdata[i].size != 1)
+            throw SceneError(fmt::format("{}: \"support_size\" is a scalar; '{}' has {} values per point", provider->where,
+                                         provider->name, k->qdata[i].size));
+          if (rho_bar.empty()) rho_bar = support_size_qdata(disc);
+          for (std::size_t q = 0; q < rho_bar.size(); ++q) data[q * std::size_t(k->qdata_per_point) + std::size_t(offset)] = rho_bar[q];
+        }
+        offset += k->qdata[i].size;
+      }
+      a->set_qdata(data);
+    }
+    return a;
+  };
+
+  // The state: the given start, or the scene's [initial]; Dirichlet values imposed on it.
+  std::vector<double> state = input.initial.empty() ? initial_state(b, nodes) : input.initial;
+  if (state.size() != nodes.size() * std::size_t(bs))
+    throw std::invalid_argument(fmt::format("solve_problem: the initial state has {} values for {} nodes x {} dofs",
+                                            state.size(), nodes.size(), bs));
+  std::vector<std::pair<int, int>> fixed_pairs;
+  std::vector<char> first_scalar_fixed(nodes.size(), 0);
+  std::vector<double> value(3);
+  for (std::size_t i = 0; i < scene.dirichlet.size(); ++i) {
+    const SceneDirichlet& d = scene.dirichlet[i];
+    const UnknownField& u = b.unknown(d.unknown);
+    std::vector<int> comps = d.components;
+    if (comps.empty())
+      for (int c = 0; c < u.components; ++c) comps.push_back(c);
+    std::set<int> on;
+    for (const auto& part : d.boundary)
+      for (const int n : boundary_nodes(scene, nodes, part)) on.insert(n);
+    if (on.empty())
+      throw SceneError(fmt::format("{}: no node lies on the boundary parts given in key 'boundary'", d.where));
+    for (const int n : on) {
+      const int handle = b.dirichlet_expression[i];
+      if (handle >= 0) b.expressions->evaluate(handle, nodes.point(std::size_t(n)), value);
+      else std::fill(value.begin(), value.end(), d.value.number());
+      for (const int c : comps) {
+        state[std::size_t(n) * std::size_t(bs) + std::size_t(u.offset + c)] = value[u.components == 1 ? 0 : std::size_t(c)];
+        fixed_pairs.emplace_back(n, u.offset + c);
+      }
+      if (u.offset == 0 && u.components == 1) first_scalar_fixed[std::size_t(n)] = 1;
+    }
+  }
+  const std::vector<PetscInt> fixed = owned_dofs(disc, fixed_pairs, bs);
+
+  const ScopedPetscOptions petsc_options(scene.solver.petsc_options);
+  std::vector<std::unique_ptr<Assembler>> assemblers;
+  std::vector<Assembler*> energy_terms;
+  std::vector<ScalarConstraint> constraints;
+  for (const auto* k : b.energy) {
+    assemblers.push_back(make(k));
+    energy_terms.push_back(assemblers.back().get());
+  }
+  for (std::size_t i = 0; i < b.constraints.size(); ++i) {
+    assemblers.push_back(make(b.constraints[i].kernel));
+    constraints.push_back({b.constraints[i].name, assemblers.back().get(), targets[i], scales[i]});
+    result.constraint_names.push_back(b.constraints[i].name);
+  }
+  Assembler* primary = nullptr;
+  if (b.kind == ProblemKind::minimization) primary = energy_terms.front();
+  if (b.residual != nullptr) {
+    assemblers.push_back(make(b.residual));
+    primary = assemblers.back().get();
+  }
+  Assembler* linear = nullptr;
+  if (b.bilinear != nullptr) {
+    assemblers.push_back(make(b.bilinear));
+    primary = assemblers.back().get();
+    assemblers.push_back(make(b.linear));
+    linear = assemblers.back().get();
+  }
+  PetscVector u = primary->create_vector();
+  set_from_original(disc, state, bs, u);
+  result.seconds_setup = seconds_since(t0);
+  const auto t1 = std::chrono::steady_clock::now();
+  // The value of every energy term and constraint at the state in u.
+  auto record_values = [&]() {
+    for (std::size_t i = 0; i < energy_terms.size(); ++i)
+      result.values[std::string(b.energy[i]->module) + "." + b.energy[i]->name] = energy_terms[i]->value(u);
+    for (const auto& c : constraints) result.values[c.name] = c.functional->value(u);
+  };
+  if (input.evaluate_only) {
+    record_values();
+    result.state = to_original(disc, u, bs);
+    result.energy = std::numeric_limits<double>::quiet_NaN();
+    result.message = "evaluated, not solved";
+    return result;
+  }
+
+  switch (b.kind) {
+    case ProblemKind::minimization: {
+      ConstrainedMinimizerOptions o;
+      o.penalty = scene.solver.penalty;
+      o.augmented_tolerance = scene.solver.augmented_tolerance;
+      o.inner_tolerance = scene.solver.inner_tolerance;
+      o.max_outer_iterations = scene.solver.max_outer_iterations;
+      o.max_inner_iterations = scene.solver.max_inner_iterations;
+      o.newton_tolerance = scene.solver.newton_tolerance;
+      o.constraint_tolerance = scene.solver.constraint_tolerance;
+      o.max_newton_iterations = scene.solver.max_newton_iterations;
+      o.log = input.log;
+      ConstrainedMinimizer minimizer(energy_terms, constraints, o);
+      minimizer.set_fixed_dofs(fixed);
+      std::vector<double> nu;  // the minimizer works with multipliers of the scaled constraints
+      if (!input.initial_multipliers.empty()) {
+        if (input.initial_multipliers.size() != constraints.size())
+          throw std::invalid_argument(fmt::format("solve_problem: {} starting multipliers for {} constraints",
+                                                  input.initial_multipliers.size(), constraints.size()));
+        for (std::size_t i = 0; i < constraints.size(); ++i) nu.push_back(input.initial_multipliers[i] * constraints[i].scale);
+      }
+      result.minimization = minimizer.minimize(u, nu);
+      result.converged = result.minimization.converged;
+      result.message = result.minimization.message;
+      result.energy = result.minimization.energy;
+      result.iterations = result.minimization.augmented_iterations + result.minimization.newton_iterations;
+      break;
+    }
+    case ProblemKind::residual: {
+      SnesContext ctx{primary, &fixed};
+      SNES snes = nullptr;
+      LMEFORM_PETSC_CHECK(SNESCreate(comm, &snes));
+      PetscMatrix J = primary->create_matrix();
+      PetscVector r = primary->create_vector();
+      LMEFORM_PETSC_CHECK(SNESSetFunction(snes, r, snes_residual, &ctx));
+      LMEFORM_PETSC_CHECK(SNESSetJacobian(snes, J, J, snes_jacobian, &ctx));
+      KSP ksp = nullptr;
+      LMEFORM_PETSC_CHECK(SNESGetKSP(snes, &ksp));
+      configure_direct_solver(ksp);
+      LMEFORM_PETSC_CHECK(SNESSetTolerances(snes, 1e-12, scene.solver.newton_tolerance, 1e-14,
+                                            scene.solver.max_newton_iterations, 10000));
+      LMEFORM_PETSC_CHECK(SNESSetFromOptions(snes));
+      const PetscErrorCode solved = SNESSolve(snes, nullptr, u);
+      SNESConvergedReason reason = SNES_CONVERGED_ITERATING;
+      PetscInt its = 0;
+      PetscReal norm = 0;
+      SNESGetConvergedReason(snes, &reason);
+      SNESGetIterationNumber(snes, &its);
+      SNESGetFunctionNorm(snes, &norm);
+      SNESDestroy(&snes);
+      LMEFORM_PETSC_CHECK(solved);
+      result.converged = reason > 0;
+      result.message = fmt::format("SNES {} after {} Newton steps, |R| = {:.3e}", SNESConvergedReasons[reason], its, norm);
+      result.iterations = static_cast<int>(its);
+      result.residual_norm = norm;
+      result.energy = std::numeric_limits<double>::quiet_NaN();
+      break;
+    }
+    case ProblemKind::linear: {
+      PetscMatrix A = primary->create_matrix();
+      PetscVector rhs = linear->create_vector(), x = primary->create_vector();
+      primary->matrix(u, A);
+      linear->vector(u, rhs);
+      LMEFORM_PETSC_CHECK(VecCopy(u, x));
+      apply_dirichlet(A, rhs, x, fixed);
+      KSP ksp = nullptr;
+      LMEFORM_PETSC_CHECK(KSPCreate(comm, &ksp));
+      configure_direct_solver(ksp);
+      LMEFORM_PETSC_CHECK(KSPSetOperators(ksp, A, A));
+      LMEFORM_PETSC_CHECK(KSPSetFromOptions(ksp));
+      const PetscErrorCode solved = KSPSolve(ksp, rhs, x);
+      KSPConvergedReason reason = KSP_CONVERGED_ITERATING;
+      PetscInt its = 0;
+      KSPGetConvergedReason(ksp, &reason);
+      KSPGetIterationNumber(ksp, &its);
+      KSPDestroy(&ksp);
+      LMEFORM_PETSC_CHECK(solved);
+      // The relative residual of the system actually solved (Dirichlet rows included).
+      PetscVector Ax = primary->create_vector();
+      LMEFORM_PETSC_CHECK(MatMult(A, x, Ax));
+      LMEFORM_PETSC_CHECK(VecAXPY(Ax, -1.0, rhs));
+      PetscReal rn = 0, bn = 0;
+      LMEFORM_PETSC_CHECK(VecNorm(Ax, NORM_2, &rn));
+      LMEFORM_PETSC_CHECK(VecNorm(rhs, NORM_2, &bn));
+      result.residual_norm = bn > 0 ? rn / bn : rn;
+      result.converged = reason > 0 && result.residual_norm < 1e-6;
+      result.message = fmt::format("KSP {} in {} iterations, |Au - b| / |b| = {:.2e}", KSPConvergedReasons[reason], its,
+                                   result.residual_norm);
+      result.iterations = static_cast<int>(its);
+      result.energy = std::numeric_limits<double>::quiet_NaN();
+      LMEFORM_PETSC_CHECK(VecCopy(x, u));
+      break;
+    }
+  }
+  result.seconds_solve = seconds_since(t1);
+  if (energy_terms.size() > 1) record_values();
+  result.state = to_original(disc, u, bs);
+
+  // Errors against the scene's exact solutions.
+  for (const auto& [name, exact] : scene.reference.solution) {
+    const UnknownField& field = b.unknown(name);
+    const FormModule& errors = compile_error_form(scene.dim(), name, field.components, exact.expression(), b.constants,
+                                                  exact.where, comm, input.log);
+    // The error form has this unknown alone: its state is the unknown's components.
+    const auto& l2 = errors.at("l2", scene.dim());
+    const auto& h1 = errors.at("h1", scene.dim());
+    Assembler l2_form(disc, l2), h1_form(disc, h1);
+    for (int i = 0; i < l2.n_constants; ++i) {
+      l2_form.set_constant(l2.constants[i], std::isnan(constants.at(l2.constants[i])) ? 0.0 : constants.at(l2.constants[i]));
+      h1_form.set_constant(h1.constants[i], std::isnan(constants.at(h1.constants[i])) ? 0.0 : constants.at(h1.constants[i]));
+    }
+    std::vector<double> field_state(nodes.size() * std::size_t(field.components));
+    for (std::size_t a = 0; a < nodes.size(); ++a)
+      for (int c = 0; c < field.components; ++c)
+        field_state[a * std::size_t(field.components) + std::size_t(c)] = result.state[a * std::size_t(bs) + std::size_t(field.offset + c)];
+    PetscVector v = l2_form.create_vector();
+    set_from_original(disc, field_state, field.components, v);
+    result.errors.push_back({name, std::sqrt(std::max(0.0, l2_form.value(v))), std::sqrt(std::max(0.0, h1_form.value(v)))});
+  }
+
+  // |∇u| of the first scalar unknown at the nodes (0 where it is prescribed): adaptivity indicators.
+  if (!b.unknowns.empty() && b.unknowns.front().components == 1) {
+    result.gradient_norm.assign(nodes.size(), 0.0);
+    const int dim = nodes.dim;
+    for (std::size_t r = 0; r < nodes.size(); ++r) {
+      const auto o = static_cast<std::size_t>(disc.original_index()[r]);
+      if (first_scalar_fixed[o] != 0) continue;
+      const auto x = disc.nodes().point(r);
+      const auto list = disc.basis().neighbours(x);
+      const auto jet = disc.basis().evaluate(x, list, 1);
+      double g2 = 0;
+      for (int i = 0; i < dim; ++i) {
+        double g = 0;
+        for (std::size_t m = 0; m < list.size(); ++m)
+          g += jet[std::size_t(1 + i) * list.size() + m] *
+               result.state[std::size_t(disc.original_index()[static_cast<std::size_t>(list[m])]) * std::size_t(bs)];
+        g2 += g * g;
+      }
+      result.gradient_norm[o] = std::sqrt(g2);
+    }
+  }
+  result.cells = delaunay(nodes);
+  return result;
+}
+
+}  // namespace lmeform::app

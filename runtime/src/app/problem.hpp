@@ -1,0 +1,133 @@
+// Any model from its forms and a scene: the scene bound to its loaded forms (every name checked),
+// and one solve on a node set. The kind of problem follows from the outputs the scene names:
+// energies (+ constraints) go to the constrained Newton minimizer, a residual to PETSc SNES, a
+// bilinear + linear pair to one PETSc KSP solve. Nothing here knows a particular model; models with
+// conveniences of their own (the phase-field vesicle) call solve_problem with their choices.
+#pragma once
+
+#include <mpi.h>
+
+#include <iosfwd>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "expressions.hpp"
+#include "lmeform/constrained_minimizer.hpp"
+#include "lmeform/delaunay.hpp"
+#include "lmeform/form_registry.hpp"
+#include "lmeform/lme_basis.hpp"
+#include "lmeform/node_set.hpp"
+#include "lmeform/scene.hpp"
+
+namespace lmeform::app {
+
+/// An unknown field of the problem: name, components, offset within a node's dofs.
+struct UnknownField {
+  std::string name;
+  int components = 1;
+  int offset = 0;
+};
+
+struct BoundConstraint {
+  std::string name;
+  const kernel::FormKernels* kernel = nullptr;
+  double target = 0;
+  double scale = 1;
+  std::string target_constant;         ///< the form's constant holding the target ("" for a number)
+};
+
+/// A scene with its forms loaded and every name checked against them.
+struct BoundScene {
+  const Scene* scene = nullptr;
+  std::vector<const FormModule*> modules;
+  ProblemKind kind = ProblemKind::minimization;
+  std::vector<const kernel::FormKernels*> energy;  ///< minimization: the summed energy terms
+  std::vector<BoundConstraint> constraints;
+  const kernel::FormKernels* residual = nullptr;
+  const kernel::FormKernels* bilinear = nullptr;
+  const kernel::FormKernels* linear = nullptr;
+  std::vector<UnknownField> unknowns;
+  int dofs_per_node = 0;
+  int basis_order = 0;                 ///< the highest derivative order the kernels read
+  /// Every constant of the used kernels: the scene's value, else the form's default.
+  std::map<std::string, double, std::less<>> constants;
+  /// Point expressions of the scene (initial fields, Dirichlet values), compiled.
+  std::shared_ptr<PointExpressions> expressions;
+  std::vector<int> initial_expression;    ///< per scene.initial entry: expression handle or -1
+  std::vector<int> dirichlet_expression;  ///< per scene.dirichlet entry: expression handle or -1
+
+  [[nodiscard]] const UnknownField& unknown(std::string_view name) const;
+  /// Every kernel the problem assembles.
+  [[nodiscard]] std::vector<const kernel::FormKernels*> kernels() const;
+};
+
+/// Loads the scene's forms (built-in or JIT, collective over comm) and checks every name the scene
+/// uses against them: outputs, constants (did-you-mean over the forms' constants), constraint
+/// names, unknowns, quadrature data, expressions. Throws SceneError naming file, line and key, or
+/// FormLoadError for a form that cannot be loaded.
+/// `provided_constants`: constants a model sets itself (not required in [constants]);
+/// `provided_qdata`: quadrature data a model supplies itself.
+[[nodiscard]] BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log,
+                                    const std::vector<std::string>& provided_constants = {},
+                                    const std::vector<std::string>& provided_qdata = {});
+
+/// What one solve starts from; empty members take the scene's choice.
+struct ProblemInput {
+  NodeSet nodes;
+  std::map<std::string, double, std::less<>> constants;  ///< overrides (e.g. eps of a continuation stage)
+  std::map<std::string, double, std::less<>> targets;    ///< constraint targets, by constraint name
+  std::map<std::string, double, std::less<>> scales;     ///< constraint scales, by constraint name
+  std::vector<double> initial;               ///< original node order, dofs interleaved; empty: the scene's [initial]
+  std::vector<double> initial_multipliers;   ///< physical units, one per constraint; empty: zero
+  LmeOptions lme;                            ///< mirror symmetry, spacing smoothing
+  std::ostream* log = nullptr;
+  /// Only evaluate the energies and constraints at the start (ProblemResult::values), no solve.
+  bool evaluate_only = false;
+};
+
+/// Error of one unknown against the scene's exact solution.
+struct FieldError {
+  std::string unknown;
+  double l2 = 0;
+  double h1 = 0;                             ///< semi-norm |∇(u − u_exact)|
+};
+
+struct ProblemResult {
+  bool converged = false;
+  std::string message;
+  ConstrainedResult minimization;            ///< minimization problems (energy, multipliers, ...)
+  double energy = 0;                         ///< Σ energies at the solution (NaN for other problems)
+  double residual_norm = 0;                  ///< final |R| (residual problems) or |Au − b| / |b| (linear)
+  int iterations = 0;                        ///< Newton / Krylov iterations
+  NodeSet nodes;                             ///< original order
+  BackgroundCells cells;                     ///< original numbering
+  std::vector<double> state;                 ///< original order, dofs interleaved
+  std::vector<double> gradient_norm;         ///< |∇u| of the first scalar unknown at the nodes (0 where fixed)
+  std::vector<std::string> constraint_names;
+  std::vector<FieldError> errors;
+  /// Each energy term ("module.output") and constraint (by name) at the state: filled by
+  /// evaluate_only, and after a solve whose energy has several terms.
+  std::map<std::string, double, std::less<>> values;
+  double h_min = 0, h_mean = 0;
+  double seconds_setup = 0, seconds_solve = 0;
+};
+
+/// One solve on input.nodes. Collective over comm. Throws for what cannot run (an LME evaluation
+/// that fails, a linear solve that breaks down); a solver that does not converge is reported in the
+/// result instead.
+[[nodiscard]] ProblemResult solve_problem(MPI_Comm comm, const BoundScene& bound, const ProblemInput& input);
+
+/// The scene's initial node set (uniform grid, uniform CVT of a node count, or a point file whose
+/// points must lie in the domain).
+[[nodiscard]] NodeSet initial_nodes(const Scene& scene, std::ostream* log = nullptr);
+
+/// Values of the scene's [initial] fields at the nodes (original order, dofs interleaved; unknowns
+/// without an entry start at 0).
+[[nodiscard]] std::vector<double> initial_state(const BoundScene& bound, const NodeSet& nodes);
+
+/// The original indices of the nodes on a named boundary part (box sides, "hull", "axis").
+[[nodiscard]] std::vector<int> boundary_nodes(const Scene& scene, const NodeSet& nodes, const std::string& part);
+
+}  // namespace lmeform::app

@@ -1,0 +1,465 @@
+// `lmeform check` and its library (runtime/src/check): every built-in module passes in every
+// declared dimension (2D and 3D, Cartesian and axisymmetric) with generic states; corrupted kernels
+// fail with the offending output named (and exit code 1 from the command); residual, bilinear and
+// linear outputs are checked for what applies to them; non-smooth forms report kinks, not failures.
+#include "check_command.hpp"
+
+#include <lmeform/form_check_setup.hpp>
+#include <lmeform/form_registry.hpp>
+#include <lmeform/module_check.hpp>
+
+#include <check_elastic_kernels.hpp>
+#include <check_kinks_kernels.hpp>
+#include <check_weak_kernels.hpp>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace fc = lmeform::formcheck;
+namespace fs = std::filesystem;
+using lmeform::kernel::CellInputs;
+using lmeform::kernel::FormKernels;
+using lmeform::kernel::ModuleTable;
+
+namespace {
+
+std::span<const FormKernels* const> kernels_of(const ModuleTable& t) {
+  return {t.kernels, static_cast<std::size_t>(t.n_kernels)};
+}
+
+const fc::CheckRecord* find_record(const fc::ModuleCheck& check, const std::string& output, int dim) {
+  for (const auto& r : check.records)
+    if (r.output == output && r.dim == dim) return &r;
+  return nullptr;
+}
+
+// ---- Corrupted kernels ----------------------------------------------------------------------------
+// Kernel pointers are plain functions: the wrapped original lives in a global for the wrapper.
+
+const FormKernels* g_original = nullptr;
+
+int ndofs(const CellInputs& in) { return in.n_nodes * g_original->dofs_per_node; }
+
+/// Adds 1e-3 max|H| to one off-diagonal entry (kernels accumulate: compute, then add).
+void matrix_with_one_wrong_entry(const CellInputs& in, double* m) {
+  const int N = ndofs(in);
+  std::vector<double> H(static_cast<std::size_t>(N) * N, 0.0);
+  g_original->matrix(in, H.data());
+  double largest = 0.0;
+  for (const double h : H) largest = std::max(largest, std::abs(h));
+  H[static_cast<std::size_t>(1) * N + 2] += 1e-3 * largest;
+  for (std::size_t i = 0; i < H.size(); ++i) m[i] += H[i];
+}
+
+void vector_scaled(const CellInputs& in, double* g) {
+  std::vector<double> v(static_cast<std::size_t>(ndofs(in)), 0.0);
+  g_original->vector(in, v.data());
+  for (std::size_t i = 0; i < v.size(); ++i) g[i] += 1.001 * v[i];
+}
+
+/// A "linear" form that squares its entries: not linear in the test function.
+void vector_squared(const CellInputs& in, double* g) {
+  std::vector<double> v(static_cast<std::size_t>(ndofs(in)), 0.0);
+  g_original->vector(in, v.data());
+  for (std::size_t i = 0; i < v.size(); ++i) g[i] += v[i] + 10.0 * v[i] * v[i];
+}
+
+/// A "bilinear" form that reads the unknowns.
+void matrix_reading_unknowns(const CellInputs& in, double* m) {
+  const int N = ndofs(in);
+  std::vector<double> A(static_cast<std::size_t>(N) * N, 0.0);
+  g_original->matrix(in, A.data());
+  for (std::size_t i = 0; i < A.size(); ++i) m[i] += A[i] * (1.0 + 1e-3 * in.unknowns[0]);
+}
+
+/// A module table with `replaced` standing in for the kernel of the same output and dimension.
+struct PatchedModule {
+  std::vector<const FormKernels*> kernels;
+  ModuleTable table;
+  PatchedModule(const ModuleTable& original, const FormKernels& replaced) : table(original) {
+    for (int i = 0; i < original.n_kernels; ++i) {
+      const FormKernels* k = original.kernels[i];
+      kernels.push_back(std::string(k->name) == replaced.name && k->dim == replaced.dim ? &replaced : k);
+    }
+    table.kernels = kernels.data();
+  }
+};
+
+}  // namespace
+
+// ---- Built-in modules ------------------------------------------------------------------------------
+
+class BuiltinModule : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(BuiltinModule, PassesInEveryDeclaredDimension) {
+  const lmeform::FormModule& module = lmeform::load_form(GetParam());
+  const fc::ModuleCheck check = fc::check_module(module.name, module.source, module.kernels, {});
+  std::printf("%s\n", fc::format_table(check).c_str());
+  EXPECT_EQ(check.records.size(), module.kernels.size()) << "every output in every declared dimension";
+  for (const fc::CheckRecord& r : check.records) {
+    EXPECT_TRUE(r.passed) << r.output << " " << r.dim << "d";
+    EXPECT_EQ(r.status, "pass") << r.output << " " << r.dim << "d: a smooth form reports no kink";
+    EXPECT_EQ(r.cells, 2);
+  }
+  const bool axisymmetric = GetParam().find("_axisymmetric") != std::string::npos;
+  EXPECT_EQ(check.coordinates, axisymmetric ? fc::Coordinates::axisymmetric : fc::Coordinates::cartesian);
+}
+
+INSTANTIATE_TEST_SUITE_P(All, BuiltinModule, ::testing::ValuesIn(lmeform::builtin_form_names()),
+                         [](const ::testing::TestParamInfo<std::string>& p) { return p.param; });
+
+TEST(ModuleCheck, BuiltinsCoverBothDimensionsAndKinds) {
+  // The built-in library must exercise 3D and the axisymmetric geometry, or the test above proves little.
+  bool three_d = false, axisymmetric = false, constraint = false;
+  for (const auto& name : lmeform::builtin_form_names()) {
+    const auto& m = lmeform::load_form(name);
+    for (const auto* k : m.kernels) {
+      three_d = three_d || k->dim == 3;
+      constraint = constraint || k->kind == lmeform::kernel::FunctionalKind::Constraint;
+    }
+    axisymmetric = axisymmetric || name.find("_axisymmetric") != std::string::npos;
+  }
+  EXPECT_TRUE(three_d && axisymmetric && constraint);
+}
+
+// ---- Corrupted kernels fail, naming the output -------------------------------------------------------
+
+TEST(ModuleCheck, WrongHessianEntryFails) {
+  const auto& helfrich = lmeform::load_form("helfrich");
+  FormKernels bad = helfrich.at("bending", 2);
+  g_original = &helfrich.at("bending", 2);
+  bad.matrix = &matrix_with_one_wrong_entry;
+  const fc::CheckRecord r = fc::check_kernels(bad, fc::resolve_constants(helfrich.kernels, {}, 1),
+                                              fc::Coordinates::cartesian, {});
+  EXPECT_FALSE(r.passed);
+  EXPECT_EQ(r.status, "fail");
+  EXPECT_GT(r.hessian_rel_error, 1e-6);
+  EXPECT_GT(r.symmetry_error, 1e-12);
+  EXPECT_LT(r.gradient_rel_error, 1e-6) << "the gradient is untouched";
+  for (const auto& f : r.failures) std::printf("  %s\n", f.c_str());
+}
+
+TEST(ModuleCheck, ScaledGradientOfA3dLagrangianFormFails) {
+  const auto& lagrangian = lmeform::load_form("helfrich_lagrangian");
+  FormKernels bad = lagrangian.at("bending", 3);
+  g_original = &lagrangian.at("bending", 3);
+  bad.vector = &vector_scaled;
+  const fc::CheckRecord r = fc::check_kernels(bad, fc::resolve_constants(lagrangian.kernels, {}, 1),
+                                              fc::Coordinates::cartesian, {});
+  EXPECT_FALSE(r.passed);
+  EXPECT_GT(r.gradient_rel_error, 1e-4);
+  ASSERT_FALSE(r.failures.empty());
+  EXPECT_NE(r.failures.front().find("gradient"), std::string::npos) << r.failures.front();
+}
+
+TEST(CheckCommand, CorruptedKernelExitsOneNamingTheOutput) {
+  FormKernels bad = check_weak_nonlinear_2d;
+  g_original = &check_weak_nonlinear_2d;
+  bad.matrix = &matrix_with_one_wrong_entry;
+  const PatchedModule patched(check_weak_module, bad);
+  lmeform::CheckCommandOptions options;
+  options.module = &patched.table;
+  std::ostringstream out, err;
+  options.out = &out;
+  options.err = &err;
+  EXPECT_EQ(lmeform::run_check_command(options), 1);
+  std::printf("%s%s", out.str().c_str(), err.str().c_str());
+  EXPECT_NE(out.str().find("FAIL nonlinear 2d"), std::string::npos);
+  EXPECT_NE(err.str().find("nonlinear (2d)"), std::string::npos);
+  EXPECT_EQ(err.str().find("affine"), std::string::npos) << "only the corrupted output fails";
+  EXPECT_EQ(err.str().find("nonlinear (3d)"), std::string::npos);
+}
+
+TEST(ModuleCheck, LinearFormThatIsNotLinearFails) {
+  FormKernels bad = check_weak_load_2d;
+  g_original = &check_weak_load_2d;
+  bad.vector = &vector_squared;
+  const fc::CheckRecord r = fc::check_kernels(bad, fc::resolve_constants(kernels_of(check_weak_module), {}, 1),
+                                              fc::Coordinates::cartesian, {});
+  EXPECT_FALSE(r.passed);
+  EXPECT_GT(r.linearity_error, 1e-6);
+}
+
+TEST(ModuleCheck, BilinearFormReadingTheUnknownsFails) {
+  FormKernels bad = check_weak_stiffness_3d;
+  g_original = &check_weak_stiffness_3d;
+  bad.matrix = &matrix_reading_unknowns;
+  const fc::CheckRecord r = fc::check_kernels(bad, fc::resolve_constants(kernels_of(check_weak_module), {}, 1),
+                                              fc::Coordinates::cartesian, {});
+  EXPECT_FALSE(r.passed);
+  EXPECT_GT(r.state_dependence_error, 1e-6);
+}
+
+// ---- Residual, bilinear and linear outputs ---------------------------------------------------------
+
+TEST(ModuleCheck, ResidualBilinearAndLinearOutputs) {
+  const fc::ModuleCheck check = fc::check_module("check_weak", "", kernels_of(check_weak_module), {});
+  std::printf("%s\n", fc::format_table(check).c_str());
+  EXPECT_TRUE(check.passed());
+  for (const int dim : {2, 3}) {
+    const auto* nonlinear = find_record(check, "nonlinear", dim);
+    const auto* affine = find_record(check, "affine", dim);
+    const auto* stiffness = find_record(check, "stiffness", dim);
+    const auto* load = find_record(check, "load", dim);
+    ASSERT_TRUE(nonlinear && affine && stiffness && load);
+    // A residual: Jacobian against FD of R, its Taylor remainder, linearity in the test function;
+    // no value, so no gradient check and no value remainders.
+    EXPECT_TRUE(std::isnan(nonlinear->gradient_rel_error));
+    EXPECT_LT(nonlinear->hessian_rel_error, 1e-6);
+    EXPECT_LT(nonlinear->linearity_error, 1e-10);
+    EXPECT_EQ(nonlinear->taylor_slope_gradient.kind, fc::SlopeResult::Kind::not_applicable);
+    EXPECT_EQ(nonlinear->taylor_slope_hessian.kind, fc::SlopeResult::Kind::fitted);
+    EXPECT_NEAR(nonlinear->taylor_slope_hessian.value, 2.0, 0.2);
+    EXPECT_EQ(affine->taylor_slope_hessian.kind, fc::SlopeResult::Kind::exact) << "R affine in T";
+    // Bilinear and linear forms: linearity and independence of the unknowns, nothing else.
+    for (const auto* r : {stiffness, load}) {
+      EXPECT_LT(r->linearity_error, 1e-10);
+      EXPECT_EQ(r->state_dependence_error, 0.0);
+      EXPECT_TRUE(std::isnan(r->gradient_rel_error) && std::isnan(r->hessian_rel_error));
+      EXPECT_EQ(r->taylor_slope_hessian.kind, fc::SlopeResult::Kind::not_applicable);
+    }
+  }
+}
+
+TEST(ModuleCheck, ResidualOfAVectorUnknown) {
+  const fc::ModuleCheck check = fc::check_module("check_elastic", "", kernels_of(check_elastic_module), {});
+  std::printf("%s\n", fc::format_table(check).c_str());
+  EXPECT_TRUE(check.passed());
+  for (const auto& r : check.records) EXPECT_GT(r.min_det, 0.5) << r.dim << "d";
+}
+
+// ---- Non-smooth forms ----------------------------------------------------------------------------
+
+TEST(ModuleCheck, NonSmoothFormReportsKinksNotFailures) {
+  const fc::ModuleCheck check = fc::check_module("check_kinks", "", kernels_of(check_kinks_module), {});
+  std::printf("%s\n", fc::format_table(check).c_str());
+  EXPECT_TRUE(check.passed());
+  int kinked = 0;
+  for (const auto& r : check.records) kinked += r.status == "kink" ? 1 : 0;
+  EXPECT_GT(kinked, 0) << "the random perturbations cross kinks of abs(sin(20 phi)) and max(phi, 0.2)";
+  const auto* absolute = find_record(check, "absolute", 2);
+  ASSERT_TRUE(absolute);
+  EXPECT_EQ(absolute->status, "kink");
+  ASSERT_FALSE(absolute->kinks.empty());
+  EXPECT_NE(absolute->kinks.front().find("Taylor direction"), std::string::npos) << absolute->kinks.front();
+}
+
+TEST(FormCheck, KinksAndJumpsAtTheStateAreReportedNotFailed) {
+  // phi = threshold + 1e-9 (x - x_cell) / h at the nodes, so the quadrature points sit on both sides
+  // of the kink of max(phi, 0.2) or the jump of `if phi > 0.3`, 1e-9 away: every finite difference
+  // and the Taylor direction (increasing phi everywhere) cross it right at the state.
+  const fc::CheckGeometry geometry(fc::GeometryOptions{});
+  const fc::Cell cell = geometry.check_cells(2).front();
+  struct Case { const FormKernels* form; double threshold; const char* label; };
+  for (const Case& c : {Case{&check_kinks_clipped_2d, 0.2, "max(phi, 0.2)^2 at its kink"},
+                        Case{&check_kinks_switched_2d, 0.3, "if phi > 0.3 at its jump"}}) {
+    fc::State state;
+    const double x_cell = cell.points[0];
+    for (int a = 0; a < cell.n; ++a)
+      state.unknowns.push_back(c.threshold + 1e-9 * (cell.nodes[static_cast<std::size_t>(a) * 2] - x_cell) / geometry.h_min());
+    state.constants = std::vector<double>(static_cast<std::size_t>(c.form->n_constants), 0.2);
+    const std::vector<double> direction(static_cast<std::size_t>(cell.n), 1.0);
+    const fc::Report rep = fc::check_form(*c.form, cell, state, direction, fc::Options{});
+    std::printf("%s\n", rep.summary(c.label).c_str());
+    EXPECT_TRUE(rep.ok()) << c.label;
+    const auto lines = fc::describe_kinks(rep.kinks);
+    auto mentions = [&](const char* what) {
+      return std::any_of(lines.begin(), lines.end(), [&](const std::string& l) { return l.find(what) != std::string::npos; });
+    };
+    EXPECT_TRUE(mentions("FD of the value")) << c.label;
+    EXPECT_TRUE(mentions("Taylor direction")) << c.label;
+    // Without kink detection the same check fails: the detection is what saves it.
+    fc::Options blind;
+    blind.detect_kinks = false;
+    EXPECT_FALSE(fc::check_form(*c.form, cell, state, direction, blind).ok()) << c.label;
+  }
+}
+
+// ---- Setup: cells and states ---------------------------------------------------------------------
+
+TEST(CheckSetup, GradedCellsInEveryGeometry) {
+  for (const int dim : {1, 2, 3})
+    for (const auto coordinates : {fc::Coordinates::cartesian, fc::Coordinates::axisymmetric}) {
+      if (dim == 1 && coordinates == fc::Coordinates::axisymmetric) continue;
+      fc::GeometryOptions go;
+      go.dim = dim;
+      go.coordinates = coordinates;
+      const fc::CheckGeometry g(go);
+      const auto cells = g.check_cells(2);
+      ASSERT_EQ(cells.size(), 2u);
+      double h_lo = 1e300, h_hi = 0;
+      for (const double h : g.basis().spacing()) { h_lo = std::min(h_lo, h); h_hi = std::max(h_hi, h); }
+      std::printf("%dD %s: %zu nodes, %zu cells, spacing %.3f .. %.3f, check cells n = %d, %d (nq = %d)\n", dim,
+                  fc::to_string(coordinates), g.nodes().size(), g.cells().size(), h_lo, h_hi, cells[0].n, cells[1].n,
+                  cells[0].nq);
+      EXPECT_GT(h_hi / h_lo, 2.0) << "strongly graded";
+      if (coordinates == fc::Coordinates::axisymmetric && dim > 1) {
+        const fc::Cell off_axis = g.check_cells(2, true).back();
+        std::mt19937_64 rng(5);
+        const auto y = fc::near_identity_field(off_axis, 0.1, 0.001, coordinates, rng);
+        EXPECT_GT(fc::min_det_grad(off_axis, y, dim, 0), 0.5) << "the cell off the axis for vector fields";
+      }
+      for (const auto& cell : cells) {
+        // A partition of unity that reproduces linear fields, at points inside the domain.
+        for (int q = 0; q < cell.nq; ++q) {
+          double sum = 0.0;
+          for (int a = 0; a < cell.n; ++a) sum += cell.basis[static_cast<std::size_t>(q) * lmeform::kernel::jet_size(dim, 2) * cell.n + a];
+          EXPECT_NEAR(sum, 1.0, 1e-10);
+          if (coordinates == fc::Coordinates::axisymmetric) {
+            EXPECT_GT(cell.points[static_cast<std::size_t>(q) * dim], 0.0);
+          }
+        }
+        std::mt19937_64 rng(5);
+        const auto y = fc::near_identity_field(cell, 0.1, 0.001, coordinates, rng);
+        // Vector fields meet the axis cell only where it is off the axis (check_cells(order, true)).
+        if (dim > 1 && (coordinates == fc::Coordinates::cartesian || &cell == &cells.front())) {
+          EXPECT_GT(fc::min_det_grad(cell, y, dim, 0), 0.5);
+        }
+        const auto phi = fc::smooth_scalar_field(cell, g.feature(), 2 * g.h_min(), 0.05, rng);
+        for (const double p : phi) EXPECT_LT(std::abs(p), 1.0);
+      }
+    }
+}
+
+TEST(CheckSetup, QdataFollowsTheDeclaredSizes) {
+  const fc::CheckGeometry g(fc::GeometryOptions{});
+  const fc::Cell cell = g.check_cells(2).front();
+  std::mt19937_64 rng(1);
+  const auto phi = fc::smooth_scalar_field(cell, g.feature(), 0.06, 0.05, rng);
+  const auto qd = fc::reference_qdata(cell, phi);  // phi0, gphi0, hphi0
+  ASSERT_EQ(qd.size(), static_cast<std::size_t>(cell.nq) * 7);
+  EXPECT_DOUBLE_EQ(qd[0], cell.jet(0, 0, phi.data(), 1, 0));
+  EXPECT_DOUBLE_EQ(qd[2], cell.jet(0, 2, phi.data(), 1, 0));
+  EXPECT_DOUBLE_EQ(qd[4], qd[5]) << "the Hessian is symmetric";
+}
+
+// ---- Constants and coordinates ----------------------------------------------------------------
+
+TEST(ModuleCheck, ConstantsFromSetDefaultsOrRandom) {
+  const auto& helfrich = lmeform::load_form("helfrich");  // constant k = 1, eps, C0 = 0
+  const auto c = fc::resolve_constants(helfrich.kernels, {{"eps", 0.02}}, 7);
+  ASSERT_EQ(c.size(), 3u);
+  EXPECT_EQ(c[0].name, "k");
+  EXPECT_EQ(c[0].value, 1.0);
+  EXPECT_EQ(c[0].origin, "default");
+  EXPECT_EQ(c[1].value, 0.02);
+  EXPECT_EQ(c[1].origin, "--set");
+  const auto r = fc::resolve_constants(helfrich.kernels, {}, 7);
+  EXPECT_EQ(r[1].origin, "random");
+  EXPECT_NEAR(r[1].value, 1.0, 0.2);
+  try {
+    (void)fc::resolve_constants(helfrich.kernels, {{"kappa", 1.0}}, 7);
+    FAIL() << "unknown constant accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("k, eps, C0"), std::string::npos) << e.what();
+  }
+}
+
+TEST(ModuleCheck, DefaultCoordinatesRule) {
+  const auto& eulerian = lmeform::load_form("helfrich");
+  const auto& axi = lmeform::load_form("area_axisymmetric");
+  EXPECT_EQ(fc::default_coordinates(eulerian.name, eulerian.source, {}), fc::Coordinates::cartesian);
+  EXPECT_EQ(fc::default_coordinates(axi.name, axi.source, {}), fc::Coordinates::axisymmetric);
+  // By the include, whatever the name.
+  const fs::path dir = fs::temp_directory_path() / "lmeform_check_coordinates";
+  fs::create_directories(dir);
+  std::ofstream(dir / "ring.form") << "form ring\ninclude \"axisymmetric.inc\"  # r, z\nunknown u\nenergy e = u^2*dA\n";
+  std::ofstream(dir / "commented.form") << "form commented\n# include \"axisymmetric.inc\"\nunknown u\n";
+  std::string why;
+  EXPECT_EQ(fc::default_coordinates("ring", dir / "ring.form", {}, &why), fc::Coordinates::axisymmetric);
+  EXPECT_EQ(why, "source includes axisymmetric.inc");
+  EXPECT_EQ(fc::default_coordinates("commented", dir / "commented.form", {}), fc::Coordinates::cartesian);
+}
+
+// ---- The command ---------------------------------------------------------------------------------
+
+TEST(CheckCommand, ParsesItsFlags) {
+  CLI::App app;
+  lmeform::CheckCommandOptions o;
+  CLI::App* cmd = lmeform::add_check_subcommand(app, o);
+  const char* argv[] = {"lmeform", "check", "--dim", "2", "--set", "eps=0.02", "--set", "k=2", "--output",
+                        "bending", "--coordinates", "cartesian", "--seed", "9", "--json", "out.json", "-I",
+                        "inc", "helfrich"};
+  app.parse(static_cast<int>(std::size(argv)), argv);
+  EXPECT_TRUE(cmd->parsed());
+  EXPECT_EQ(o.form, "helfrich");
+  EXPECT_EQ(o.dims, std::vector<int>{2});
+  EXPECT_EQ(o.sets, (std::vector<std::string>{"eps=0.02", "k=2"}));
+  EXPECT_EQ(o.outputs, std::vector<std::string>{"bending"});
+  EXPECT_EQ(o.coordinates, "cartesian");
+  EXPECT_EQ(o.seed, 9u);
+  EXPECT_EQ(o.json, "out.json");
+  EXPECT_EQ(o.include_dirs, std::vector<std::string>{"inc"});
+}
+
+TEST(CheckCommand, BuiltinByNameWritesJsonRecords) {
+  const fs::path json = fs::temp_directory_path() / "lmeform_check_poisson.json";
+  lmeform::CheckCommandOptions o;
+  o.form = "poisson";
+  o.json = json.string();
+  std::ostringstream out, err;
+  o.out = &out;
+  o.err = &err;
+  EXPECT_EQ(lmeform::run_check_command(o), 0) << out.str() << err.str();
+  std::printf("%s", out.str().c_str());
+  const auto records = nlohmann::json::parse(std::ifstream(json));
+  ASSERT_TRUE(records.is_array());
+  ASSERT_EQ(records.size(), 2u);  // heat in 2D and 3D
+  for (const auto& r : records) {
+    for (const char* key : {"form", "output", "kind", "dim", "gradient_rel_error", "hessian_rel_error",
+                            "taylor_slope_gradient", "taylor_slope_hessian", "passed"})
+      EXPECT_TRUE(r.contains(key)) << key;
+    EXPECT_EQ(r["form"], "poisson");
+    EXPECT_EQ(r["kind"], "energy");
+    EXPECT_TRUE(r["passed"].get<bool>());
+    EXPECT_EQ(r["taylor_slope_hessian"], "exact") << "a quadratic energy";
+    EXPECT_NEAR(r["taylor_slope_gradient"].get<double>(), 2.0, 0.2);
+  }
+}
+
+TEST(CheckCommand, UsageErrorsExitTwo) {
+  std::ostringstream out, err;
+  lmeform::CheckCommandOptions o;
+  o.out = &out;
+  o.err = &err;
+  o.form = "helfrich";
+  o.sets = {"kappa=1"};
+  EXPECT_EQ(lmeform::run_check_command(o), 2);
+  EXPECT_NE(err.str().find("k, eps, C0"), std::string::npos) << err.str();
+  o.sets = {"eps=abc"};
+  EXPECT_EQ(lmeform::run_check_command(o), 2);
+  o.sets = {};
+  o.outputs = {"energy"};
+  EXPECT_EQ(lmeform::run_check_command(o), 2);
+  EXPECT_NE(err.str().find("outputs: bending"), std::string::npos) << err.str();
+  o.outputs = {};
+  o.form = "no_such_module";
+  EXPECT_EQ(lmeform::run_check_command(o), 2);
+}
+
+TEST(CheckCommand, FormByPathIsCompiledAndChecked) {
+  const fs::path cache = fs::temp_directory_path() / "lmeform_check_test_cache";
+  ::setenv("LMEFORM_CACHE_DIR", cache.c_str(), 1);
+  lmeform::CheckCommandOptions o;
+  o.form = std::string(LMEFORM_CHECK_TEST_FORMS) + "/check_weak.form";
+  o.dims = {2};
+  o.sets = {"c=0.5"};
+  std::ostringstream out, err;
+  o.out = &out;
+  o.err = &err;
+  const int code = lmeform::run_check_command(o);
+  std::printf("%s%s", out.str().c_str(), err.str().c_str());
+  EXPECT_EQ(code, 0);
+  EXPECT_NE(out.str().find("c = 0.5 (--set)"), std::string::npos);
+}

@@ -1,0 +1,434 @@
+// The phase-field vesicle's [vesicle] extension of a scene (runtime/src/app/vesicle.cpp,
+// docs/scenes.md): targets from a sphere (radius, reduced_volume), the feasibility of the reduced
+// volume, the initial shape (inside the domain, on the axis), the adaptivity schedule (eps lowered
+// stage by stage, branches), the resolution rule against the uniform grid of [nodes], and the demos
+// read with the extension list of `lmeform run`.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <filesystem>
+#include <initializer_list>
+#include <numbers>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "lmeform/scene.hpp"
+#include "run_scene.hpp"
+#include "vesicle.hpp"
+
+using namespace lmeform;
+using lmeform::app::read_vesicle;
+using lmeform::app::VesicleModel;
+
+namespace {
+
+constexpr double pi = std::numbers::pi;
+
+// An axisymmetric vesicle on a uniform grid: h_min = 1.5 / round(1.5 / 0.024) = 1.5 / 63 = 0.0238095,
+// so eps = 0.05 passes the default rule eps >= 2 h_min = 0.047619.
+const std::string kVesicle = R"([scene]
+name = "vesicle"
+coordinates = "axisymmetric"
+[domain]
+lower = [0.0, 0.0]
+upper = [1.5, 2.0]
+[nodes]
+spacing = 0.024
+[model]
+forms = ["helfrich_axisymmetric", "area_axisymmetric", "volume_axisymmetric", "moment_axisymmetric"]
+energy = "bending"
+[constants]
+eps = 0.05
+zc = 1.0
+[constraints]
+area = {}
+volume = {}
+moment = 0.0
+[[dirichlet]]
+boundary = ["r_max", "z_min", "z_max"]
+unknown = "phi"
+value = -1.0
+[vesicle]
+radius = 0.4
+reduced_volume = 0.8
+[vesicle.initial]
+shape = "ellipsoid"
+center = [0.0, 1.0]
+semi_axes = [0.4987, 0.2059]
+)";
+
+// A 2D Cartesian vesicle: perimeter and enclosed area.
+const std::string kPlanar = R"([scene]
+name = "planar"
+coordinates = "cartesian"
+[domain]
+lower = [-1.0, -1.0]
+upper = [1.0, 1.0]
+[nodes]
+counts = [41, 41]
+[model]
+forms = ["helfrich", "area", "volume"]
+[constants]
+eps = 0.1
+[vesicle]
+radius = 0.5
+reduced_volume = 0.9
+[vesicle.initial]
+shape = "sphere"
+center = [0.0, 0.0]
+radius = 0.5
+)";
+
+std::string edit(const std::string& text, const std::string& from, const std::string& to) {
+  const auto pos = text.find(from);
+  EXPECT_NE(pos, std::string::npos) << "test bug: '" << from << "' not in the scene";
+  if (pos == std::string::npos) return text;
+  std::string out = text;
+  out.replace(pos, from.size(), to);
+  return out;
+}
+
+int line_of(const std::string& text, const std::string& needle) {
+  const auto pos = text.find(needle);
+  EXPECT_NE(pos, std::string::npos) << "test bug: '" << needle << "' not in the scene";
+  if (pos == std::string::npos) return -1;
+  return 1 + static_cast<int>(std::count(text.begin(), text.begin() + static_cast<long>(pos), '\n'));
+}
+
+std::string at_line(const std::string& text, const std::string& needle) {
+  return "scenes/broken.toml:" + std::to_string(line_of(text, needle)) + ": ";
+}
+
+Scene load(const std::string& text, const std::string& name = "scenes/ok.toml") {
+  return parse_scene(text, name, app::model_extensions());
+}
+
+VesicleModel vesicle_of(const std::string& text) {
+  const auto m = read_vesicle(load(text));
+  EXPECT_TRUE(m) << "no [vesicle] read";
+  return m.value_or(VesicleModel{});
+}
+
+/// The SceneError of loading `text` and reading its [vesicle]; fails the test if both succeed.
+std::string error_of(const std::string& text) {
+  try {
+    (void)read_vesicle(load(text, "scenes/broken.toml"));
+  } catch (const SceneError& e) {
+    return e.what();
+  }
+  ADD_FAILURE() << "the vesicle scene was accepted:\n" << text;
+  return {};
+}
+
+void expect_error(const std::string& text, std::initializer_list<std::string> parts) {
+  const std::string msg = error_of(text);
+  for (const auto& p : parts) EXPECT_NE(msg.find(p), std::string::npos) << "'" << p << "' not in: " << msg;
+}
+
+}  // namespace
+
+TEST(VesicleScene, ExtensionOfLmeformRun) {
+  const auto ext = app::model_extensions();
+  EXPECT_NE(std::find(ext.begin(), ext.end(), std::string_view("vesicle")), ext.end());
+  const Scene s = load(kVesicle);
+  EXPECT_EQ(s.extensions, (std::vector<std::string>{"vesicle"}));
+  // A scene without [vesicle] is no vesicle.
+  const Scene plain = load(kVesicle.substr(0, kVesicle.find("[vesicle]")));
+  EXPECT_TRUE(plain.extensions.empty());
+  EXPECT_FALSE(read_vesicle(plain));
+}
+
+TEST(VesicleScene, TargetsFromTheSphere) {
+  const VesicleModel m = vesicle_of(kVesicle);
+  EXPECT_EQ(m.field, "phi");
+  EXPECT_EQ(m.width, "eps");
+  EXPECT_EQ(m.eps, 0.05);
+  ASSERT_TRUE(m.area && m.volume && m.reduced_volume);
+  EXPECT_NEAR(*m.area, 0.64 * pi, 1e-14);  // 4 pi R^2
+  EXPECT_NEAR(*m.volume, 0.8 * 4.0 / 3.0 * pi * 0.064, 1e-15);
+  EXPECT_EQ(*m.reduced_volume, 0.8);
+  EXPECT_EQ(m.resolution_factor, 2.0);
+  EXPECT_EQ(m.shape, VesicleModel::Shape::ellipsoid);
+  EXPECT_EQ(m.center[0], 0.0);
+  EXPECT_EQ(m.center[1], 1.0);
+  EXPECT_EQ(m.semi_axes[0], 0.4987);
+  EXPECT_EQ(m.semi_axes[1], 0.2059);
+  EXPECT_FALSE(m.profile_eps);
+  EXPECT_FALSE(m.adaptivity);
+  // 2D Cartesian: the perimeter 2 pi R and the area v pi R^2.
+  const VesicleModel p = vesicle_of(kPlanar);
+  EXPECT_NEAR(*p.area, 2 * pi * 0.5, 1e-15);
+  EXPECT_NEAR(*p.volume, 0.9 * pi * 0.25, 1e-15);
+  EXPECT_EQ(p.shape, VesicleModel::Shape::sphere);
+  EXPECT_EQ(p.semi_axes[0], 0.5);
+  EXPECT_EQ(p.semi_axes[1], 0.5);
+  // A radius alone: the area only; neither: no targets (the constraints' own).
+  const VesicleModel a = vesicle_of(edit(kVesicle, "reduced_volume = 0.8\n", ""));
+  EXPECT_TRUE(a.area);
+  EXPECT_FALSE(a.volume);
+  EXPECT_FALSE(a.reduced_volume);
+  const VesicleModel n = vesicle_of(edit(kVesicle, "radius = 0.4\nreduced_volume = 0.8\n", ""));
+  EXPECT_FALSE(n.area);
+  EXPECT_FALSE(n.volume);
+  // Other names for the field and the width.
+  const VesicleModel w = vesicle_of(edit(edit(kVesicle, "eps = 0.05", "delta = 0.05"), "[vesicle]\n",
+                                         "[vesicle]\nfield = \"c\"\nwidth = \"delta\"\nresolution_factor = 1.5\n"));
+  EXPECT_EQ(w.field, "c");
+  EXPECT_EQ(w.width, "delta");
+  EXPECT_EQ(w.eps, 0.05);
+  EXPECT_EQ(w.resolution_factor, 1.5);
+}
+
+TEST(VesicleScene, InfeasibleReducedVolume) {
+  std::string t = edit(kVesicle, "reduced_volume = 0.8", "reduced_volume = 1.2");
+  expect_error(t, {at_line(t, "reduced_volume ="), "key 'vesicle.reduced_volume' = 1.2 must not exceed 1: no closed surface "
+                                                   "encloses more volume than the sphere of the same area"});
+  EXPECT_NEAR(*vesicle_of(edit(kVesicle, "reduced_volume = 0.8", "reduced_volume = 1.0")).volume, 4.0 / 3.0 * pi * 0.064, 1e-15);
+  t = edit(kVesicle, "reduced_volume = 0.8", "reduced_volume = 0");
+  expect_error(t, {"key 'vesicle.reduced_volume' must be positive, got 0"});
+  t = edit(kVesicle, "radius = 0.4\n", "");
+  expect_error(t, {at_line(t, "reduced_volume ="), "key 'vesicle.reduced_volume' needs the sphere it refers to: add 'vesicle.radius'"});
+  t = edit(kVesicle, "radius = 0.4", "radius = -0.4");
+  expect_error(t, {"key 'vesicle.radius' must be positive, got -0.4"});
+  // A target given twice.
+  t = edit(kVesicle, "area = {}", "area = 2.0");
+  expect_error(t, {at_line(t, "area = 2.0"), "key 'constraints.area': the target is already set by [vesicle]"});
+  t = edit(kVesicle, "volume = {}", "volume = { target = 0.2 }");
+  expect_error(t, {at_line(t, "volume = {"), "the target is already set by [vesicle]"});
+  // A scale alone is no target.
+  EXPECT_NO_THROW((void)read_vesicle(load(edit(kVesicle, "volume = {}", "volume = { scale = 0.3 }"))));
+}
+
+TEST(VesicleScene, Feasibility) {
+  const double A0 = 0.64 * pi;
+  EXPECT_NEAR(app::max_volume_for_area(A0), 4.0 / 3.0 * pi * 0.064, 1e-15);
+  EXPECT_NEAR(app::max_volume_for_area(2 * pi * 0.5, 2), pi * 0.25, 1e-15);
+  EXPECT_NO_THROW(app::check_feasible(A0, 0.8 * app::max_volume_for_area(A0)));
+  EXPECT_NO_THROW(app::check_feasible(A0, app::max_volume_for_area(A0)));  // the sphere itself
+  try {
+    app::check_feasible(A0, 1.1 * app::max_volume_for_area(A0));
+    ADD_FAILURE() << "no error";
+  } catch (const SceneError& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("infeasible targets: volume V0 = 0.29489"), std::string::npos) << m;
+    EXPECT_NE(m.find("V_max = 0.26808"), std::string::npos) << m;
+    EXPECT_NE(m.find("(reduced volume 1.1"), std::string::npos) << m;
+  }
+  EXPECT_THROW(app::check_feasible(A0, -1.0), SceneError);
+  EXPECT_THROW(app::check_feasible(0.0, 0.1), SceneError);
+  EXPECT_THROW(app::check_feasible(2 * pi * 0.5, 1.01 * pi * 0.25, 2), SceneError);
+}
+
+TEST(VesicleScene, WidthConstant) {
+  std::string t = edit(kVesicle, "eps = 0.05\n", "");
+  expect_error(t, {at_line(t, "[vesicle]"), "key 'vesicle.width' names the constant 'eps', which [constants] does not give"});
+  t = edit(kVesicle, "[vesicle]\n", "[vesicle]\nwidth = \"epsilon\"\n");
+  expect_error(t, {at_line(t, "width ="), "names the constant 'epsilon', which [constants] does not give"});
+  t = edit(kVesicle, "eps = 0.05", "eps = -0.05");
+  expect_error(t, {at_line(t, "eps = -0.05"), "key 'constants.eps': must be positive, got -0.05"});
+  t = edit(kVesicle, "[vesicle]\n", "[vesicle]\nraduis = 0.4\n");
+  expect_error(t, {at_line(t, "raduis"), "unknown key 'vesicle.raduis'; did you mean 'radius'?"});
+  t = edit(kVesicle, "[vesicle]\n", "[vesicle]\nresolution_factor = 0\n");
+  expect_error(t, {"key 'vesicle.resolution_factor' must be positive, got 0"});
+}
+
+TEST(VesicleScene, InitialShape) {
+  // Outside the domain: above the upper bound, below the lower bound (not across the axis).
+  std::string t = edit(kVesicle, "semi_axes = [0.4987, 0.2059]", "semi_axes = [0.4987, 1.5]");
+  expect_error(t, {at_line(t, "semi_axes ="), "key 'vesicle.initial.semi_axes' puts the initial shape outside the domain: it "
+                                              "reaches 2.5 on axis 1 > upper bound 2"});
+  t = edit(edit(kVesicle, "semi_axes = [0.4987, 0.2059]", "semi_axes = [0.4, 0.75]"), "center = [0.0, 1.0]", "center = [0.0, 0.5]");
+  expect_error(t, {"key 'vesicle.initial.semi_axes' puts the initial shape outside the domain: it reaches -0.25 on axis 1 < lower "
+                   "bound 0"});
+  t = edit(kVesicle, "semi_axes = [0.4987, 0.2059]", "semi_axes = [1.75, 0.2059]");
+  expect_error(t, {"reaches 1.75 on axis 0 > upper bound 1.5"});
+  t = edit(kPlanar, "center = [0.0, 0.0]", "center = [-0.75, 0.0]");
+  expect_error(t, {"key 'vesicle.initial.radius' puts the initial shape outside the domain: it reaches -1.25 on axis 0 < lower "
+                   "bound -1"});
+  // Axisymmetric: centred on the axis.
+  t = edit(kVesicle, "center = [0.0, 1.0]", "center = [0.1, 1.0]");
+  expect_error(t, {at_line(t, "center ="), "key 'vesicle.initial.center' must lie on the axis (r = 0) in an axisymmetric scene, "
+                                           "got r = 0.1"});
+  // Keys of the other shape, typos, a missing table.
+  t = edit(kVesicle, "semi_axes = [0.4987, 0.2059]", "semi_axes = [0.4987, 0.2059]\nradius = 0.3");
+  expect_error(t, {"key 'vesicle.initial.radius' belongs to shape 'sphere'; an ellipsoid takes 'semi_axes'"});
+  t = edit(kPlanar, "center = [0.0, 0.0]\nradius = 0.5\n", "center = [0.0, 0.0]\nradius = 0.5\nsemi_axes = [0.5, 0.5]\n");
+  expect_error(t, {"key 'vesicle.initial.semi_axes' belongs to shape 'ellipsoid'; a sphere takes 'radius'"});
+  t = edit(kVesicle, "shape = \"ellipsoid\"", "shape = \"elipsoid\"");
+  expect_error(t, {at_line(t, "shape ="), "key 'vesicle.initial.shape' must be one of 'ellipsoid', 'sphere', got 'elipsoid'; did "
+                                          "you mean 'ellipsoid'?"});
+  t = edit(kVesicle, "semi_axes = [0.4987, 0.2059]", "semi_axes = [0.4987, 0.2059, 0.3]");
+  expect_error(t, {"key 'vesicle.initial.semi_axes' must be an array of 2 numbers, found 3 entries"});
+  t = kVesicle.substr(0, kVesicle.find("[vesicle.initial]"));
+  expect_error(t, {at_line(t, "[vesicle]"), "key 'vesicle.initial' is missing"});
+  // The profile's own width, and the profile: +1 inside, 0 on the boundary, -1 outside.
+  const VesicleModel m = vesicle_of(kPlanar + "eps = 0.02\n");  // in [vesicle.initial], the last table
+  ASSERT_TRUE(m.profile_eps);
+  EXPECT_EQ(*m.profile_eps, 0.02);
+  const std::array<double, 2> c{0.0, 0.0}, on{0.5, 0.0}, out{0.9, 0.9}, near{0.49, 0.0};
+  EXPECT_GT(app::initial_profile(m, c, 2), 0.99);
+  EXPECT_NEAR(app::initial_profile(m, on, 2), 0.0, 1e-14);
+  EXPECT_LT(app::initial_profile(m, out, 2), -0.99);
+  EXPECT_NEAR(app::initial_profile(m, near, 2), std::tanh(0.01 / (std::numbers::sqrt2 * 0.02)), 1e-12);
+}
+
+TEST(VesicleScene, AdaptivityStages) {
+  const std::string adapt = "[vesicle.adaptivity]\nlloyd_iterations = 30\nstages = [\n"
+                            "  { eps = 0.04, f = 10.0 },\n"
+                            "  { eps = 0.03, lloyd_iterations = 0 },\n"
+                            "  { eps = 0.02, lloyd_iterations = 0, branch = true },\n"
+                            "  { eps = 0.03, f = 100.0, lloyd_iterations = 50 },\n"
+                            "]\n";
+  const VesicleModel m = vesicle_of(kVesicle + adapt);
+  ASSERT_TRUE(m.adaptivity);
+  const auto& a = *m.adaptivity;
+  EXPECT_FALSE(a.start_from_density);
+  EXPECT_EQ(a.samples_per_node, 64);
+  ASSERT_EQ(a.stages.size(), 4u);
+  EXPECT_EQ(a.stages[0].eps, 0.04);
+  EXPECT_EQ(a.stages[0].f, 10.0);
+  EXPECT_EQ(a.stages[0].lloyd_iterations, 30);  // the table's default
+  EXPECT_FALSE(a.stages[0].branch);
+  EXPECT_EQ(a.stages[1].lloyd_iterations, 0);    // continuation: no relocation,
+  EXPECT_EQ(a.stages[1].f, 0.0);                 // f may be left out
+  EXPECT_TRUE(a.stages[2].branch);
+  // After a branch, the next stage continues from the last stage that is not one (eps 0.03).
+  EXPECT_EQ(a.stages[3].eps, 0.03);
+  EXPECT_EQ(a.stages[3].lloyd_iterations, 50);
+  EXPECT_EQ(a.stages[3].f, 100.0);
+  // Defaults of the table, and start / samples_per_node.
+  const VesicleModel d = vesicle_of(kVesicle + "[vesicle.adaptivity]\nstart = \"density\"\nsamples_per_node = 16\n"
+                                               "stages = [ { eps = 0.05, f = 1.0 } ]\n");
+  EXPECT_TRUE(d.adaptivity->start_from_density);
+  EXPECT_EQ(d.adaptivity->samples_per_node, 16);
+  EXPECT_EQ(d.adaptivity->stages[0].lloyd_iterations, 20);
+  EXPECT_EQ(d.adaptivity->stages[0].eps, 0.05);  // equal to constants.eps: allowed
+
+  // eps increasing: refused, at the stage's line.
+  std::string t = kVesicle + edit(adapt, "{ eps = 0.03, f = 100.0", "{ eps = 0.035, f = 100.0");
+  expect_error(t, {at_line(t, "{ eps = 0.035"), "key 'vesicle.adaptivity.stages[3].eps' = 0.035 exceeds the previous eps (0.03): "
+                                                "the schedule lowers eps"});
+  // Without the branch the fourth stage continues from 0.02.
+  t = kVesicle + edit(adapt, ", branch = true", "");
+  expect_error(t, {at_line(t, "{ eps = 0.03, f = 100.0"), "key 'vesicle.adaptivity.stages[3].eps' = 0.03 exceeds the previous eps (0.02)"});
+  t = kVesicle + edit(adapt, "{ eps = 0.04, f = 10.0 }", "{ eps = 0.06, f = 10.0 }");
+  expect_error(t, {at_line(t, "{ eps = 0.06"), "key 'vesicle.adaptivity.stages[0].eps' = 0.06 exceeds the previous eps (0.05, "
+                                               "constants.eps)"});
+  // Broken stages and tables.
+  t = kVesicle + edit(adapt, "{ eps = 0.04, f = 10.0 }", "{ eps = 0.04 }");
+  expect_error(t, {"missing key 'vesicle.adaptivity.stages[0].f' in [vesicle.adaptivity.stages[0]]"});
+  t = kVesicle + edit(adapt, "{ eps = 0.04, f = 10.0 }", "{ eps = 0.04, f = -1.0 }");
+  expect_error(t, {"key 'vesicle.adaptivity.stages[0].f' must be non-negative, got -1"});
+  t = kVesicle + edit(adapt, "{ eps = 0.04, f = 10.0 }", "{ eps = 0.04, factor = 10.0 }");
+  expect_error(t, {"unknown key 'vesicle.adaptivity.stages[0].factor'"});
+  t = kVesicle + edit(adapt, "{ eps = 0.04, f = 10.0 }", "{ eps = 0.04, f = 10.0, branch = 1 }");
+  expect_error(t, {"key 'vesicle.adaptivity.stages[0].branch' must be a boolean"});
+  t = kVesicle + "[vesicle.adaptivity]\nstages = []\n";
+  expect_error(t, {"key 'vesicle.adaptivity.stages' must list at least one stage"});
+  t = kVesicle + "[vesicle.adaptivity]\nstages = 5\n";
+  expect_error(t, {"key 'vesicle.adaptivity.stages' must be an array of tables, found an integer"});
+  t = kVesicle + "[vesicle.adaptivity]\nlloyd_iterations = 10\n";
+  expect_error(t, {"missing key 'vesicle.adaptivity.stages' in [vesicle.adaptivity]"});
+  t = kVesicle + edit(adapt, "lloyd_iterations = 30", "lloyd_iterations = 0");
+  expect_error(t, {"key 'vesicle.adaptivity.lloyd_iterations' must be at least 1, got 0"});
+  t = kVesicle + "[vesicle.adaptivity]\nstart = \"densty\"\nstages = [ { eps = 0.05, f = 1.0 } ]\n";
+  expect_error(t, {at_line(t, "start ="), "key 'vesicle.adaptivity.start' must be one of 'nodes', 'density', got 'densty'; did you "
+                                          "mean 'density'?"});
+  t = kVesicle + "[vesicle.adaptivity]\nsamples_per_node = 0.5\nstages = [ { eps = 0.05, f = 1.0 } ]\n";
+  expect_error(t, {"key 'vesicle.adaptivity.samples_per_node' must be at least 1"});
+  // 3D: no CVT adaptivity.
+  const std::string ball = R"([scene]
+name = "ball"
+coordinates = "cartesian"
+[domain]
+lower = [-1.0, -1.0, -1.0]
+upper = [1.0, 1.0, 1.0]
+[nodes]
+spacing = 0.1
+quadrature_points = 4
+[model]
+forms = ["helfrich", "area", "volume"]
+[constants]
+eps = 0.3
+[vesicle]
+[vesicle.initial]
+shape = "sphere"
+center = [0.0, 0.0, 0.0]
+radius = 0.5
+)";
+  EXPECT_EQ(vesicle_of(ball).semi_axes[2], 0.5);
+  t = ball + "[vesicle.adaptivity]\nstages = [ { eps = 0.2, f = 1.0 } ]\n";
+  expect_error(t, {"CVT adaptivity is available in 2D and axisymmetric scenes only"});
+}
+
+TEST(VesicleScene, ResolutionAgainstTheUniformGrid) {
+  // spacing 0.024 on r in [0, 1.5]: 63 intervals, h_min = 0.0238095; eps = 0.04 < 2 h_min = 0.047619.
+  std::string t = edit(kVesicle, "eps = 0.05", "eps = 0.04");
+  expect_error(t, {at_line(t, "eps = 0.04"), "key 'constants.eps': constant 'eps': eps = 0.04 is under-resolved: h_min = 0.0238095",
+                   "the smallest admissible eps is 2 h_min = 0.047619",
+                   "(the uniform grid of [nodes]; lower nodes.spacing or raise eps)"});
+  // A lower factor admits it (the seed's Table 1: eps = 0.04 on h = 0.024).
+  EXPECT_NO_THROW((void)read_vesicle(load(edit(t, "[vesicle]\n", "[vesicle]\nresolution_factor = 1.6\n"))));
+  // counts: h = min(1.5 / 30, 2 / 40) = 0.05 needs eps >= 0.1.
+  const std::string counts = edit(kVesicle, "spacing = 0.024", "counts = [31, 41]");
+  expect_error(counts, {"eps = 0.05 is under-resolved: h_min = 0.05"});
+  EXPECT_NO_THROW((void)read_vesicle(load(edit(counts, "eps = 0.05", "eps = 0.1"))));
+  // The smallest axis decides: counts [31, 201] gives h = 2 / 200 = 0.01 on z.
+  EXPECT_NO_THROW((void)read_vesicle(load(edit(counts, "counts = [31, 41]", "counts = [31, 201]"))));
+  expect_error(edit(edit(counts, "counts = [31, 41]", "counts = [31, 201]"), "eps = 0.05", "eps = 0.019"),
+               {"eps = 0.019 is under-resolved: h_min = 0.01"});
+  // A CVT of a node count is checked by the run, once its nodes exist.
+  EXPECT_NO_THROW((void)read_vesicle(load(edit(edit(kVesicle, "spacing = 0.024", "count = 500"), "eps = 0.05", "eps = 0.001"))));
+}
+
+TEST(VesicleScene, LmeOptionsAndRescaling) {
+  const Scene axi = load(kVesicle);
+  const LmeOptions o = app::vesicle_lme_options(axi);
+  EXPECT_EQ(o.mirror_axis, 0);
+  EXPECT_EQ(o.mirror_position, 0.0);
+  EXPECT_EQ(o.spacing_smoothing, 5);
+  const LmeOptions p = app::vesicle_lme_options(load(kPlanar));
+  EXPECT_EQ(p.mirror_axis, -1);
+  // tanh(d / (sqrt2 eps_from)) re-profiled to eps_to is tanh(d / (sqrt2 eps_to)).
+  std::vector<double> phi, expected;
+  for (const double d : {-0.1, -0.02, 0.0, 0.01, 0.05}) {
+    phi.push_back(std::tanh(d / (std::numbers::sqrt2 * 0.04)));
+    expected.push_back(std::tanh(d / (std::numbers::sqrt2 * 0.02)));
+  }
+  const auto out = app::rescale_interface(phi, 0.04, 0.02);
+  for (std::size_t i = 0; i < out.size(); ++i) EXPECT_NEAR(out[i], expected[i], 1e-12) << i;
+  EXPECT_THROW((void)app::rescale_interface(phi, 0.0, 0.02), std::invalid_argument);
+}
+
+TEST(VesicleScene, Demos) {
+  for (const char* name : {"discocyte", "dumbbell"}) {
+    SCOPED_TRACE(name);
+    const Scene s = load_scene(std::filesystem::path(LMEFORM_SOURCE_DIR) / "demos" / (std::string(name) + ".toml"),
+                               app::model_extensions());
+    EXPECT_TRUE(s.has_extension("vesicle"));
+    const auto m = read_vesicle(s);
+    ASSERT_TRUE(m);
+    ASSERT_TRUE(m->area && m->volume);
+    EXPECT_NEAR(*m->area, 0.64 * pi, 1e-14);
+    EXPECT_NEAR(*m->volume, 0.8 * 4.0 / 3.0 * pi * 0.4 * 0.4 * 0.4, 1e-14);
+    EXPECT_EQ(m->reduced_volume, 0.8);
+    EXPECT_EQ(m->eps, 0.04);
+    EXPECT_EQ(m->resolution_factor, 1.6);
+    // The initial spheroid already encloses V0 (to the rounding of its semi-axes).
+    const double a = m->semi_axes[0], c = m->semi_axes[1];
+    EXPECT_NEAR(4.0 / 3.0 * pi * a * a * c / *m->volume, 1.0, 2e-3);
+    EXPECT_EQ(std::string(name) == "discocyte", a > c);  // oblate vs prolate
+    // The Table B.6 schedule down to eps = 0.01, three relocations (f = 10, 100, 1000).
+    ASSERT_TRUE(m->adaptivity);
+    EXPECT_TRUE(m->adaptivity->start_from_density);
+    EXPECT_EQ(m->adaptivity->stages.size(), std::string(name) == "discocyte" ? 9u : 11u);
+    EXPECT_EQ(m->adaptivity->stages.back().eps, 0.01);
+    int relocations = 0;
+    for (const auto& st : m->adaptivity->stages) relocations += st.lloyd_iterations > 0 ? 1 : 0;
+    EXPECT_EQ(relocations, 3);
+  }
+}
