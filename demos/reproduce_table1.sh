@@ -37,20 +37,29 @@ upper = [1.5, 2.0]
 count = $n
 gamma = 0.8
 quadrature_points = 6
+[model]
+forms = ["helfrich_axisymmetric", "area_axisymmetric", "volume_axisymmetric", "moment_axisymmetric"]
+[constants]
+eps = $eps
+zc = 1.0
+[constraints]
+area = {}
+volume = {}
+moment = 0.0
+[[dirichlet]]
+boundary = ["r_max", "z_min", "z_max"]
+unknown = "phi"
+value = -1.0
+[solver]
+augmented_tolerance = 1e-3
+[vesicle]
+radius = 0.4
+reduced_volume = 0.8
 resolution_factor = 1.6
-[initial]
+[vesicle.initial]
 shape = "ellipsoid"
 center = [0.0, 1.0]
 semi_axes = [0.4987, 0.2059]
-[model]
-form = "helfrich_axisymmetric"
-eps = $eps
-[constraints]
-area = { radius = 0.4 }
-volume = { reduced_volume = 0.8 }
-moment = { target = 0.0, z_center = 1.0 }
-[solver]
-augmented_tolerance = 1e-3
 [reference]
 energy = 9.12657
 [output]
