@@ -390,7 +390,7 @@ TEST(CheckCommand, ParsesItsFlags) {
   CLI::App* cmd = lmeform::add_check_subcommand(app, o);
   const char* argv[] = {"lmeform", "check", "--dim", "2", "--set", "eps=0.02", "--set", "k=2", "--output",
                         "bending", "--coordinates", "cartesian", "--seed", "9", "--json", "out.json", "-I",
-                        "inc", "helfrich"};
+                        "inc", "--perturbation", "0.05", "--interface-width", "0.1", "helfrich"};
   app.parse(static_cast<int>(std::size(argv)), argv);
   EXPECT_TRUE(cmd->parsed());
   EXPECT_EQ(o.form, "helfrich");
@@ -401,6 +401,8 @@ TEST(CheckCommand, ParsesItsFlags) {
   EXPECT_EQ(o.seed, 9u);
   EXPECT_EQ(o.json, "out.json");
   EXPECT_EQ(o.include_dirs, std::vector<std::string>{"inc"});
+  EXPECT_EQ(o.perturbation, 0.05);
+  EXPECT_EQ(o.interface_width, 0.1);
 }
 
 TEST(CheckCommand, BuiltinByNameWritesJsonRecords) {

@@ -39,6 +39,13 @@ CLI::App* add_check_subcommand(CLI::App& app, CheckCommandOptions& options) {
   cmd->add_option("--output", options.outputs, "check only this output (repeatable)")->allow_extra_args(false);
   cmd->add_option("-I", options.include_dirs, "include directory of the form (repeatable)")->allow_extra_args(false);
   cmd->add_flag("--rebuild", options.rebuild, "recompile the form even when the JIT cache holds it");
+  cmd->add_option("--perturbation", options.perturbation,
+                  "vector fields (deformations, velocities) are x + a smooth field whose gradient is this large; "
+                  "halved until det grad y >= 0.5 on every check cell")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--interface-width", options.interface_width,
+                  "width of the tanh profile of scalar fields (default: twice the finest nodal spacing)")
+      ->check(CLI::NonNegativeNumber);
   return cmd;
 }
 
@@ -94,6 +101,8 @@ int run_check_command(const CheckCommandOptions& options) {
     mo.dims = options.dims;
     mo.outputs = options.outputs;
     mo.seed = options.seed;
+    mo.states.perturbation = options.perturbation;
+    mo.states.width = options.interface_width;
     if (options.coordinates == "cartesian") mo.coordinates = formcheck::Coordinates::cartesian;
     else if (options.coordinates == "axisymmetric") mo.coordinates = formcheck::Coordinates::axisymmetric;
     else if (options.coordinates != "auto")
@@ -108,7 +117,6 @@ int run_check_command(const CheckCommandOptions& options) {
                                                                                   static_cast<std::size_t>(table.n_kernels)),
                                       mo, include_dirs);
       check.provenance = "given module table";
-      check.builtin = true;
     } else {
       ensure_mpi();
       FormLoadOptions lo;

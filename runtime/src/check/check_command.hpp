@@ -31,6 +31,8 @@ struct CheckCommandOptions {
   std::vector<std::string> outputs;        ///< --output NAME: only these outputs
   std::vector<std::string> include_dirs;   ///< -I DIR: include directories of the form
   bool rebuild = false;                    ///< --rebuild: recompile a JIT form even when cached
+  double perturbation = 0.1;               ///< --perturbation: vector fields, size of grad y - I
+  double interface_width = 0.0;            ///< --interface-width: scalar fields' tanh width (0: 2 h_min)
 
   // Not on the command line (tests, embedding):
   /// Check this module table instead of loading `form`.

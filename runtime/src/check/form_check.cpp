@@ -141,8 +141,9 @@ std::vector<double> unit_step(const std::vector<double>& u, int i, double t) {
 // Along a line t -> u + t d the kernel outputs ("streams": the value, the gradient or residual) are
 // sampled at equal spacing. Where a stream is smooth its second differences are O(spacing^2); a jump
 // of the stream (a kink of the value, e.g. abs) keeps them O(1), a kink of the stream O(spacing).
-// A candidate interval is refined twice by 16: a kink keeps its second differences within a factor
-// 64 per refinement, a smooth stream loses a factor 256.
+// A candidate [t_{j-1}, t_{j+1}] is resampled at the same count, a spacing 16 times finer, twice:
+// a kink keeps its second differences within a factor 32 per refinement, a smooth stream loses
+// a factor 256.
 
 using Streams = std::vector<std::vector<double>>;
 using LineFunction = std::function<Streams(double)>;
@@ -159,8 +160,7 @@ struct Samples {
 };
 
 constexpr int kScanIntervals = 32;
-constexpr int kRefinement = 16;
-constexpr double kKinkRatio = 1.0 / 64.0;  // kink: >= 1/32 per refinement; smooth: ~1/256
+constexpr double kKinkRatio = 1.0 / 64.0;  // between a kink (>= 1/32 per refinement) and smooth (1/256)
 constexpr double kSignificance = 100.0;    // second differences must exceed this many floors
 
 Samples sample(const LineFunction& f, double a, double b) {

@@ -358,7 +358,10 @@ std::string format_table(const ModuleCheck& mc) {
     for (const auto& k : r.kinks) os << fmt::format("  kink {} {}d: {}\n", r.output, r.dim, k);
     for (const auto& f : r.failures) os << fmt::format("  FAIL {} {}d: {}\n", r.output, r.dim, f);
   }
-  const std::string compile = mc.builtin ? "built-in" : mc.cache_hit ? "cache hit" : fmt::format("{:.2f} s", mc.compile_seconds);
+  const std::string compile = mc.builtin         ? "built-in"
+                              : mc.cache_hit     ? "cache hit"
+                              : mc.compile_seconds > 0 ? fmt::format("{:.2f} s", mc.compile_seconds)
+                                                       : "-";
   os << fmt::format("\n{:<16} {:>3} {:>5} {:>4} {:>10} {:>10} {:>10} {:>11} {:>9}\n", "kernel", "dim", "n", "nq",
                     "value", "vector", "matrix", "JIT compile", "check");
   for (const CheckRecord& r : mc.records)
