@@ -51,7 +51,7 @@ std::string discocyte_scene(int count, double eps, const std::string& adaptivity
 
 Record record_of(const app::StageRecord& st, const std::string& grid, double wall) {
   const double e = st.result.energy;
-  Record r{st.eps, grid, st.nodes, st.h_min, e, (e - kSharp) / kSharp, wall};
+  Record r{st.parameter, grid, st.nodes, st.h_min, e, (e - kSharp) / kSharp, wall};
   std::printf("%-8s %6d nodes  h_min %.4f  eps %.4f  E %.5f  rel. error %+7.3f %%  %7.1f s\n", grid.c_str(), r.nodes,
               r.h_min, r.eps, r.energy, 100 * r.relative_error_sharp, r.wall_s);
   return r;

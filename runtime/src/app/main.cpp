@@ -113,7 +113,7 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
     if (!r.gradient_norm.empty()) fields.emplace("grad_" + run.unknowns.front().name + "_norm", FieldView{r.gradient_norm, 1});
     OutputAttributes attributes;
     if (minimization) attributes.emplace("energy", r.energy);
-    if (run.vesicle) attributes.emplace("eps", last.eps);
+    if (!run.parameter.empty()) attributes.emplace(run.parameter, last.parameter);
     attributes.emplace("converged", static_cast<std::int64_t>(converged ? 1 : 0));
     attributes.emplace("status", status);
     attributes.emplace("scene", scene.source);
@@ -138,11 +138,11 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
       if (scene.reference.energy)
         std::printf("%-26s %.6f (relative error %+.3f %%)\n", "reference energy", reference, 100 * rel_error(r.energy));
       for (std::size_t i = 0; i < r.constraint_names.size(); ++i) {
-        // The vesicle's area multiplier is the membrane tension, its volume multiplier the pressure difference.
         const std::string& c = r.constraint_names[i];
-        const char* meaning = !run.vesicle ? "" : c == "area" ? " (tension)" : c == "volume" ? " (pressure)" : "";
+        const auto named = run.multiplier_meanings.find(c);
+        const std::string meaning = named == run.multiplier_meanings.end() ? "" : " (" + named->second + ")";
         std::printf("%-26s %.6g (relative residual %.1e), multiplier%s %.6g\n", (c + " constraint").c_str(),
-                    r.minimization.constraint_values[i], r.minimization.relative_residuals[i], meaning,
+                    r.minimization.constraint_values[i], r.minimization.relative_residuals[i], meaning.c_str(),
                     r.minimization.multipliers[i]);
       }
     } else {
@@ -151,19 +151,19 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
     for (const auto& e : r.errors)
       std::printf("%-26s L2 %.6e, H1 semi-norm %.6e\n", ("error of " + e.unknown).c_str(), e.l2, e.h1);
     std::printf("%-26s %d (h_min %.4g, h_mean %.4g)\n", "nodes", last.nodes, r.h_min, r.h_mean);
-    if (run.vesicle) std::printf("%-26s %g\n", "eps", last.eps);
+    if (!run.parameter.empty()) std::printf("%-26s %g\n", run.parameter.c_str(), last.parameter);
     if (minimization)
       std::printf("%-26s %d augmented Lagrangian + %d KKT\n", "Newton iterations", r.minimization.augmented_iterations,
                   r.minimization.newton_iterations);
-    if (run.vesicle) {
-      std::printf("\n%-20s %8s %8s %9s %10s %12s %8s %10s %9s %9s %9s\n", "stage", "nodes", "eps", "h_min", "energy",
+    if (!run.parameter.empty()) {
+      std::printf("\n%-20s %8s %8s %9s %10s %12s %8s %10s %9s %9s %9s\n", "stage", "nodes", run.parameter.c_str(), "h_min", "energy",
                   "rel. error", "AL+KKT", "adapt s", "setup s", "AL s", "KKT s");
       for (const auto& s : stages) {
         const std::string its = std::to_string(s.result.minimization.augmented_iterations) + "+" +
                                 std::to_string(s.result.minimization.newton_iterations);
         const std::string error = scene.reference.energy ? fmt::format("{:+.3f}%", 100 * rel_error(s.result.energy)) : "-";
         const std::string name = std::to_string(s.stage) + " " + s.grid + s.label;
-        std::printf("%-20s %8d %8g %9.4g %10.5f %12s %8s %10.2f %9.2f %9.2f %9.2f\n", name.c_str(), s.nodes, s.eps, s.h_min,
+        std::printf("%-20s %8d %8g %9.4g %10.5f %12s %8s %10.2f %9.2f %9.2f %9.2f\n", name.c_str(), s.nodes, s.parameter, s.h_min,
                     s.result.energy, error.c_str(), its.c_str(), s.adapt_s, s.result.seconds_setup,
                     s.result.minimization.seconds_augmented, s.result.minimization.seconds_newton);
       }
@@ -200,8 +200,8 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
           js["constraint_residuals"][r.constraint_names[i]] = number(r.minimization.relative_residuals[i]);
         }
       }
-      if (run.vesicle) {
-        js["eps"] = number(last.eps);
+      if (!run.parameter.empty()) {
+        js[run.parameter] = number(last.parameter);
         js["grid"] = stages.size() > 1 ? "adapted" : "uniform";
         js["relative_error_sharp"] = number(rel_error(r.energy));
       }
@@ -210,7 +210,7 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
         js["stages"].push_back({{"stage", s.stage},
                                 {"grid", s.grid},
                                 {"branch", !s.label.empty()},
-                                {"eps", number(s.eps)},
+                                {run.parameter.empty() ? "parameter" : run.parameter, number(s.parameter)},
                                 {"nodes", s.nodes},
                                 {"h_min", number(s.h_min)},
                                 {"energy", number(s.result.energy)},

@@ -127,6 +127,36 @@ struct ProblemResult {
 /// without an entry start at 0).
 [[nodiscard]] std::vector<double> initial_state(const BoundScene& bound, const NodeSet& nodes);
 
+/// One solve of a run: a single solve, or a stage of a model's schedule.
+struct StageRecord {
+  int stage = 0;
+  double parameter = 0;  ///< the continuation parameter of a staged model at this stage (RunSchedule)
+  std::string grid;    ///< "uniform" / "file", then "cvt-1", "cvt-2", ... per relocation
+  int generation = 0;  ///< relocations along the chain of stages that led here
+  std::string label;   ///< " (branch)" for a side solve
+  int nodes = 0;
+  double h_min = 0;    ///< SpacingSummary::h_min of the stage's grid
+  ProblemResult result;
+  double wall_s = 0;   ///< this stage: relocation + setup + solve
+  double adapt_s = 0;  ///< of which the relocation
+};
+
+struct SceneRun {
+  std::vector<StageRecord> stages;  ///< the finished stages, in order
+  /// Empty when every stage ran; else "stage k: <why>" for the stage that could not run. A stage
+  /// whose solver did not converge is the last one, with its result's message.
+  std::string failure;
+  double wall_s = 0;                ///< the whole run, node set generation included
+  std::vector<UnknownField> unknowns;  ///< the layout of every stage's state
+  /// Set by a model that runs a schedule of stages (the vesicle's CVT adaptivity in eps): the name
+  /// of the constant it continues in; empty for a single solve.
+  std::string parameter;
+  /// What a model's constraint multipliers mean physically (e.g. "tension"), by constraint name.
+  std::map<std::string, std::string, std::less<>> multiplier_meanings;
+};
+
+
+
 /// The original indices of the nodes on a named boundary part (box sides, "hull", "axis").
 [[nodiscard]] std::vector<int> boundary_nodes(const Scene& scene, const NodeSet& nodes, const std::string& part);
 

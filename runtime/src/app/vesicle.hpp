@@ -86,6 +86,11 @@ void check_feasible(double A0, double V0, int dim = 3);
 [[nodiscard]] std::vector<double> transfer_phi(const NodeSet& old_nodes, std::span<const double> phi, double gamma,
                                                const LmeOptions& lme, const NodeSet& new_nodes);
 
+/// Runs a vesicle scene: binds it with the model's targets filled in, then solves the first stage
+/// and every adaptivity stage (relocation, resolution check, continuation in eps from the previous
+/// stage, multipliers warm-started). A stage that cannot run ends the schedule (SceneRun::failure).
+[[nodiscard]] SceneRun run_vesicle(MPI_Comm comm, const Scene& scene, const VesicleModel& model, std::ostream* log);
+
 /// One CVT adaptation of a solved state: Lloyd iterations with density ρ = 1 + f·|∇φ| on the box.
 [[nodiscard]] NodeSet adapt_nodes(const ProblemResult& solved, const Box& box, double f, const CvtOptions& cvt,
                                   CvtReport* report = nullptr);
