@@ -13,6 +13,7 @@
 
 #include <mpi.h>
 
+#include <cstdint>
 #include <filesystem>
 #include <iosfwd>
 #include <stdexcept>
@@ -86,6 +87,10 @@ struct FormLoadOptions {
 /// Compiles `form` (a path) into the cache without the process-wide memo: every call does the
 /// full key computation and either a cache hit or a compile. For tests and `lmeform check`.
 [[nodiscard]] FormModule compile_form(const std::filesystem::path& form, const FormLoadOptions& options = {});
+
+/// FNV-1a (64 bits) of `bytes`, continuing from `state`: the cache keys of forms and of the forms
+/// generated from scene expressions. A cache key, not a security boundary.
+[[nodiscard]] std::uint64_t content_hash(std::string_view bytes, std::uint64_t state = 0xcbf29ce484222325ull) noexcept;
 
 /// The cache directory that options (or the environment) select.
 [[nodiscard]] std::filesystem::path form_cache_dir(const FormLoadOptions& options = {});

@@ -44,19 +44,10 @@ inline std::size_t edit_distance(std::string_view a, std::string_view b) {
   return row[b.size()];
 }
 
-/// The closest candidate when it is close enough to be a likely typo; empty otherwise.
+/// The closest candidate when it is close enough to be a likely typo; empty otherwise (closest_name).
 inline std::string closest(std::string_view word, std::initializer_list<std::string_view> candidates) {
-  std::string best;
-  std::size_t best_d = std::numeric_limits<std::size_t>::max();
-  for (auto c : candidates) {
-    const std::size_t d = edit_distance(word, c);
-    if (d < best_d) {
-      best_d = d;
-      best = std::string(c);
-    }
-  }
-  const std::size_t limit = std::max<std::size_t>(2, std::min(word.size(), best.size()) / 3);
-  return best_d <= limit ? best : std::string{};
+  const std::vector<std::string> names(candidates.begin(), candidates.end());
+  return closest_name(word, names);
 }
 
 /// Candidates one of whose '_'-separated words is close to `word` ("tolerence": every *_tolerance).

@@ -14,19 +14,10 @@ namespace fs = std::filesystem;
 
 namespace {
 
-std::uint64_t fnv1a(std::string_view bytes) {
-  std::uint64_t h = 0xcbf29ce484222325ull;
-  for (const unsigned char c : bytes) {
-    h ^= c;
-    h *= 0x100000001b3ull;
-  }
-  return h;
-}
-
 /// Writes a generated form into the cache's expression folder (named by its text, so an unchanged
 /// scene reuses the compiled module) and loads it. The module name must equal the file name.
 const FormModule& load_generated(const std::string& prefix, const std::string& body, MPI_Comm comm, std::ostream* log) {
-  const std::string module = fmt::format("{}_{:016x}", prefix, fnv1a(body));
+  const std::string module = fmt::format("{}_{:016x}", prefix, content_hash(body));
   const fs::path dir = form_cache_dir() / "expressions";
   const fs::path path = dir / (module + ".form");
   int rank = 0;

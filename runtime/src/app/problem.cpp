@@ -206,7 +206,7 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
   b.unknowns = unknowns_of(*primary);
   b.dofs_per_node = primary->dofs_per_node;
   for (const auto* k : b.kernels()) {
-    const auto u = k->kind == kernel::FunctionalKind::Linear ? unknowns_of(*k) : unknowns_of(*k);
+    const auto u = unknowns_of(*k);
     bool same = u.size() == b.unknowns.size();
     for (std::size_t i = 0; same && i < u.size(); ++i)
       same = u[i].components == b.unknowns[i].components &&

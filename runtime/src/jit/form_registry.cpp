@@ -61,6 +61,14 @@ std::vector<std::string> builtin_form_names() {
   return names;
 }
 
+std::uint64_t content_hash(std::string_view bytes, std::uint64_t state) noexcept {
+  for (const unsigned char c : bytes) {
+    state ^= c;
+    state *= 0x100000001b3ull;
+  }
+  return state;
+}
+
 fs::path form_cache_dir(const FormLoadOptions& options) {
   if (!options.cache_dir.empty()) return options.cache_dir;
   if (const char* env = std::getenv("LMEFORM_CACHE_DIR"); env != nullptr && *env != '\0') return env;

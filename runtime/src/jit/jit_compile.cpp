@@ -37,15 +37,6 @@ std::string read_file(const fs::path& path) {
   return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
 }
 
-/// FNV-1a, 64 bits: a cache key, not a security boundary (the manifest records the material).
-std::uint64_t fnv1a(std::string_view bytes, std::uint64_t h = 0xcbf29ce484222325ull) {
-  for (const unsigned char c : bytes) {
-    h ^= c;
-    h *= 0x100000001b3ull;
-  }
-  return h;
-}
-
 std::vector<std::string> split(std::string_view text, char separator) {
   std::vector<std::string> parts;
   std::size_t start = 0;
@@ -187,13 +178,13 @@ CacheEntry describe_entry(const fs::path& form, const fs::path& lmeformc, const 
            << "lmeformc " << (version.exit_code == 0 ? version.out : "unknown") << "lmeformc-binary "
            << binary_stamp(lmeformc) << "\n"
            << "cxx " << compiler() << " " << binary_stamp(compiler()) << "\nflags " << jit_config::flags << "\nincludes " << jit_config::include_dirs << "\n";
-  std::uint64_t h = fnv1a(material.str());
+  std::uint64_t h = content_hash(material.str());
   for (const auto& line : split(deps.out, '\n')) {
     const fs::path dep(line);
     e.dependencies.push_back(dep);
     material << "file " << dep.string() << "\n";
-    h = fnv1a(dep.string(), h);
-    h = fnv1a(read_file(dep), h);
+    h = content_hash(dep.string(), h);
+    h = content_hash(read_file(dep), h);
   }
   e.key = fmt::format("{:016x}", h);
   e.key_material = material.str();
