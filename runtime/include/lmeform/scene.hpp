@@ -75,6 +75,9 @@ struct SceneModel {
   std::vector<SceneName> energy;
   std::optional<SceneName> residual;
   std::optional<SceneName> bilinear, linear;
+  /// Unknowns determined by the equations only up to a constant (the pressure of enclosed Stokes
+  /// flow): the solve adds the condition ∫ u dx = 0 for each (linear problems only).
+  std::vector<SceneName> zero_mean;
 };
 
 /// A value given as a number or as an expression of the coordinates `x` and the scene's constants
@@ -119,9 +122,11 @@ struct SceneInitialField {
 /// [qdata]: runtime-supplied quadrature data by the name the form declares.
 struct SceneQdata {
   std::string name;
-  /// "support_size": rho-bar, the mean support radius of the point's LME neighbours weighted by their
-  /// basis values; "zero": zeros (e.g. a reference field to be set by a model).
+  /// "support_size": rho-bar, the nodal spacing of the point's LME neighbours weighted by their
+  /// basis values; "zero": zeros (e.g. a reference field to be set by a model); "value": `value`
+  /// (a number, or an expression of x and the constants) at every quadrature point.
   std::string provider;
+  SceneValue value;                    ///< provider "value"
   std::string where;
 };
 

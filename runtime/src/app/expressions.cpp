@@ -138,4 +138,10 @@ const FormModule& compile_error_form(int dim, const std::string& unknown, int co
   }
 }
 
+const FormModule& compile_integral_form(int dim, MPI_Comm comm, std::ostream* log) {
+  std::ostringstream body;
+  body << "dimension " << dim << "\nunknown u\nenergy integral = u * dx\n";
+  return load_generated("scene_integral", body.str(), comm, log);
+}
+
 }  // namespace lmeform::app

@@ -54,4 +54,8 @@ class PointExpressions {
                                                    const std::map<std::string, double, std::less<>>& constants,
                                                    const std::string& where, MPI_Comm comm, std::ostream* log);
 
+/// The generated form of the mean of a scalar field: output "integral" = ∫ u dx (dx, no
+/// axisymmetric weight); its gradient is ∫ N_a dx.
+[[nodiscard]] const FormModule& compile_integral_form(int dim, MPI_Comm comm, std::ostream* log);
+
 }  // namespace lmeform::app

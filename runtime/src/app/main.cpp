@@ -14,6 +14,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <iostream>
 #include <limits>
@@ -57,11 +58,30 @@ void check_writable(const fs::path& json_path, const fs::path& out_dir, bool wri
   }
 }
 
-int run(const std::string& scene_path, const std::string& json_path, const std::string& output_override) {
+/// NAME=VALUE of a --set option.
+std::pair<std::string, double> parse_constant_setting(const std::string& text) {
+  const auto eq = text.find('=');
+  if (eq == std::string::npos || eq == 0)
+    throw SceneError(fmt::format("--set {}: expected NAME=VALUE (e.g. --set C=0.5)", text));
+  const std::string value = text.substr(eq + 1);
+  char* end = nullptr;
+  const double v = std::strtod(value.c_str(), &end);
+  if (value.empty() || end == nullptr || *end != '\0') throw SceneError(fmt::format("--set {}: '{}' is not a number", text, value));
+  return {text.substr(0, eq), v};
+}
+
+int run(const std::string& scene_path, const std::string& json_path, const std::string& output_override,
+        const std::vector<std::string>& settings) {
   const int rank = PetscSession::rank();
   std::ostream* log = rank == 0 ? &std::cout : nullptr;
   const auto t_start = std::chrono::steady_clock::now();
-  const Scene scene = load_scene(scene_path, app::model_extensions());
+  Scene loaded = load_scene(scene_path, app::model_extensions());
+  for (const auto& setting : settings) {  // the command line wins over [constants]
+    const auto [name, value] = parse_constant_setting(setting);
+    loaded.constants[name] = value;
+    loaded.constant_where[name] = "command line: --set " + setting;
+  }
+  const Scene& scene = loaded;
   const fs::path out_dir = !output_override.empty() ? fs::path(output_override)
                            : scene.output         ? scene.output->directory
                                                   : fs::path("out") / scene.name;
@@ -233,9 +253,11 @@ int main(int argc, char** argv) {
   cli.require_subcommand(1);
   auto* run_cmd = cli.add_subcommand("run", "Solve the problem of a scene (TOML) and write its results");
   std::string scene_path, json_path, output_dir;
+  std::vector<std::string> settings;
   run_cmd->add_option("scene", scene_path, "scene file (.toml)")->required()->check(CLI::ExistingFile);
   run_cmd->add_option("--json", json_path, "write the run's figures (energy, errors, iterations, stages, wall_s)");
   run_cmd->add_option("--output", output_dir, "output directory (default: the scene's [output] directory)");
+  run_cmd->add_option("--set", settings, "set a constant, NAME=VALUE (repeatable; wins over the scene's [constants])");
   run_cmd->allow_extras();  // PETSc options (-ksp_type gmres, -snes_monitor, ...) pass through
 #ifdef LMEFORM_HAVE_CHECK
   CheckCommandOptions check_options;
@@ -251,7 +273,10 @@ int main(int argc, char** argv) {
 #ifdef LMEFORM_HAVE_CHECK
     if (check_cmd->parsed()) return run_check_command(check_options);
 #endif
-    return run(scene_path, json_path, output_dir);
+    for (const auto& extra : run_cmd->remaining())
+      if (extra.starts_with("--"))
+        throw SceneError(fmt::format("unknown option '{}' of 'lmeform run' (PETSc options take one dash: -ksp_type ...)", extra));
+    return run(scene_path, json_path, output_dir, settings);
   } catch (const SceneError& e) {
     std::cerr << "lmeform: scene error: " << e.what() << "\n";
     return 1;

@@ -1,4 +1,5 @@
 #include "problem.hpp"
+#include "linear_solve.hpp"
 
 #include <petscsnes.h>
 
@@ -309,7 +310,7 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
     const bool provided = std::find(provided_qdata.begin(), provided_qdata.end(), n) != provided_qdata.end();
     if (!given && !provided)
       throw SceneError(fmt::format("{}: missing key 'qdata.{}': the forms read the quadrature datum '{}' (give a "
-                                   "provider: \"support_size\" or \"zero\")",
+                                   "provider: \"support_size\", \"zero\", a number or an expression of x)",
                                    scene.source, n, n));
   }
 
@@ -346,6 +347,26 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
     if (!d.value.is_number()) handle = b.expressions->add(d.value.expression(), u.components, d.value.where);
     b.dirichlet_expression.push_back(handle);
   }
+  for (const auto& q : scene.qdata) {
+    if (q.provider != "value") continue;
+    int size = 0;
+    for (const auto* k : b.kernels())
+      for (int i = 0; i < k->n_qdata; ++i)
+        if (k->qdata[i].name == q.name) size = k->qdata[i].size;
+    if (size != 1 && size != dim)
+      throw SceneError(fmt::format("{}: '{}' has {} values per point; a value or an expression gives a scalar or a "
+                                   "vector",
+                                   q.where, q.name, size));
+    b.qdata_expression[q.name] =
+        q.value.is_number() ? -1 : b.expressions->add(q.value.expression(), size, q.value.where);
+  }
+  for (const auto& z : scene.model.zero_mean) {
+    const UnknownField& u = check_unknown(z.name, z.where);
+    if (u.components != 1)
+      throw SceneError(fmt::format("{}: '{}' is a vector; model.zero_mean takes scalar unknowns", z.where, u.name));
+    b.zero_mean.push_back(u.name);
+  }
+  if (!b.zero_mean.empty()) (void)compile_integral_form(dim, comm, log);  // compiled now, not during the solve
   b.expressions->compile(comm, log);
   for (const auto& [name, value] : scene.reference.solution) {
     const UnknownField& u = check_unknown(name, value.where);
@@ -575,6 +596,16 @@ ProblemResult solve_problem(MPI_Comm comm, const BoundScene& b, const ProblemInp
       for (int i = 0; i < k->n_qdata; ++i) {
         const auto provider = std::find_if(scene.qdata.begin(), scene.qdata.end(),
                                            [&](const SceneQdata& q) { return q.name == k->qdata[i].name; });
+        if (provider != scene.qdata.end() && provider->provider == "value") {
+          const int size = k->qdata[i].size;
+          const int handle = b.qdata_expression.at(provider->name);
+          std::vector<double> v(static_cast<std::size_t>(size), handle < 0 ? provider->value.number() : 0.0);
+          for (std::size_t q = 0; q < disc.quadrature().size(); ++q) {
+            if (handle >= 0) b.expressions->evaluate(handle, disc.quadrature().point(q), v);
+            for (int c = 0; c < size; ++c)
+              data[q * std::size_t(k->qdata_per_point) + std::size_t(offset + c)] = v[std::size_t(c)];
+          }
+        }
         if (provider != scene.qdata.end() && provider->provider == "support_size") {
           if (k->qdata[i].size != 1)
             throw SceneError(fmt::format("{}: \"support_size\" is a scalar; '{}' has {} values per point", provider->where,
@@ -724,36 +755,53 @@ ProblemResult solve_problem(MPI_Comm comm, const BoundScene& b, const ProblemInp
       break;
     }
     case ProblemKind::linear: {
+      const auto ta = std::chrono::steady_clock::now();
       PetscMatrix A = primary->create_matrix();
       PetscVector rhs = linear->create_vector(), x = primary->create_vector();
       primary->matrix(u, A);
       linear->vector(u, rhs);
+      result.seconds_assembly = seconds_since(ta);
       LMEFORM_PETSC_CHECK(VecCopy(u, x));
       apply_dirichlet(A, rhs, x, fixed);
-      KSP ksp = nullptr;
-      LMEFORM_PETSC_CHECK(KSPCreate(comm, &ksp));
-      configure_direct_solver(ksp);
-      LMEFORM_PETSC_CHECK(KSPSetOperators(ksp, A, A));
-      LMEFORM_PETSC_CHECK(KSPSetFromOptions(ksp));
-      const PetscErrorCode solved = KSPSolve(ksp, rhs, x);
-      KSPConvergedReason reason = KSP_CONVERGED_ITERATING;
-      PetscInt its = 0;
-      KSPGetConvergedReason(ksp, &reason);
-      KSPGetIterationNumber(ksp, &its);
-      KSPDestroy(&ksp);
-      LMEFORM_PETSC_CHECK(solved);
-      // The relative residual of the system actually solved (Dirichlet rows included).
-      PetscVector Ax = primary->create_vector();
-      LMEFORM_PETSC_CHECK(MatMult(A, x, Ax));
-      LMEFORM_PETSC_CHECK(VecAXPY(Ax, -1.0, rhs));
-      PetscReal rn = 0, bn = 0;
-      LMEFORM_PETSC_CHECK(VecNorm(Ax, NORM_2, &rn));
-      LMEFORM_PETSC_CHECK(VecNorm(rhs, NORM_2, &bn));
-      result.residual_norm = bn > 0 ? rn / bn : rn;
-      result.converged = reason > 0 && result.residual_norm < 1e-6;
-      result.message = fmt::format("KSP {} in {} iterations, |Au - b| / |b| = {:.2e}", KSPConvergedReasons[reason], its,
-                                   result.residual_norm);
-      result.iterations = static_cast<int>(its);
+      LinearSystemLayout layout;
+      layout.dofs_per_node = bs;
+      for (const auto& f : b.unknowns) layout.fields.push_back({f.name, f.offset, f.components});
+      std::vector<PetscVector> means, modes;
+      for (const auto& name : b.zero_mean) {
+        const UnknownField& f = b.unknown(name);
+        const bool prescribed =
+            std::any_of(fixed_pairs.begin(), fixed_pairs.end(), [&](const auto& p) { return p.second == f.offset; });
+        if (prescribed)
+          throw SceneError(fmt::format("{}: '{}' has Dirichlet values and model.zero_mean: give one or the other",
+                                       scene.source, name));
+        // c_a = ∫ N_a dx: the gradient of ∫ u dx, assembled like any form.
+        const FormModule& integral = compile_integral_form(scene.dim(), comm, input.log);
+        Assembler integral_form(disc, integral.at("integral", scene.dim()));
+        PetscVector one = integral_form.create_vector(), weights = integral_form.create_vector();
+        LMEFORM_PETSC_CHECK(VecSet(one, 1.0));
+        integral_form.vector(one, weights);
+        PetscVector c = primary->create_vector(), mode = primary->create_vector();
+        LMEFORM_PETSC_CHECK(VecSet(c, 0.0));
+        LMEFORM_PETSC_CHECK(VecSet(mode, 0.0));
+        {
+          const VecReadView w(weights);
+          VecWriteView cv(c), mv(mode);
+          for (PetscInt i = 0; i < w.size(); ++i) {
+            cv[i * bs + f.offset] = w[i];
+            mv[i * bs + f.offset] = 1.0;
+          }
+        }
+        layout.mean_functionals.push_back(c);
+        layout.constant_modes.push_back(mode);
+        means.push_back(std::move(c));
+        modes.push_back(std::move(mode));
+      }
+      const LinearSolveReport solve = solve_linear_system(comm, A, rhs, x, layout);
+      result.residual_norm = solve.relative_residual;
+      result.converged = solve.converged;
+      result.message = solve.message;
+      result.iterations = solve.iterations;
+      result.zero_mean_method = solve.zero_mean_method;
       result.energy = std::numeric_limits<double>::quiet_NaN();
       LMEFORM_PETSC_CHECK(VecCopy(x, u));
       break;

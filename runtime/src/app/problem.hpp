@@ -57,6 +57,8 @@ struct BoundScene {
   std::shared_ptr<PointExpressions> expressions;
   std::vector<int> initial_expression;    ///< per scene.initial entry: expression handle or -1
   std::vector<int> dirichlet_expression;  ///< per scene.dirichlet entry: expression handle or -1
+  std::map<std::string, int, std::less<>> qdata_expression;  ///< qdata given by value: expression handle or -1 (a number)
+  std::vector<std::string> zero_mean;     ///< unknowns fixed by ∫ u dx = 0 (scalar unknowns)
 
   [[nodiscard]] const UnknownField& unknown(std::string_view name) const;
   /// Every kernel the problem assembles.
@@ -112,6 +114,10 @@ struct ProblemResult {
   std::map<std::string, double, std::less<>> values;
   double h_min = 0, h_mean = 0;
   double seconds_setup = 0, seconds_solve = 0;
+  double seconds_assembly = 0;               ///< linear problems: assembly of A and b (in seconds_solve)
+  /// Linear problems with zero-mean unknowns: how the level was fixed ("constraint": a bordered
+  /// system, "null space": the Krylov method's null space + the mean removed afterwards).
+  std::string zero_mean_method;
 };
 
 /// One solve on input.nodes. Collective over comm. Throws for what cannot run (an LME evaluation

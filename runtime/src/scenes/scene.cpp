@@ -152,7 +152,7 @@ std::vector<SceneName> names_of(const Section& t, std::string_view key) {
 }
 
 void read_model(const Section& root, Scene& s) {
-  const Section t = root.table("model", {"forms", "energy", "residual", "bilinear", "linear"});
+  const Section t = root.table("model", {"forms", "energy", "residual", "bilinear", "linear", "zero_mean"});
   SceneModel& m = s.model;
   m.forms = names_of(t, "forms");
   for (auto& f : m.forms) {
@@ -178,6 +178,11 @@ void read_model(const Section& root, Scene& s) {
   } else {
     m.kind = ProblemKind::minimization;
     if (energy) m.energy = names_of(t, "energy");
+  }
+  if (t.has("zero_mean")) {
+    if (m.kind != ProblemKind::linear)
+      t.fail_key("zero_mean", "is supported for linear problems (model.bilinear + model.linear) only");
+    m.zero_mean = names_of(t, "zero_mean");
   }
 }
 
@@ -305,7 +310,13 @@ void read_qdata(const Section& root, Scene& s) {
     SceneQdata q;
     q.name = name;
     q.where = t->where(name);
-    q.provider = t->choice_of(name, t->string_of(name, node), {"support_size", "zero"});
+    // A string other than the two provider names is an expression ("[0, -9.81]", "sin(pi*x[0])").
+    if (node.is_string() && (*node.value<std::string>() == "support_size" || *node.value<std::string>() == "zero")) {
+      q.provider = *node.value<std::string>();
+    } else {
+      q.provider = "value";
+      q.value = value_of(*t, name, node);
+    }
     s.qdata.push_back(std::move(q));
   }
 }
