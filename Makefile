@@ -3,13 +3,14 @@
 #   make demo   - the main demo
 #   make test   - the whole test suite (unit, form FD checks, 2-rank MPI tests)
 #   make bench  - the benchmarks in quick mode; JSON lands in build/bench/
+#   make compare - Stokes: lmeform (bench_stokes) against FEniCSx; results in build/compare/
 
 BUILD_DIR ?= build
 BUILD_TYPE ?= Release
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?=
 
-.PHONY: all deps configure build test demo bench clean
+.PHONY: all deps configure build test demo bench compare clean
 
 all: build
 
@@ -30,6 +31,9 @@ demo: build
 
 bench: build
 	bash scripts/run-benchmarks.sh $(BUILD_DIR)
+
+compare: build
+	bash demos/stokes/compare.sh $(BUILD_DIR)
 
 clean:
 	rm -rf $(BUILD_DIR)
