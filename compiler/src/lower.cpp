@@ -4,6 +4,7 @@
 // nodal fields (the first differentiation layer of ARCHITECTURE §3).
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <numbers>
 #include <fstream>
 #include <set>
@@ -69,6 +70,16 @@ std::string shape_name(const Value& v) {
     s += std::to_string(v.shape[static_cast<std::size_t>(i)]);
   }
   return s + "]";
+}
+
+/// A constant index as a message shows it: an integer as one (`2`), anything else as %g (`0.5`,
+/// `1e+300`, `inf`, `nan`), since casting such a double to an integer type is undefined behaviour.
+std::string index_text(double d) {
+  if (d == std::floor(d) && std::abs(d) < 1e15) return std::to_string(static_cast<long long>(d));
+  if (std::isnan(d)) return "nan";  // %g may print "-nan"
+  char text[32];
+  std::snprintf(text, sizeof text, "%g", d);
+  return text;
 }
 
 struct QdataGradient { int offset; };
@@ -491,7 +502,7 @@ class Lowering {
       fail(arg.begin, "the argument of e() must be an integer constant expression (such as 0, 1 or dim - 1)");
     const double i = g_->node(iv.c[0]).value;
     if (i < 0 || i >= dim_)
-      fail(arg.begin, "unit vector e(" + std::to_string(static_cast<long long>(i)) + ") does not exist in dimension " +
+      fail(arg.begin, "unit vector e(" + index_text(i) + ") does not exist in dimension " +
                           std::to_string(dim_) + " (e(0) to e(" + std::to_string(dim_ - 1) + "))");
     Value v;
     v.shape = {dim_};
@@ -539,7 +550,7 @@ class Lowering {
       const double d = g_->node(iv.c[0]).value;
       const int extent = base.shape[static_cast<std::size_t>(i)];
       if (d != std::floor(d) || d < 0 || d >= extent)
-        fail(il, "index " + std::to_string(static_cast<long long>(d)) + " is out of range 0.." + std::to_string(extent - 1) +
+        fail(il, "index " + index_text(d) + " is out of range 0.." + std::to_string(extent - 1) +
                      " for " + shape_name(base) + " (dimension " + std::to_string(dim_) + ")");
       stride /= static_cast<std::size_t>(extent);
       offset += static_cast<std::size_t>(d) * stride;

@@ -54,10 +54,12 @@ std::string format_diagnostic(const SourceSet& sources, const Loc& loc, const st
     // caret, so that the message stays readable.
     constexpr std::size_t kWindow = 160;
     if (line.size() > kWindow) {
+      // Each end moves over at most the 3 continuation bytes of one UTF-8 character, so as not to
+      // cut it: a longer run (invalid UTF-8 in a comment) must not push the caret out of the window.
       std::size_t first = caret > kWindow / 2 ? caret - kWindow / 2 : 0;
-      while (first > 0 && is_utf8_continuation(line[first])) --first;
+      for (int k = 0; k < 3 && first > 0 && is_utf8_continuation(line[first]); ++k) --first;
       std::size_t last = std::min(line.size(), first + kWindow);
-      while (last < line.size() && is_utf8_continuation(line[last])) ++last;
+      for (int k = 0; k < 3 && last < line.size() && is_utf8_continuation(line[last]); ++k) ++last;
       const std::string head = first > 0 ? "..." : "", tail = last < line.size() ? "..." : "";
       line = head + line.substr(first, last - first) + tail;
       caret = caret - first + head.size();
