@@ -2,10 +2,13 @@
 //
 // For each output and dimension: f = integrand (IR node). The rows/columns of the local vector and
 // matrix are the jet slots J = (u, ∇u, ∇∇u) of the row/column fields; ∂f/∂J and ∂²f/∂J² are
-// formed symbolically (forward mode, memoized per variable) and emitted once per quadrature point
-// in topological order: each hash-consed node becomes one `const double tN = ...;` (CSE). The
-// contraction with the basis is done by the Eigen helpers of kernel.hpp (dense products).
+// formed symbolically (∂f/∂J by one reverse pass over the DAG, each row of ∂²f/∂J² by a reverse pass
+// over one first derivative: ir::gradient) and emitted once per quadrature point in topological
+// order: each hash-consed node becomes one `const double tN = ...;` (CSE). The contraction with the
+// basis goes through the kernel contract's ContractionRoutines (the runtime's dense products, or the
+// contract's plain loops), so generated code includes no library.
 #include <algorithm>
+#include <cstdio>
 #include <cmath>
 #include <iomanip>
 #include <map>
@@ -100,16 +103,46 @@ KernelPlan plan_kernel(const CompiledForm& form, const OutputDecl& output, int d
     if (!g.is_const(first[k], 0.0))
       plan.vector.push_back({row_of(row_vars[k], row_off), slot_index(g.jet_var(row_vars[k]).slot), first[k]});
   }
-  if (has_cols) {
+  if (has_cols && plan.symmetric) {
+    // Energies and constraints (rows == columns): the Hessian two ways, by edge pushing (one sweep
+    // carrying second-order interactions) and by a reverse sweep over each first derivative; each
+    // wins on some integrands (edge pushing on the 2D Lagrangian forms, row sweeps where long sums
+    // of intermediates make the pushed interaction lists swell, the 3D Lagrangian Helfrich). Keep
+    // the one whose entries need fewer operations.
+    std::vector<KernelPlan::MatrixEntry> pushed, rows;
+    for (const auto& e : ir::hessian(g, f, row_vars)) {
+      const int r = row_of(row_vars[e.row], row_off), rs = slot_index(g.jet_var(row_vars[e.row]).slot);
+      const int c = row_of(row_vars[e.col], row_off), cs = slot_index(g.jet_var(row_vars[e.col]).slot);
+      pushed.push_back({r, rs, c, cs, e.node});
+      if (e.row != e.col) pushed.push_back({c, cs, r, rs, e.node});
+    }
+    for (std::size_t k = 0; k < row_vars.size(); ++k) {
+      if (g.is_const(first[k], 0.0)) continue;
+      for (const auto& [l, h] : ir::gradient(g, first[k], row_vars)) {
+        if (l < k || g.is_const(h, 0.0)) continue;
+        const int r = row_of(row_vars[k], row_off), rs = slot_index(g.jet_var(row_vars[k]).slot);
+        const int c = row_of(row_vars[l], row_off), cs = slot_index(g.jet_var(row_vars[l]).slot);
+        rows.push_back({r, rs, c, cs, h});
+        if (l != k) rows.push_back({c, cs, r, rs, h});
+      }
+    }
+    auto operations = [&](const std::vector<KernelPlan::MatrixEntry>& entries) {
+      std::vector<NodeId> roots;
+      for (const auto& e : entries) roots.push_back(e.node);
+      double count = 0;
+      for (NodeId id : g.reachable(roots)) count += ir::is_terminal(g.node(id).op) ? 0 : ir::flop_cost(g.node(id).op);
+      return count;
+    };
+    plan.matrix = operations(pushed) <= operations(rows) ? std::move(pushed) : std::move(rows);
+  } else if (has_cols) {
+    // Residuals and bilinear forms: each row of the Jacobian by a reverse sweep over its row.
     for (std::size_t k = 0; k < row_vars.size(); ++k) {
       if (g.is_const(first[k], 0.0)) continue;
       for (const auto& [l, h] : ir::gradient(g, first[k], col_vars)) {
-        if (plan.symmetric && l < k) continue;
         if (g.is_const(h, 0.0)) continue;
         const int r = row_of(row_vars[k], row_off), rs = slot_index(g.jet_var(row_vars[k]).slot);
         const int c = row_of(col_vars[l], col_off), cs = slot_index(g.jet_var(col_vars[l]).slot);
         plan.matrix.push_back({r, rs, c, cs, h});
-        if (plan.symmetric && l != k) plan.matrix.push_back({c, cs, r, rs, h});
       }
     }
   }
@@ -287,7 +320,83 @@ struct EmittedKernel {
   bool has_value = false, has_vector = false, has_matrix = false;
   int n_blocks = 0;
   int line = 0;
+  long generated_lines = 0;  ///< lines of this kernel's functions in the header
 };
+
+long count_lines(const std::string& text, std::size_t from) {
+  return static_cast<long>(std::count(text.begin() + static_cast<std::ptrdiff_t>(from), text.end(), '\n'));
+}
+
+/// "phi", "y[1]": the field and component of a row of the plan.
+std::string row_name(const CompiledForm& form, const KernelPlan& p, int row) {
+  int offset = 0;
+  for (const auto* f : form.fields_of(p.row_role)) {
+    const int c = f->components(p.dim);
+    if (row < offset + c) return c == 1 ? f->name : f->name + "[" + std::to_string(row - offset) + "]";
+    offset += c;
+  }
+  return "?";
+}
+
+/// "value", "d/dx0", "d2/dx0dx1": the derivative a jet slot holds.
+std::string slot_name(int slot, int dim) {
+  if (slot == 0) return "value";
+  if (slot <= dim) return "d/dx" + std::to_string(slot - 1);
+  for (int i = 0; i < dim; ++i)
+    for (int j = i; j < dim; ++j)
+      if (1 + dim + i * dim - i * (i - 1) / 2 + (j - i) == slot)  // the contract's hessian_slot(i, j, dim)
+        return "d2/dx" + std::to_string(i) + "dx" + std::to_string(j);
+  return "slot" + std::to_string(slot);
+}
+
+/// The per-kernel cost report of `lmeformc --report`.
+std::string cost_report(const CompiledForm& form, const std::vector<EmittedKernel>& kernels, long total_lines) {
+  std::ostringstream r;
+  r << "cost report of form " << form.module << " (" << total_lines << " generated lines)\n"
+    << "  flops per quadrature point from the generated expression DAG (after CSE); H/v = Hessian / value,\n"
+    << "  bound 16 m = m reverse passes of <= 4x the gradient (m jet components); contraction share: of the\n"
+    << "  Hessian kernel's flops on a cell of n = 30 (2D) / 60 (3D) nodes and 6 / 14 points, the part in\n"
+    << "  the basis contractions (B_q^T D_q B_q) rather than in the point-wise derivatives\n";
+  for (const auto& k : kernels) {
+    const KernelPlan& p = k.plan;
+    r << "\n" << to_string(p.output->kind) << " " << p.output->name << ", dimension " << p.dim << " (" << form.sources.where(p.output->loc)
+      << "): " << k.generated_lines << " generated lines\n";
+    std::string src = form.sources.line_text(p.output->loc);
+    if (src.size() > 100) src = src.substr(0, 97) + "...";
+    r << "  | " << src << "\n";
+    r << "  jet components (m = " << p.vector.size() << "):";
+    for (std::size_t e = 0; e < p.vector.size(); ++e)
+      r << (e ? ", " : " ") << row_name(form, p, p.vector[e].row) << " " << slot_name(p.slots[static_cast<std::size_t>(p.vector[e].slot_index)], p.dim);
+    r << "\n";
+    char line[256];
+    std::snprintf(line, sizeof line, "  flops/point: value %s, gradient %s, Hessian %s",
+                  k.has_value ? std::to_string(static_cast<long>(k.value.per_point)).c_str() : "-",
+                  k.has_vector ? std::to_string(static_cast<long>(k.vector.per_point)).c_str() : "-",
+                  k.has_matrix ? std::to_string(static_cast<long>(k.matrix.per_point)).c_str() : "-");
+    r << line;
+    if (k.has_value && k.value.per_point > 0) {
+      if (k.has_vector && k.vector.per_point > 0) {
+        std::snprintf(line, sizeof line, "; g/v %.2f (bound 4)", k.vector.per_point / k.value.per_point);
+        r << line;
+      }
+      if (k.has_matrix && k.matrix.per_point > 0) {
+        std::snprintf(line, sizeof line, "; H/v %.2f (bound %zu)", k.matrix.per_point / k.value.per_point, 16 * p.vector.size());
+        r << line;
+      }
+    }
+    r << "\n";
+    if (k.has_matrix) {
+      const double n = p.dim == 3 ? 60 : 30, nq = p.dim == 3 ? 14 : 6;
+      const int S = static_cast<int>(p.slots.size());
+      const double contraction = nq * (n * 2.0 * S * S * k.n_blocks + n * n * k.matrix.per_node_pair_point);
+      const double total = nq * (k.matrix.per_point + n * k.matrix.per_node_point + n * n * k.matrix.per_node_pair_point);
+      std::snprintf(line, sizeof line, "  Hessian on a cell: %.3g flops, %.0f %% in the contractions (%d slots, %d blocks)\n", total,
+                    total > 0 ? 100.0 * contraction / total : 0.0, S, k.n_blocks);
+      r << line;
+    }
+  }
+  return r.str();
+}
 
 std::string flop_json(const FlopModel& f) {
   std::ostringstream s;
@@ -310,7 +419,7 @@ GeneratedModule generate(const CompiledForm& form, const std::string& source_nam
   const std::string& m = form.module;
   h << "// Generated by lmeformc from " << source_name << " -- do not edit.\n"
     << "// Every kernel block below carries `// file:line: source` comments mapping it back to the form.\n"
-    << "#pragma once\n\n#include <algorithm>\n#include <cmath>\n#include <cstddef>\n#include <limits>\n\n#include <lmeform/kernel.hpp>\n\n"
+    << "#pragma once\n\n#include <cmath>\n#include <cstddef>\n\n#include <lmeform/kernel.hpp>\n\n"
     << "namespace " << m << "_detail {\n\n";
   std::vector<EmittedKernel> kernels;
 
@@ -338,7 +447,7 @@ GeneratedModule generate(const CompiledForm& form, const std::string& source_nam
     h << "inline const double constant_defaults[] = {";
     for (const auto& c : form.constants) {
       if (c.default_value) h << literal(*c.default_value) << ", ";
-      else h << "std::numeric_limits<double>::quiet_NaN(), ";
+      else h << "__builtin_nan(\"\"), ";
     }
     h << "};\n";
   }
@@ -347,6 +456,7 @@ GeneratedModule generate(const CompiledForm& form, const std::string& source_nam
   for (const auto& output : form.outputs) {
     for (int dim : form.dims) {
       EmittedKernel k;
+      const std::size_t kernel_start = h.tellp() < 0 ? 0 : static_cast<std::size_t>(h.tellp());
       k.plan = plan_kernel(form, output, dim);
       const KernelPlan& p = k.plan;
       k.symbol = output.name + "_" + std::to_string(dim) + "d";
@@ -390,10 +500,10 @@ GeneratedModule generate(const CompiledForm& form, const std::string& source_nam
           << "  static constexpr int slots[] = {" << slots.str() << "};\n"
           << "  double* Bs = in.workspace;  // gathered basis rows (nq*S x n)\n"
           << "  double* G = Bs + std::size_t(nq) * " << S << " * std::size_t(n);  // w_q df/dJ (nq*S x R)\n"
-          << "  std::fill(G, G + std::size_t(nq) * " << S * R << ", 0.0);\n";
+          << "  for (std::size_t i = 0; i < std::size_t(nq) * " << S * R << "; ++i) G[i] = 0.0;\n";
         const auto [fl, nj] = w.point_loop(h, roots, sink.str());
         h << "  lmeform::kernel::gather_slots(in, " << dim << ", " << S << ", slots, Bs);\n"
-          << "  lmeform::kernel::contract_vector(n, nq, " << S << ", " << R << ", Bs, G, local_vector);\n}\n\n";
+          << "  lmeform::kernel::contract_vector(in, n, nq, " << S << ", " << R << ", Bs, G, local_vector);\n}\n\n";
         k.vector = {fl + static_cast<double>(p.vector.size()), 2.0 * nj + 2.0 * S * R, 0};
         ir_text << " vector (df/dJ):\n";
         dump(roots);
@@ -437,10 +547,10 @@ GeneratedModule generate(const CompiledForm& form, const std::string& source_nam
             << "  double* Bs = in.workspace;  // gathered basis rows (nq*S x n)\n"
             << "  double* D = Bs + std::size_t(nq) * " << S << " * std::size_t(n);  // w_q d2f/dJ2 per point\n"
             << "  double* work = D + std::size_t(nq) * " << dsize << ";\n"
-            << "  std::fill(D, D + std::size_t(nq) * " << dsize << ", 0.0);\n";
+            << "  for (std::size_t i = 0; i < std::size_t(nq) * " << dsize << "; ++i) D[i] = 0.0;\n";
           const auto [fl, nj] = w.point_loop(h, roots, sink.str());
           h << "  lmeform::kernel::gather_slots(in, " << dim << ", " << S << ", slots, Bs);\n"
-            << "  lmeform::kernel::contract_matrix(n, nq, " << S << ", " << R << ", " << C
+            << "  lmeform::kernel::contract_matrix(in, n, nq, " << S << ", " << R << ", " << C
             << ", Bs, D, blocks, " << nb << ", work, local_matrix);\n}\n\n";
           matrix_point_flops = fl;
           matrix_jets = nj;
@@ -462,7 +572,8 @@ GeneratedModule generate(const CompiledForm& form, const std::string& source_nam
         << "  const std::size_t mat = " << (p.has_matrix() ? "Q * " + std::to_string(S) + " * N + Q * " + std::to_string(dsize) +
                                                                    " + lmeform::kernel::contract_matrix_workspace(n, nq, " + std::to_string(S) + ")"
                                                              : std::string("0"))
-        << ";\n  return std::max(vec, mat);\n}\n\n";
+        << ";\n  return vec > mat ? vec : mat;\n}\n\n";
+      k.generated_lines = count_lines(h.str(), kernel_start);
       kernels.push_back(std::move(k));
     }
   }
@@ -579,6 +690,7 @@ GeneratedModule generate(const CompiledForm& form, const std::string& source_nam
   }
   j << "  ]\n}\n";
   out.json = j.str();
+  out.report = cost_report(form, kernels, static_cast<long>(std::count(out.header.begin(), out.header.end(), '\n')));
   return out;
 }
 

@@ -1,10 +1,12 @@
 #include "lmeform/compiler/ir.hpp"
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <functional>
 #include <sstream>
+#include <unordered_map>
 #include <unordered_set>
 
 namespace lmeform::compiler::ir {
@@ -364,6 +366,204 @@ std::vector<std::pair<std::size_t, NodeId>> gradient(Graph& g, NodeId f, std::sp
   std::vector<std::pair<std::size_t, NodeId>> result;
   for (std::size_t i = 0; i < wrt.size(); ++i)
     if (const auto it = adjoint.find(wrt[i]); it != adjoint.end()) result.emplace_back(i, it->second);
+  return result;
+}
+
+namespace {
+
+/// First and second partial derivatives of one node with respect to its argument positions.
+struct LocalPartials {
+  std::array<NodeId, 3> child{-1, -1, -1};
+  std::array<NodeId, 3> first{-1, -1, -1};   ///< ∂v/∂child (zero node when none)
+  std::array<std::array<NodeId, 3>, 3> second{};  ///< ∂²v/∂child_p∂child_q, symmetric (-1: zero)
+  int count = 0;
+};
+
+LocalPartials local_partials(Graph& g, NodeId id) {
+  const Node n = g.node(id);
+  LocalPartials L;
+  for (auto& row : L.second) row.fill(-1);
+  const NodeId a = n.arg[0], b = n.arg[1];
+  auto set1 = [&](int k, NodeId c, NodeId d) {
+    L.child[static_cast<std::size_t>(k)] = c;
+    L.first[static_cast<std::size_t>(k)] = d;
+    L.count = std::max(L.count, k + 1);
+  };
+  auto set2 = [&](int p, int q, NodeId s) {
+    L.second[static_cast<std::size_t>(p)][static_cast<std::size_t>(q)] = s;
+    L.second[static_cast<std::size_t>(q)][static_cast<std::size_t>(p)] = s;
+  };
+  switch (n.op) {
+    case Op::Add: set1(0, a, g.one()); set1(1, b, g.one()); break;
+    case Op::Mul: set1(0, a, b); set1(1, b, a); set2(0, 1, g.one()); break;
+    case Op::Neg: set1(0, a, g.constant(-1.0)); break;
+    case Op::Div: {  // v = a/b: v_a = 1/b, v_b = -v/b, v_ab = -1/b², v_bb = 2v/b²
+      const NodeId inv = g.div(g.one(), b);
+      set1(0, a, inv);
+      set1(1, b, g.neg(g.div(id, b)));
+      set2(0, 1, g.neg(g.mul(inv, inv)));
+      set2(1, 1, g.div(g.mul(g.constant(2.0), id), g.mul(b, b)));
+      break;
+    }
+    case Op::Pow:
+      if (g.is_const(b)) {
+        const double c = g.node(b).value;
+        set1(0, a, g.mul(b, g.pow(a, g.constant(c - 1.0))));
+        set2(0, 0, g.mul(g.constant(c * (c - 1.0)), g.pow(a, g.constant(c - 2.0))));
+      } else {  // v = a^b
+        const NodeId log_a = g.unary(Op::Log, a);
+        set1(0, a, g.div(g.mul(b, id), a));
+        set1(1, b, g.mul(id, log_a));
+        set2(0, 0, g.div(g.mul(g.mul(b, g.sub(b, g.one())), id), g.mul(a, a)));
+        set2(0, 1, g.div(g.mul(id, g.add(g.one(), g.mul(b, log_a))), a));
+        set2(1, 1, g.mul(id, g.mul(log_a, log_a)));
+      }
+      break;
+    case Op::Sqrt:  // v' = 1/(2v), v'' = -1/(4 v³)
+      set1(0, a, g.div(g.one(), g.mul(g.constant(2.0), id)));
+      set2(0, 0, g.neg(g.div(g.one(), g.mul(g.constant(4.0), g.mul(id, g.mul(id, id))))));
+      break;
+    case Op::Exp: set1(0, a, id); set2(0, 0, id); break;
+    case Op::Log: {
+      const NodeId inv = g.div(g.one(), a);
+      set1(0, a, inv);
+      set2(0, 0, g.neg(g.mul(inv, inv)));
+      break;
+    }
+    case Op::Sin: set1(0, a, g.unary(Op::Cos, a)); set2(0, 0, g.neg(id)); break;
+    case Op::Cos: set1(0, a, g.neg(g.unary(Op::Sin, a))); set2(0, 0, g.neg(id)); break;
+    case Op::Tanh: {
+      const NodeId d = g.sub(g.one(), g.mul(id, id));
+      set1(0, a, d);
+      set2(0, 0, g.mul(g.constant(-2.0), g.mul(id, d)));
+      break;
+    }
+    case Op::Abs: set1(0, a, g.unary(Op::Sign, a)); break;
+    case Op::Select:
+      set1(0, n.arg[1], g.select(a, g.one(), g.zero()));
+      set1(1, n.arg[2], g.select(a, g.zero(), g.one()));
+      break;
+    default: break;  // terminals; Sign, comparisons and logic are piecewise constant
+  }
+  return L;
+}
+
+}  // namespace
+
+std::vector<HessianEntry> hessian(Graph& g, NodeId f, std::span<const NodeId> wrt) {
+  // Active nodes: those depending on a variable of wrt (only they carry derivatives).
+  const std::vector<NodeId> order_up = g.reachable(std::span<const NodeId>(&f, 1));
+  std::unordered_map<NodeId, std::size_t> var_index;
+  for (std::size_t i = 0; i < wrt.size(); ++i) var_index.emplace(wrt[i], i);
+  std::unordered_set<NodeId> active;
+  for (NodeId id : order_up) {
+    const Node& n = g.node(id);
+    if (is_terminal(n.op)) {
+      if (var_index.contains(id)) active.insert(id);
+      continue;
+    }
+    for (NodeId child : n.arg)
+      if (child >= 0 && active.contains(child)) {
+        active.insert(id);
+        break;
+      }
+  }
+  if (!active.contains(f)) return {};
+
+  // Edge pushing (Gower & Mello 2012) over the DAG, symbolically: a reverse sweep carrying the
+  // adjoints and the symmetric matrix W of second-order interactions between live nodes. At node v
+  // the entries W(v, ·) are pushed to v's arguments through the chain rule, v's own curvature is
+  // created with its adjoint, and v leaves W; at the end W holds the Hessian on the variables.
+  std::unordered_map<NodeId, NodeId> adjoint{{f, g.one()}};
+  std::unordered_map<NodeId, std::unordered_map<NodeId, NodeId>> off;  // W(u, p), u != p, stored both ways
+  std::unordered_map<NodeId, NodeId> diag;                               // W(u, u)
+  auto add_to = [&](NodeId& slot, NodeId x) { slot = slot < 0 ? x : g.add(slot, x); };
+  auto add_pair = [&](NodeId u, NodeId p, NodeId x) {
+    if (g.is_const(x, 0.0)) return;
+    if (u == p) {
+      auto [it, fresh] = diag.try_emplace(u, x);
+      if (!fresh) it->second = g.add(it->second, x);
+      return;
+    }
+    NodeId& a = off[u].try_emplace(p, -1).first->second;
+    add_to(a, x);
+    off[p][u] = a;
+  };
+  const Loc saved = g.current_origin();
+  for (auto it = order_up.rbegin(); it != order_up.rend(); ++it) {
+    const NodeId v = *it;
+    if (!active.contains(v) || is_terminal(g.node(v).op)) continue;
+    g.set_origin(g.origin(v));
+    const LocalPartials L = local_partials(g, v);
+    // Unique active children with merged partials: d[c] and S[c][c'] (symmetric).
+    std::vector<NodeId> kids;
+    std::vector<int> pos_to_kid(static_cast<std::size_t>(L.count), -1);
+    for (int p = 0; p < L.count; ++p) {
+      const NodeId c = L.child[static_cast<std::size_t>(p)];
+      if (c < 0 || !active.contains(c)) continue;
+      const auto found = std::find(kids.begin(), kids.end(), c);
+      pos_to_kid[static_cast<std::size_t>(p)] = static_cast<int>(found - kids.begin());
+      if (found == kids.end()) kids.push_back(c);
+    }
+    if (kids.empty()) continue;
+    const std::size_t K = kids.size();
+    std::vector<NodeId> d(K, g.zero());
+    std::vector<std::vector<NodeId>> S(K, std::vector<NodeId>(K, g.zero()));
+    for (int p = 0; p < L.count; ++p) {
+      const int i = pos_to_kid[static_cast<std::size_t>(p)];
+      if (i < 0) continue;
+      d[static_cast<std::size_t>(i)] = g.add(d[static_cast<std::size_t>(i)], L.first[static_cast<std::size_t>(p)]);
+      for (int q = 0; q < L.count; ++q) {
+        const int j = pos_to_kid[static_cast<std::size_t>(q)];
+        const NodeId s = L.second[static_cast<std::size_t>(p)][static_cast<std::size_t>(q)];
+        if (j < 0 || s < 0) continue;
+        S[static_cast<std::size_t>(i)][static_cast<std::size_t>(j)] = g.add(S[static_cast<std::size_t>(i)][static_cast<std::size_t>(j)], s);
+      }
+    }
+    // Pushing: W(v, p) and W(v, v) to the children.
+    if (const auto row = off.find(v); row != off.end()) {
+      const auto partners = std::move(row->second);
+      off.erase(row);
+      for (const auto& [p, w] : partners) {
+        if (auto back = off.find(p); back != off.end()) back->second.erase(v);
+        for (std::size_t i = 0; i < K; ++i) {
+          const NodeId x = g.mul(d[i], w);
+          add_pair(kids[i], p, kids[i] == p ? g.mul(g.constant(2.0), x) : x);
+        }
+      }
+    }
+    if (const auto dv = diag.find(v); dv != diag.end()) {
+      const NodeId w = dv->second;
+      diag.erase(dv);
+      for (std::size_t i = 0; i < K; ++i)
+        for (std::size_t j = i; j < K; ++j) add_pair(kids[i], kids[j], g.mul(g.mul(d[i], d[j]), w));
+    }
+    // Creating (v's own curvature) and the adjoints.
+    const auto found = adjoint.find(v);
+    if (found == adjoint.end()) continue;
+    const NodeId bar = found->second;
+    for (std::size_t i = 0; i < K; ++i)
+      for (std::size_t j = i; j < K; ++j)
+        if (!g.is_const(S[i][j], 0.0)) add_pair(kids[i], kids[j], g.mul(bar, S[i][j]));
+    for (std::size_t i = 0; i < K; ++i) {
+      const NodeId contribution = g.mul(bar, d[i]);
+      if (g.is_const(contribution, 0.0)) continue;
+      auto [a, fresh] = adjoint.try_emplace(kids[i], contribution);
+      if (!fresh) a->second = g.add(a->second, contribution);
+    }
+  }
+  g.set_origin(saved);
+  std::vector<HessianEntry> result;
+  for (std::size_t k = 0; k < wrt.size(); ++k) {
+    if (const auto dk = diag.find(wrt[k]); dk != diag.end() && !g.is_const(dk->second, 0.0)) result.push_back({k, k, dk->second});
+    if (const auto row = off.find(wrt[k]); row != off.end())
+      for (const auto& [p, w] : row->second)
+        if (const auto l = var_index.find(p); l != var_index.end() && l->second > k && !g.is_const(w, 0.0))
+          result.push_back({k, l->second, w});
+  }
+  std::sort(result.begin(), result.end(), [](const HessianEntry& x, const HessianEntry& y) {
+    return std::pair(x.row, x.col) < std::pair(y.row, y.col);
+  });
   return result;
 }
 

@@ -8,6 +8,7 @@
 #include <numbers>
 #include <fstream>
 #include <set>
+#include <map>
 #include <sstream>
 
 #include "lmeform/compiler/ast.hpp"
@@ -151,6 +152,7 @@ class Lowering {
     const Symbol* def = nullptr;
   };
   std::vector<DefScope> scopes_;
+  std::map<std::string, Value> def_calls_;  ///< lowered def calls by (def, argument nodes)
   std::vector<std::unique_ptr<ir::Differentiator>> spatial_;
   int def_depth_ = 0;
   int expr_depth_ = 0;  ///< current recursion depth of expr()
@@ -866,11 +868,25 @@ class Lowering {
     DefScope scope;
     scope.def = &sym;
     for (std::size_t i = 0; i < e.args.size(); ++i) scope.params[def.params[i]] = expr(*e.args[i]);
+    // The IR is hash-consed, so a def called again with the same argument nodes yields the same
+    // nodes: reuse them. Without this a chain of defs each calling the previous one twice costs
+    // 2^depth body lowerings (40 such lines would run for days).
+    std::ostringstream key;
+    key << static_cast<const void*>(&def);
+    for (const auto& p : def.params) {
+      const Value& v = scope.params.at(p);
+      key << '|' << v.measure << v.condition << ':';
+      for (const int d : v.shape) key << d << 'x';
+      key << ':';
+      for (const NodeId id : v.c) key << id << ',';
+    }
+    if (const auto hit = def_calls_.find(key.str()); hit != def_calls_.end()) return hit->second;
     scopes_.push_back(std::move(scope));
     ++def_depth_;
     Value r = expr(*def.body);
     --def_depth_;
     scopes_.pop_back();
+    def_calls_.emplace(key.str(), r);
     return r;
   }
 };

@@ -31,6 +31,8 @@ struct Options {
   std::vector<std::string> include_dirs;
   std::string depfile;
   bool dependencies = false;
+  bool report = false;
+  bool out_dir_given = false;
 };
 
 #ifndef LMEFORM_VERSION
@@ -41,6 +43,7 @@ constexpr const char* kVersionLine = "lmeformc " LMEFORM_VERSION;
 const char* kUsage =
     "lmeformc FILE.form -o DIR [--no-json] [--print-ir] [-I DIR]... [--depfile FILE]\n"
     "lmeformc FILE.form --dependencies [-I DIR]...\n"
+    "lmeformc FILE.form --report [-o DIR] [-I DIR]...\n"
     "  Compiles a lmeform form file into DIR/<module>_kernels.hpp (C++ kernels: value, gradient,\n"
     "  Hessian / residual, Jacobian) and DIR/<module>.json (metadata).\n"
     "  -o, --output DIR   output directory (created if missing; default .)\n"
@@ -51,6 +54,9 @@ const char* kUsage =
     "  --depfile FILE     write a Makefile dependency file (the form and every included file)\n"
     "  --dependencies     only parse the form and its includes, and print the absolute path of the\n"
     "                     form and of every included file, one per line; write nothing\n"
+    "  --report           print the cost of every kernel (flops per point of value, gradient and\n"
+    "                     Hessian, jet components, generated lines, the .form line of each output,\n"
+    "                     the share of the basis contractions); writes files only with -o\n"
     "  --version          print the version (lmeformc X.Y.Z)\n"
     "  -h, --help         this text\n";
 
@@ -117,6 +123,10 @@ int run(const Options& opt) {
     const CompiledForm form = compile_file(opt.form, copt);
     const GeneratedModule gen = generate(form, fs::path(opt.form).filename().string());
     if (opt.print_ir) std::cout << gen.ir;
+    if (opt.report) {
+      std::cout << gen.report;
+      if (!opt.out_dir_given) return 0;
+    }
     fs::create_directories(opt.out_dir);
     // Everything is generated before anything is written: an error above leaves no files.
     const fs::path header = fs::path(opt.out_dir) / (form.module + "_kernels.hpp");
@@ -160,10 +170,12 @@ int main(int argc, char** argv) {
   app.add_option("-I", opt.include_dirs, "include search directory")->allow_extra_args(false);
   app.add_option("--depfile", opt.depfile, "write a Makefile dependency file");
   app.add_flag("--dependencies", opt.dependencies, "print the form's file and its includes (absolute paths), write nothing");
+  app.add_flag("--report", opt.report, "print the cost of every kernel; writes files only with -o");
   app.set_version_flag("--version", kVersionLine);
   app.footer(kUsage);
   CLI11_PARSE(app, argc, argv);
   opt.json = !no_json;
+  opt.out_dir_given = app.count("-o") > 0;
 #else
   std::vector<std::string> args(argv + 1, argv + argc);
   for (std::size_t i = 0; i < args.size(); ++i) {
@@ -175,7 +187,8 @@ int main(int argc, char** argv) {
     if (a == "-h" || a == "--help") { std::cout << kUsage; return 0; }
     else if (a == "--version") { std::cout << kVersionLine << "\n"; return 0; }
     else if (a == "--dependencies") opt.dependencies = true;
-    else if (a == "-o" || a == "--output") opt.out_dir = value();
+    else if (a == "-o" || a == "--output") opt.out_dir = value(), opt.out_dir_given = true;
+    else if (a == "--report") opt.report = true;
     else if (a == "--json") opt.json = true;
     else if (a == "--no-json") opt.json = false;
     else if (a == "--print-ir") opt.print_ir = true;

@@ -27,6 +27,7 @@
 #include <vector>
 
 #include "bench_common.hpp"
+#include "bench_mpi.hpp"
 #include "helfrich_kernels.hpp"
 #include "lmeform/assembler.hpp"
 #include "lmeform/convex_hull.hpp"
@@ -42,21 +43,6 @@ namespace {
 const kernel::FormKernels& heat_form() { return poisson_heat_2d; }
 const kernel::FormKernels& helfrich_form() { return helfrich_bending_2d; }
 
-bool rank0() { return PetscSession::rank() == 0; }
-
-template <class... Args>
-void say(const char* format, Args... args) {
-  if (rank0()) {
-    std::printf(format, args...);
-    std::fflush(stdout);
-  }
-}
-
-double max_over_ranks(double v) {
-  double m = 0;
-  MPI_Allreduce(&v, &m, 1, MPI_DOUBLE, MPI_MAX, PETSC_COMM_WORLD);
-  return m;
-}
 
 DiscretizationOptions heat_options(double gamma, int points, NeighbourhoodStrategy strategy) {
   DiscretizationOptions o;

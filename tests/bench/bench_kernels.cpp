@@ -1,9 +1,12 @@
-// bench_kernels: per form of the model library, the cost of generating and compiling its kernels,
-// their size and Hessian flop model, and for helfrich_axisymmetric and helfrich_lagrangian the
-// generated Hessian kernel against a naive thesis-style one (tests/bench/naive_kernels.hpp) on the
-// same LME cell with the same inputs (they must agree to 1e-10).
+// bench_kernels: per form of the model library, the cost of generating and compiling its kernels
+// and their size; per kernel (form, output, dimension) the flops per quadrature point of the value,
+// gradient and Hessian, the ratios gradient/value and Hessian/value next to the bounds of the
+// differentiation method, and the Hessian kernel's time on a check cell with the runtime's dense
+// contractions and with the contract's plain loops (the two ways a kernel can contract); for
+// helfrich_axisymmetric and helfrich_lagrangian also the generated Hessian against a naive
+// thesis-style one (tests/bench/naive_kernels.hpp) on the same cell (they must agree to 1e-10).
 //
-//   bench_kernels [--quick] [--out DIR]      writes DIR/kernels.json and prints a table
+//   bench_kernels [--quick] [--out DIR]      writes DIR/kernels.json and prints tables
 //
 // Baked in at build time: LMEFORMC (path of lmeformc), LMEFORM_CXX + LMEFORM_CXX_FLAGS (the
 // compiler and flags of this build), LMEFORM_KERNEL_INCLUDES (runtime/include and Eigen),
@@ -11,8 +14,13 @@
 #include "naive_kernels.hpp"
 #include "test_cells.hpp"
 
+#include <lmeform/contractions.hpp>
 #include <lmeform/form_check.hpp>
 #include <lmeform/form_check_setup.hpp>
+#include <lmeform/form_registry.hpp>
+#include <lmeform/module_check.hpp>
+
+#include <nlohmann/json.hpp>
 
 #include <helfrich_axisymmetric_kernels.hpp>
 #include <helfrich_lagrangian_kernels.hpp>
@@ -60,41 +68,27 @@ std::string read_file(const fs::path& p) {
 
 int run(const std::string& cmd) { return std::system(cmd.c_str()); }
 
-/// Sum over the JSON's dim-2 kernels of the per-point (n-independent) matrix flops and the model at (n, nq).
-std::pair<double, double> hessian_flops(const std::string& json, int n, int nq) {
-  double per_point = 0.0, cell = 0.0;
-  std::size_t pos = 0;
-  while ((pos = json.find("\"symbol\"", pos)) != std::string::npos) {
-    const std::size_t end = json.find("\"symbol\"", pos + 1);
-    const std::string k = json.substr(pos, end == std::string::npos ? std::string::npos : end - pos);
-    pos += 8;
-    if (k.find("\"dim\": 2") == std::string::npos) continue;
-    const std::size_t m = k.find("\"matrix\": {");
-    if (m == std::string::npos) continue;
-    auto num = [&](const char* key) {
-      const std::size_t p = k.find(key, m);
-      return p == std::string::npos ? 0.0 : std::atof(k.c_str() + p + std::string(key).size());
-    };
-    const double a = num("\"per_point\": "), b = num("\"per_node_point\": "), c = num("\"per_node_pair_point\": ");
-    per_point += a;
-    cell += nq * (a + n * b + double(n) * n * c);
-  }
-  return {per_point, cell};
-}
-
 struct Record {
   std::string form;
   double lmeformc_s = 0, cxx_compile_s = 0;
   long generated_lines = 0;
-  double flops_hessian = 0, flops_hessian_cell = 0;
+  nlohmann::json module_json;
   bool timed = false;
   double gen_s = 0, naive_s = 0, max_diff = 0;
   int n = 0, nq = 0;
 };
 
+/// Bounds of the differentiation method (compiler/src/codegen.cpp, plan_kernel): the gradient is
+/// one reverse pass over the integrand's DAG, at most 4 times its operations (the cheap-gradient
+/// principle, Griewank & Walther, Evaluating Derivatives, ch. 4); the Hessian is one reverse pass
+/// over each of the m first derivatives, each at most 4 times the gradient: 16 m times the value.
+/// CSE across the passes only lowers the cost.
+constexpr double kGradientBound = 4.0;
+double hessian_bound(int jet_components) { return 16.0 * jet_components; }
+
 /// Median time of one Hessian call on the cell (the output is zeroed before each call).
 double time_hessian(const FormKernels& f, const fc::Cell& cell, const fc::State& s, int reps,
-                    std::vector<double>& H) {
+                    std::vector<double>& H, const lmeform::kernel::ContractionRoutines* contractions = &lmeform::dense_contractions()) {
   std::vector<double> ws(f.workspace_doubles ? f.workspace_doubles(cell.n, cell.nq) + 1 : 1);
   lmeform::kernel::CellInputs in;
   in.n_nodes = cell.n;
@@ -107,6 +101,8 @@ double time_hessian(const FormKernels& f, const fc::Cell& cell, const fc::State&
   in.qdata = s.qdata.empty() ? nullptr : s.qdata.data();
   in.constants = s.constants.data();
   in.workspace = ws.data();
+  in.coefficients = s.coefficients.empty() ? nullptr : s.coefficients.data();
+  in.contractions = contractions;
   const std::size_t N = static_cast<std::size_t>(cell.n) * f.dofs_per_node;
   H.assign(N * N, 0.0);
   std::vector<double> t;
@@ -175,9 +171,8 @@ int main(int argc, char** argv) {
       return 1;
     }
     r.cxx_compile_s = now() - t0;
-    const std::string json = read_file(dir / (r.form + ".json"));
+    r.module_json = nlohmann::json::parse(read_file(dir / (r.form + ".json")));
     records.push_back(r);
-    records.back().flops_hessian = hessian_flops(json, 0, 1).first;
   }
 
   // Hessian cell timings on a real LME cell (graded node set, 6 Gauss points, interface cell).
@@ -214,7 +209,6 @@ int main(int argc, char** argv) {
     r.n = cell.n;
     r.nq = cell.nq;
     r.timed = true;
-    r.flops_hessian_cell = 0;
     if (!(r.max_diff <= 1e-10)) {
       std::fprintf(stderr, "bench_kernels: %s generated and naive Hessians differ by %.3e (relative)\n",
                    r.form.c_str(), r.max_diff);
@@ -222,33 +216,113 @@ int main(int argc, char** argv) {
     }
   }
 
-  std::ofstream js(out / "kernels.json");
-  js << "[\n";
-  for (std::size_t i = 0; i < records.size(); ++i) {
-    const Record& r = records[i];
-    char b[1024];
-    std::snprintf(b, sizeof b,
-                  "  {\"form\": \"%s\", \"lmeformc_s\": %.6f, \"cxx_compile_s\": %.6f, \"generated_lines\": %ld, "
-                  "\"flops_hessian\": %.0f",
-                  r.form.c_str(), r.lmeformc_s, r.cxx_compile_s, r.generated_lines, r.flops_hessian);
-    js << b;
-    if (r.timed) {
-      std::snprintf(b, sizeof b,
-                    ", \"hessian_cell_s_generated\": %.9e, \"hessian_cell_s_naive\": %.9e, \"speedup_vs_naive\": %.3f, "
-                    "\"hessian_max_rel_diff\": %.3e, \"cell_nodes\": %d, \"cell_points\": %d",
-                    r.gen_s, r.naive_s, r.naive_s / r.gen_s, r.max_diff, r.n, r.nq);
-      js << b;
-    }
-    js << "}" << (i + 1 < records.size() ? "," : "") << "\n";
-  }
-  js << "]\n";
-  js.close();
-
-  std::printf("%-34s %10s %10s %9s %12s %12s %12s %8s\n", "form", "lmeformc_s", "cxx_s", "lines", "flops_H/pt",
-              "H_gen_s", "H_naive_s", "speedup");
+  // Per kernel: flops per point from the module JSON, method bounds, and the Hessian's time per
+  // cell with the runtime's dense contractions and with the plain loops of the contract.
+  nlohmann::json kernels_json = nlohmann::json::array();
+  std::printf("\n%-34s %-12s %3s %3s %10s %10s %10s %7s %7s %8s %12s %12s %7s\n", "form", "output", "dim", "m", "flops_v/pt",
+              "flops_g/pt", "flops_H/pt", "g/v", "H/v", "H bound", "H_dense_s", "H_plain_s", "plain/d");
   for (const Record& r : records) {
-    std::printf("%-34s %10.3f %10.2f %9ld %12.0f", r.form.c_str(), r.lmeformc_s, r.cxx_compile_s, r.generated_lines,
-                r.flops_hessian);
+    const lmeform::FormModule& module = lmeform::load_form(r.form);
+    std::string reason;
+    const fc::Coordinates coords = fc::default_coordinates(r.form, module.source, {fs::path(module.source).parent_path()}, &reason);
+    const auto constants = fc::resolve_constants(module.kernels, {}, 5);
+    for (const FormKernels* k : module.kernels) {
+      const std::string symbol = r.form + "_" + k->name + "_" + std::to_string(k->dim) + "d";
+      nlohmann::json kj;
+      for (const auto& e : r.module_json["kernels"])
+        if (e["symbol"] == symbol) kj = e;
+      if (kj.is_null()) continue;
+      const int m = static_cast<int>(kj["jet_components"].size());
+      auto per_point = [&](const char* kernel) {
+        return kj["flops"].contains(kernel) ? kj["flops"][kernel]["per_point"].get<double>() : 0.0;
+      };
+      const double fv = per_point("value"), fg = per_point("vector"), fh = per_point("matrix");
+      nlohmann::json rec{{"form", r.form},
+                         {"output", k->name},
+                         {"dim", k->dim},
+                         {"jet_components", m},
+                         {"flops_value_per_point", fv},
+                         {"flops_gradient_per_point", fg},
+                         {"flops_hessian_per_point", fh},
+                         {"generated_lines", r.generated_lines},
+                         {"cxx_compile_s", r.cxx_compile_s}};
+      if (fv > 0 && fg > 0) rec["ratio_gradient_value"] = fg / fv, rec["bound_gradient_value"] = kGradientBound;
+      if (fv > 0 && fh > 0) rec["ratio_hessian_value"] = fh / fv, rec["bound_hessian_value"] = hessian_bound(m);
+      double dense_s = 0, plain_s = 0;
+      if (k->matrix != nullptr && fh > 0) {
+        fc::GeometryOptions go;
+        go.dim = k->dim;
+        go.coordinates = coords;
+        const fc::CheckGeometry geometry(go);
+        bool vector_fields = false;
+        for (int i = 0; i < k->n_unknowns; ++i) vector_fields = vector_fields || (k->dim > 1 && k->unknowns[i].components == k->dim);
+        for (int i = 0; i < k->n_coefficients; ++i)
+          vector_fields = vector_fields || (k->dim > 1 && k->coefficients[i].components == k->dim);
+        const fc::Cell cell = geometry.check_cells(2, vector_fields).front();
+        std::vector<double> values;
+        for (int i = 0; i < k->n_constants; ++i)
+          for (const auto& c : constants)
+            if (c.name == k->constants[i]) values.push_back(c.value);
+        std::mt19937_64 case_rng(17);
+        const fc::CheckCase cc = fc::generic_case(*k, cell, geometry, values, fc::StateOptions{}, case_rng);
+        std::vector<double> Hd, Hp;
+        dense_s = time_hessian(*k, cell, cc.state, reps, Hd);
+        plain_s = time_hessian(*k, cell, cc.state, reps, Hp, nullptr);
+        double big = 0, diff = 0;
+        for (std::size_t i = 0; i < Hd.size(); ++i) {
+          big = std::max(big, std::abs(Hd[i]));
+          diff = std::max(diff, std::abs(Hd[i] - Hp[i]));
+        }
+        const double rel = big > 0 ? diff / big : diff;
+        rec["hessian_cell_s_dense"] = dense_s;
+        rec["hessian_cell_s_plain"] = plain_s;
+        rec["plain_over_dense"] = plain_s / dense_s;
+        rec["dense_plain_max_rel_diff"] = rel;
+        rec["cell_nodes"] = cell.n;
+        rec["cell_points"] = cell.nq;
+        if (!(rel <= 1e-12)) {
+          std::fprintf(stderr, "bench_kernels: %s: dense and plain contractions differ by %.3e (relative)\n", symbol.c_str(), rel);
+          agree = false;
+        }
+      }
+      std::printf("%-34s %-12s %3d %3d %10.0f %10.0f %10.0f %7.2f %7.2f %8.0f", r.form.c_str(), k->name, k->dim, m, fv, fg,
+                  fh, fv > 0 ? fg / fv : 0.0, fv > 0 ? fh / fv : 0.0, hessian_bound(m));
+      if (dense_s > 0) std::printf(" %12.3e %12.3e %7.2f", dense_s, plain_s, plain_s / dense_s);
+      std::printf("\n");
+      kernels_json.push_back(rec);
+    }
+  }
+
+  nlohmann::json forms_json = nlohmann::json::array();
+  for (const Record& r : records) {
+    nlohmann::json f{{"form", r.form},
+                     {"lmeformc_s", r.lmeformc_s},
+                     {"cxx_compile_s", r.cxx_compile_s},
+                     {"generated_lines", r.generated_lines}};
+    if (r.timed) {
+      f["hessian_cell_s_generated"] = r.gen_s;
+      f["hessian_cell_s_naive"] = r.naive_s;
+      f["speedup_vs_naive"] = r.naive_s / r.gen_s;
+      f["hessian_max_rel_diff"] = r.max_diff;
+      f["cell_nodes"] = r.n;
+      f["cell_points"] = r.nq;
+    }
+    forms_json.push_back(f);
+  }
+  const nlohmann::json js{{"compiler", LMEFORM_CXX},
+                          {"flags", LMEFORM_CXX_FLAGS},
+                          {"forms", forms_json},
+                          {"kernels", kernels_json}};
+  {
+    std::ofstream f(out / "kernels.json.tmp");
+    f << js.dump(2) << "\n";
+  }
+  fs::rename(out / "kernels.json.tmp", out / "kernels.json");
+
+  std::printf("\n%-34s %10s %10s %9s %12s %12s %8s\n", "form", "lmeformc_s", "cxx_s", "lines", "H_gen_s", "H_naive_s",
+              "speedup");
+  for (const Record& r : records) {
+    std::printf("%-34s %10.3f %10.2f %9ld", r.form.c_str(), r.lmeformc_s, r.cxx_compile_s, r.generated_lines);
     if (r.timed)
       std::printf(" %12.3e %12.3e %8.1f   (n=%d, nq=%d, rel diff %.1e)", r.gen_s, r.naive_s, r.naive_s / r.gen_s, r.n,
                   r.nq, r.max_diff);

@@ -108,6 +108,27 @@ TEST_P(Lmeformc, DependenciesReportFormErrors) {
   EXPECT_EQ(r.err, "broken.form:3:1: error: expected ')', found end of file\n\n^\n");
 }
 
+TEST_P(Lmeformc, ReportExplainsEachKernel) {
+  write(work_ / "cwd" / "cost.form",
+        "form cost\ndimension 2, 3\nunknown u\nconstant k = 1\nenergy bend = k*lap(u)^2*dx\nenergy mass = u^2*dx\n");
+  const Outcome r = run("cost.form --report");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(listing(work_ / "cwd").size() == 1) << "--report without -o wrote files";
+  for (const std::string& expected :
+       {std::string("cost report of form cost"), std::string("energy bend, dimension 2 (cost.form:5:1)"),
+        std::string("energy bend, dimension 3 (cost.form:5:1)"), std::string("| energy bend = k*lap(u)^2*dx"),
+        std::string("jet components (m = 2): u d2/dx0dx0, u d2/dx1dx1"),
+        std::string("jet components (m = 3): u d2/dx0dx0, u d2/dx1dx1, u d2/dx2dx2"),
+        std::string("jet components (m = 1): u value"), std::string("H/v "), std::string("% in the contractions"),
+        std::string(" generated lines")})
+    EXPECT_NE(r.out.find(expected), std::string::npos) << "missing: " << expected << "\n" << r.out;
+  // With -o the files are written too.
+  const Outcome w = run("cost.form --report -o out");
+  EXPECT_EQ(w.exit_code, 0) << w.err;
+  EXPECT_TRUE(fs::exists(work_ / "cwd" / "out" / "cost_kernels.hpp"));
+  EXPECT_NE(w.out.find("cost report of form cost"), std::string::npos);
+}
+
 TEST_P(Lmeformc, ADirectoryIsNotAForm) {
   fs::create_directories(work_ / "cwd" / "forms");
   const Outcome r = run("forms -o out");

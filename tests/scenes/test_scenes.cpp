@@ -592,10 +592,17 @@ TEST(SceneQdata, Providers) {
   EXPECT_EQ(s.qdata[0].provider, "support_size");
   EXPECT_EQ(s.qdata[0].where, "scenes/ok.toml:12: key 'qdata.rho'");
   std::string t = kMinimal + "[qdata]\nrho = \"support_sise\"\n";
-  expect_error(t, {at_line(t, "rho ="), "key 'qdata.rho' must be one of 'support_size', 'zero', got 'support_sise'; did you mean "
-                                        "'support_size'?"});
-  t = kMinimal + "[qdata]\nrho = 0\n";
-  expect_error(t, {at_line(t, "rho ="), "key 'qdata.rho' must be a string, found an integer"});
+  expect_error(t, {at_line(t, "rho ="), "key 'qdata.rho' must be one of 'support_size', 'zero', a number or an expression, "
+                                        "got 'support_sise'; did you mean 'support_size'?"});
+  // A number or any other string is a value for every quadrature point (an expression of x).
+  t = kMinimal + "[qdata]\nrho = 0.5\nf = \"sin(pi*x[0])\"\n";
+  const Scene values = parse_scene(t, "scenes/ok.toml");
+  ASSERT_EQ(values.qdata.size(), 2u);
+  for (const auto& q : values.qdata) {
+    EXPECT_EQ(q.provider, "value") << q.name;
+    if (q.name == "rho") EXPECT_EQ(q.value.number(), 0.5);
+    else EXPECT_EQ(q.value.expression(), "sin(pi*x[0])");
+  }
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -25,16 +25,17 @@
 //   (n*dofs_per_node) x (n*dofs_per_node), row-major.
 // * Kernels allocate nothing: the runtime passes `workspace` of at least
 //   `workspace_doubles(n, nq)` doubles.
+// * The dense contractions with the basis (gradient = Bsᵀ G, Hessian blocks Bsᵀ D Bs) are
+//   ContractionRoutines the runtime passes in CellInputs, compiled once with a BLAS-like library;
+//   this header includes no library, so that a form's translation unit compiles in about a second.
 #pragma once
 
 #include <cstddef>
 #include <cstring>
 
-#include <Eigen/Core>
-
 namespace lmeform::kernel {
 
-inline constexpr int kContractVersion = 2;
+inline constexpr int kContractVersion = 3;
 
 /// Number of jet slots of a scalar field for dimension d and derivative order k (0, 1, 2).
 constexpr int jet_size(int dim, int order) noexcept {
@@ -69,6 +70,23 @@ struct QdataInfo {
   int size;         ///< flattened size per quadrature point
 };
 
+/// A structurally non-zero component block of the local matrix; `mirror` adds its transpose at
+/// (col, row) too (symmetric Hessians compute only the upper blocks).
+struct MatrixBlock {
+  int row;
+  int col;
+  bool mirror;
+};
+
+/// The dense products of the generated kernels (see contract_vector / contract_matrix below for
+/// their meaning). The runtime supplies an optimized implementation (lmeform/contractions.hpp);
+/// without one the plain loops of this header run (same results, slower for large cells).
+struct ContractionRoutines {
+  void (*vector)(int n, int nq, int n_slots, int R, const double* Bs, const double* G, double* local_vector);
+  void (*matrix)(int n, int nq, int n_slots, int R, int C, const double* Bs, const double* D, const MatrixBlock* blocks,
+                 int n_blocks, double* work, double* local_matrix);
+};
+
 /// Everything a kernel reads for one background cell.
 struct CellInputs {
   int n_nodes = 0;                     ///< nodes of the cell neighbourhood
@@ -82,6 +100,7 @@ struct CellInputs {
   const double* qdata = nullptr;       ///< [nq * qdata_per_point]
   const double* constants = nullptr;   ///< [n_constants], in declaration order
   double* workspace = nullptr;         ///< scratch, at least workspace_doubles(n, nq)
+  const ContractionRoutines* contractions = nullptr;  ///< null: the plain loops of this header
 };
 
 using ValueKernel = double (*)(const CellInputs&);
@@ -160,18 +179,12 @@ struct ModuleTable {
 inline constexpr const char* kModuleEntrySymbol = "lmeform_module_table";
 using ModuleEntry = const ModuleTable* (*)();
 
-// ---- Contraction helpers used by generated kernels (added by the compiler, issue 3) ------------
+// ---- Contraction helpers used by generated kernels ----------------------------------------------
 // The generated code evaluates, per quadrature point, the derivatives of the integrand with respect
 // to the jet slots it uses (a dense (R*S) x (C*S) block D_q, weight included), then these helpers
-// contract with the basis as dense products: gradient = Bsᵀ G and, per non-zero component block
-// (r, c), H_rc = Bsᵀ (blockdiag_q D_q^{rc}) Bs, i.e. one small product per point and one GEMM per
-// block with inner dimension nq*S.
-namespace detail {
-using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-using ConstRowMap = Eigen::Map<const RowMatrix>;
-using RowMap = Eigen::Map<RowMatrix>;
-using StridedRowMap = Eigen::Map<RowMatrix, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
-}  // namespace detail
+// contract with the basis: gradient = Bsᵀ G and, per non-zero component block (r, c),
+// H_rc = Bsᵀ (blockdiag_q D_q^{rc}) Bs, i.e. one small product per point and one product per block
+// with inner dimension nq*S.
 
 /// Gathers the used jet slots of every point's tabulation: `out` is (nq*S x n), row (q*S + i) =
 /// basis row `slots[i]` of point q.
@@ -184,53 +197,82 @@ inline void gather_slots(const CellInputs& in, int dim, int n_slots, const int* 
                   sizeof(double) * std::size_t(n));
 }
 
-/// local_vector (n x R, dof-interleaved) += Bsᵀ G with Bs (nq*S x n) and G (nq*S x R).
-inline void contract_vector(int n, int nq, int n_slots, int R, const double* Bs, const double* G,
-                            double* local_vector) {
-  detail::RowMap out(local_vector, n, R);
-  out.noalias() += detail::ConstRowMap(Bs, Eigen::Index(nq) * n_slots, n).transpose() *
-                   detail::ConstRowMap(G, Eigen::Index(nq) * n_slots, R);
-}
-
-/// A structurally non-zero component block of the local matrix; `mirror` adds its transpose at
-/// (col, row) too (symmetric Hessians compute only the upper blocks).
-struct MatrixBlock {
-  int row;
-  int col;
-  bool mirror;
-};
-
 /// Workspace of contract_matrix (beyond Bs and D): nq*S*n + n*n doubles.
 constexpr std::size_t contract_matrix_workspace(int n, int nq, int n_slots) noexcept {
   return std::size_t(nq) * n_slots * n + std::size_t(n) * n;
 }
 
+/// local_vector (n x R, dof-interleaved) += Bsᵀ G with Bs (nq*S x n) and G (nq*S x R). Plain loops.
+inline void plain_contract_vector(int n, int nq, int n_slots, int R, const double* Bs, const double* G,
+                                  double* local_vector) noexcept {
+  const int rows = nq * n_slots;
+  for (int k = 0; k < rows; ++k)
+    for (int r = 0; r < R; ++r) {
+      const double g = G[std::size_t(k) * R + r];
+      if (g == 0.0) continue;
+      const double* b = Bs + std::size_t(k) * n;
+      for (int a = 0; a < n; ++a) local_vector[std::size_t(a) * R + r] += b[a] * g;
+    }
+}
+
 /// local_matrix ((n*R) x (n*C), dof-interleaved) += Σ_q Bs_qᵀ D_q^{rc} Bs_q for every block.
-/// D holds per point a row-major (R*S) x (C*S) matrix (weights included).
-inline void contract_matrix(int n, int nq, int n_slots, int R, int C, const double* Bs, const double* D,
-                            const MatrixBlock* blocks, int n_blocks, double* work, double* local_matrix) {
-  const Eigen::Index S = n_slots;
-  const Eigen::Index ld = Eigen::Index(C) * S;
-  double* stacked = work;                                  // (nq*S x n): D_q^{rc} Bs_q stacked
-  double* block = work + std::size_t(nq) * n_slots * n;     // (n x n)
-  const detail::ConstRowMap Ball(Bs, Eigen::Index(nq) * S, n);
+/// D holds per point a row-major (R*S) x (C*S) matrix (weights included). Plain loops.
+inline void plain_contract_matrix(int n, int nq, int n_slots, int R, int C, const double* Bs, const double* D,
+                                  const MatrixBlock* blocks, int n_blocks, double* work, double* local_matrix) noexcept {
+  const int S = n_slots;
+  const std::size_t ld = std::size_t(C) * S;
+  double* stacked = work;                                // (nq*S x n): D_q^{rc} Bs_q stacked
+  double* block = work + std::size_t(nq) * S * n;        // (n x n)
+  const std::size_t row_stride = std::size_t(R) * n * C;
   for (int b = 0; b < n_blocks; ++b) {
     const int r = blocks[b].row, c = blocks[b].col;
     for (int q = 0; q < nq; ++q) {
-      const double* Dq = D + std::size_t(q) * std::size_t(R) * S * ld + std::size_t(r) * S * ld + std::size_t(c) * S;
-      Eigen::Map<const detail::RowMatrix, 0, Eigen::OuterStride<>> Dblock(Dq, S, S, Eigen::OuterStride<>(ld));
-      detail::RowMap(stacked + std::size_t(q) * S * n, S, n).noalias() =
-          Dblock * detail::ConstRowMap(Bs + std::size_t(q) * S * n, S, n);
+      const double* Dq = D + std::size_t(q) * R * S * ld + std::size_t(r) * S * ld + std::size_t(c) * S;
+      const double* Bq = Bs + std::size_t(q) * S * n;
+      double* out = stacked + std::size_t(q) * S * n;
+      for (int i = 0; i < S; ++i) {
+        double* o = out + std::size_t(i) * n;
+        for (int a = 0; a < n; ++a) o[a] = 0.0;
+        for (int j = 0; j < S; ++j) {
+          const double d = Dq[std::size_t(i) * ld + j];
+          if (d == 0.0) continue;
+          const double* bj = Bq + std::size_t(j) * n;
+          for (int a = 0; a < n; ++a) o[a] += d * bj[a];
+        }
+      }
     }
-    detail::RowMap H(block, n, n);
-    H.noalias() = Ball.transpose() * detail::ConstRowMap(stacked, Eigen::Index(nq) * S, n);
-    const Eigen::Index row_stride = Eigen::Index(R) * n * C;
-    detail::StridedRowMap(local_matrix + std::size_t(r) * n * C + c, n, n,
-                          Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>(row_stride, C)) += H;
-    if (blocks[b].mirror)
-      detail::StridedRowMap(local_matrix + std::size_t(c) * n * C + r, n, n,
-                            Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>(row_stride, C)) += H.transpose();
+    for (std::size_t e = 0; e < std::size_t(n) * n; ++e) block[e] = 0.0;
+    for (int k = 0; k < nq * S; ++k) {
+      const double* bk = Bs + std::size_t(k) * n;
+      const double* sk = stacked + std::size_t(k) * n;
+      for (int a = 0; a < n; ++a) {
+        const double ba = bk[a];
+        if (ba == 0.0) continue;
+        double* h = block + std::size_t(a) * n;
+        for (int e = 0; e < n; ++e) h[e] += ba * sk[e];
+      }
+    }
+    for (int a = 0; a < n; ++a)
+      for (int e = 0; e < n; ++e) {
+        const double h = block[std::size_t(a) * n + e];
+        local_matrix[std::size_t(r) * n * C + c + std::size_t(a) * row_stride + std::size_t(e) * C] += h;
+        if (blocks[b].mirror) local_matrix[std::size_t(c) * n * C + r + std::size_t(e) * row_stride + std::size_t(a) * C] += h;
+      }
   }
+}
+
+/// local_vector (n x R, dof-interleaved) += Bsᵀ G: the runtime's routine, else plain loops.
+inline void contract_vector(const CellInputs& in, int n, int nq, int n_slots, int R, const double* Bs, const double* G,
+                            double* local_vector) {
+  if (in.contractions != nullptr) in.contractions->vector(n, nq, n_slots, R, Bs, G, local_vector);
+  else plain_contract_vector(n, nq, n_slots, R, Bs, G, local_vector);
+}
+
+/// local_matrix += Σ_q Bs_qᵀ D_q^{rc} Bs_q per block: the runtime's routine, else plain loops.
+inline void contract_matrix(const CellInputs& in, int n, int nq, int n_slots, int R, int C, const double* Bs,
+                            const double* D, const MatrixBlock* blocks, int n_blocks, double* work, double* local_matrix) {
+  if (in.contractions != nullptr) in.contractions->matrix(n, nq, n_slots, R, C, Bs, D, blocks, n_blocks, work, local_matrix);
+  else plain_contract_matrix(n, nq, n_slots, R, C, Bs, D, blocks, n_blocks, work, local_matrix);
 }
 
 }  // namespace lmeform::kernel

@@ -5,6 +5,7 @@
 
 #include <fmt/format.h>
 
+#include "lmeform/contractions.hpp"
 #include "lmeform/output.hpp"
 #include "lmeform/scene.hpp"
 
@@ -107,6 +108,7 @@ void PointExpressions::evaluate(int handle, std::span<const double> x, std::span
   std::vector<double> local(static_cast<std::size_t>(dofs), 0.0);
   const double weight = 1.0, basis = 1.0;
   kernel::CellInputs in;
+  in.contractions = &dense_contractions();
   in.n_nodes = 1;
   in.n_points = 1;
   in.basis_order = 0;

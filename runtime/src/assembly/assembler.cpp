@@ -9,6 +9,7 @@
 #include <string>
 
 #include "aij_direct_add.hpp"
+#include "lmeform/contractions.hpp"
 
 namespace lmeform {
 
@@ -236,6 +237,7 @@ void Assembler::element_loop(Vec u, bool owned_only, int order, PerElement&& per
   const int dim = disc_->dim();
   const CellQuadrature& quadrature = disc_->quadrature();
   kernel::CellInputs in;
+  in.contractions = &dense_contractions();
   in.basis_order = order;
   const std::size_t tabulation_size = static_cast<std::size_t>(disc_->max_element_points()) *
                                       static_cast<std::size_t>(kernel::jet_size(disc_->dim(), order)) *

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "lmeform/neighbourhoods.hpp"
+#include "lmeform/contractions.hpp"
 
 namespace lmeform {
 
@@ -105,6 +106,7 @@ QuadratureAdequacy check_quadrature(const Discretization& disc, const kernel::Fo
       basis.tabulate_cell(pts[r], nodes, order, tab, ws);
       workspace.resize(form.workspace_doubles(n, nq));
       kernel::CellInputs in;
+      in.contractions = &dense_contractions();
       in.n_nodes = n;
       in.n_points = nq;
       in.basis_order = order;

@@ -1,4 +1,5 @@
 #include "lmeform/form_check.hpp"
+#include "lmeform/contractions.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -64,6 +65,7 @@ Evaluator::Evaluator(const kernel::FormKernels& form, const Cell& cell, const St
 
 kernel::CellInputs Evaluator::inputs(const std::vector<double>& u) {
   kernel::CellInputs in;
+  in.contractions = &dense_contractions();
   in.n_nodes = cell_.n;
   in.n_points = cell_.nq;
   in.basis_order = cell_.basis_order;

@@ -3,6 +3,7 @@
 #include "lmeform/scene.hpp"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdint>
 #include <fstream>
@@ -310,9 +311,18 @@ void read_qdata(const Section& root, Scene& s) {
     SceneQdata q;
     q.name = name;
     q.where = t->where(name);
-    // A string other than the two provider names is an expression ("[0, -9.81]", "sin(pi*x[0])").
-    if (node.is_string() && (*node.value<std::string>() == "support_size" || *node.value<std::string>() == "zero")) {
-      q.provider = *node.value<std::string>();
+    // A string other than the two provider names is an expression ("sin(pi*x[0])*e(0)"); a bare
+    // word close to a provider name is taken for a misspelt provider.
+    static const std::vector<std::string> providers{"support_size", "zero"};
+    const std::string text = node.is_string() ? *node.value<std::string>() : std::string();
+    const bool word = !text.empty() && std::all_of(text.begin(), text.end(), [](unsigned char c) {
+      return std::isalnum(c) != 0 || c == '_';
+    });
+    if (text == "support_size" || text == "zero") {
+      q.provider = text;
+    } else if (word && !closest_name(text, providers).empty()) {
+      t->fail_key(name, "must be one of 'support_size', 'zero', a number or an expression, got '" + text +
+                            "'; did you mean '" + closest_name(text, providers) + "'?");
     } else {
       q.provider = "value";
       q.value = value_of(*t, name, node);

@@ -39,6 +39,7 @@ struct GeneratedModule {
   std::string header;  ///< <module>_kernels.hpp
   std::string json;    ///< <module>.json
   std::string ir;      ///< --print-ir text
+  std::string report;  ///< --report text: per kernel flops, jet components, lines, source line
 };
 
 GeneratedModule generate(const CompiledForm& form, const std::string& source_name);

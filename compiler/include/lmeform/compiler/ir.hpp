@@ -133,6 +133,19 @@ class Differentiator {
 /// functional of many unknowns quadratic in their number; this stays linear.
 std::vector<std::pair<std::size_t, NodeId>> gradient(Graph& graph, NodeId f, std::span<const NodeId> wrt);
 
+/// One entry of a symmetric Hessian: ∂²f/∂wrt[row]∂wrt[col] with row <= col.
+struct HessianEntry {
+  std::size_t row;
+  std::size_t col;
+  NodeId node;
+};
+
+/// Reverse-mode symbolic Hessian by edge pushing (Gower & Mello, 2012): the non-zero upper-triangle
+/// entries of ∂²f/∂t∂t' for the terminals of `wrt`, from one reverse sweep that pushes second-order
+/// interactions through the DAG; intermediates with few inputs (F⁻¹, det F, ∇φ) are then
+/// differentiated once, not once per variable as by a reverse sweep over every first derivative.
+std::vector<HessianEntry> hessian(Graph& graph, NodeId f, std::span<const NodeId> wrt);
+
 /// Numerical evaluation of the DAG (tests, constant defaults): terminal values from a callback.
 class Interpreter {
  public:
