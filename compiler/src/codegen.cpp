@@ -14,6 +14,7 @@
 #include <map>
 #include <set>
 #include <sstream>
+#include <unordered_map>
 
 #include "lmeform/compiler/codegen.hpp"
 
@@ -184,7 +185,10 @@ class KernelWriter {
       case Op::Coord: return "x_" + std::to_string(n.arg[0]);
       case Op::Param: return "k_" + std::to_string(n.arg[0]);
       case Op::Qdata: return "qd_" + std::to_string(n.arg[0]);
-      default: return "t" + std::to_string(id);
+      default: {
+        if (const auto it = inlined_.find(id); it != inlined_.end()) return "(" + it->second + ")";
+        return "t" + std::to_string(id);
+      }
     }
   }
 
@@ -233,6 +237,18 @@ class KernelWriter {
   /// Returns the flop estimate per point and the number of nodal jets evaluated.
   std::pair<double, int> point_loop(std::ostream& os, const std::vector<NodeId>& roots, const std::string& sink) {
     const auto order = g_.reachable(roots);
+    // A node used once, by another node, is written into its user's expression rather than as a
+    // temporary of its own (up to kInlineDepth levels): fewer lines to parse, the same operations.
+    constexpr int kInlineDepth = 4;
+    inlined_.clear();
+    std::unordered_map<NodeId, int> uses, depth;
+    for (NodeId id : order) {
+      const ir::Node& n = g_.node(id);
+      if (ir::is_terminal(n.op)) continue;
+      for (NodeId c : n.arg)
+        if (c >= 0) ++uses[c];
+    }
+    for (NodeId r : roots) uses[r] += 2;  // the sink names every root
     std::set<int> params;
     std::vector<NodeId> jets;
     std::set<int> coords, qdata;
@@ -287,9 +303,18 @@ class KernelWriter {
           last_file = o.file;
         }
       }
+      int d = 1;
+      for (NodeId c : n.arg)
+        if (c >= 0 && inlined_.contains(c)) d = std::max(d, depth[c] + 1);
+      if (uses[id] == 1 && d <= kInlineDepth) {
+        inlined_.emplace(id, expression(id));
+        depth[id] = d;
+        continue;
+      }
       os << "    const double t" << id << " = " << expression(id) << ";\n";
     }
     os << sink << "  }\n";
+    inlined_.clear();
     return {flops, static_cast<int>(jets.size())};
   }
 
@@ -297,6 +322,7 @@ class KernelWriter {
   const CompiledForm& form_;
   const KernelPlan& plan_;
   const ir::Graph& g_;
+  std::unordered_map<NodeId, std::string> inlined_;  ///< nodes written into their single user
 };
 
 std::string json_escape(const std::string& s) {
@@ -530,7 +556,8 @@ GeneratedModule generate(const CompiledForm& form, const std::string& source_nam
         int nb = 0;
         for (const auto& [r, c] : blocks) {
           if (p.symmetric && r > c) continue;
-          bl << "{" << r << ", " << c << ", " << (p.symmetric && r != c ? "true" : "false") << "}, ";
+          bl << "{" << r << ", " << c << ", " << (p.symmetric && r != c ? "true" : "false") << ", "
+             << (p.symmetric && r == c ? "true" : "false") << "}, ";
           ++nb;
         }
         k.n_blocks = nb;

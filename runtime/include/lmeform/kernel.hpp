@@ -71,11 +71,13 @@ struct QdataInfo {
 };
 
 /// A structurally non-zero component block of the local matrix; `mirror` adds its transpose at
-/// (col, row) too (symmetric Hessians compute only the upper blocks).
+/// (col, row) too (symmetric Hessians compute only the upper blocks); `symmetric`: a diagonal block
+/// of a symmetric Hessian (D_q^{rr} symmetric), of which only one triangle need be computed.
 struct MatrixBlock {
   int row;
   int col;
   bool mirror;
+  bool symmetric;
 };
 
 /// The dense products of the generated kernels (see contract_vector / contract_matrix below for
@@ -242,6 +244,7 @@ inline void plain_contract_matrix(int n, int nq, int n_slots, int R, int C, cons
       }
     }
     for (std::size_t e = 0; e < std::size_t(n) * n; ++e) block[e] = 0.0;
+    const bool upper_only = blocks[b].symmetric;
     for (int k = 0; k < nq * S; ++k) {
       const double* bk = Bs + std::size_t(k) * n;
       const double* sk = stacked + std::size_t(k) * n;
@@ -249,9 +252,12 @@ inline void plain_contract_matrix(int n, int nq, int n_slots, int R, int C, cons
         const double ba = bk[a];
         if (ba == 0.0) continue;
         double* h = block + std::size_t(a) * n;
-        for (int e = 0; e < n; ++e) h[e] += ba * sk[e];
+        for (int e = upper_only ? a : 0; e < n; ++e) h[e] += ba * sk[e];
       }
     }
+    if (upper_only)
+      for (int a = 0; a < n; ++a)
+        for (int e = 0; e < a; ++e) block[std::size_t(a) * n + e] = block[std::size_t(e) * n + a];
     for (int a = 0; a < n; ++a)
       for (int e = 0; e < n; ++e) {
         const double h = block[std::size_t(a) * n + e];

@@ -30,7 +30,14 @@ void contract_matrix(int n, int nq, int n_slots, int R, int C, const double* Bs,
       RowMap(stacked + std::size_t(q) * S * n, S, n).noalias() = Dblock * ConstRowMap(Bs + std::size_t(q) * S * n, S, n);
     }
     RowMap H(block, n, n);
-    H.noalias() = Ball.transpose() * ConstRowMap(stacked, Eigen::Index(nq) * S, n);
+    if (blocks[b].symmetric) {
+      // A diagonal block of a symmetric Hessian: one triangle of the product, then mirrored.
+      H.triangularView<Eigen::Upper>() = Ball.transpose() * ConstRowMap(stacked, Eigen::Index(nq) * S, n);
+      for (int a = 1; a < n; ++a)
+        for (int e = 0; e < a; ++e) H(a, e) = H(e, a);
+    } else {
+      H.noalias() = Ball.transpose() * ConstRowMap(stacked, Eigen::Index(nq) * S, n);
+    }
     const Eigen::Index row_stride = Eigen::Index(R) * n * C;
     StridedRowMap(local_matrix + std::size_t(r) * n * C + c, n, n, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>(row_stride, C)) += H;
     if (blocks[b].mirror)
