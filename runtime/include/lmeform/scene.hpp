@@ -172,6 +172,9 @@ struct Scene {
   std::vector<SceneConstraint> constraints;
   std::vector<SceneDirichlet> dirichlet;
   std::vector<SceneInitialField> initial;
+  /// [coefficients]: the known nodal fields the forms read (`coefficient NAME` in a form), by the
+  /// same kinds of value as [initial] (`unknown` holds the coefficient's name).
+  std::vector<SceneInitialField> coefficients;
   std::vector<SceneQdata> qdata;
   SceneSolver solver;
   SceneReference reference;

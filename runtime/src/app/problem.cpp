@@ -217,10 +217,15 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
       throw SceneError(fmt::format("{}: the outputs {}.{} and {}.{} have different unknowns: a scene's outputs share "
                                    "one set of unknown fields (names, shapes and order)",
                                    scene.source, primary->module, primary->name, k->module, k->name));
-    if (k->n_coefficients > 0)
-      throw SceneError(fmt::format("{}: {}.{} reads the coefficient field '{}': known nodal fields are not set by "
-                                   "scenes yet (a model driver sets them)",
-                                   scene.source, k->module, k->name, k->coefficients[0].name));
+    for (int i = 0; i < k->n_coefficients; ++i) {
+      const kernel::FieldInfo& c = k->coefficients[i];
+      const auto known = std::find_if(b.coefficients.begin(), b.coefficients.end(),
+                                      [&](const UnknownField& f) { return f.name == c.name; });
+      if (known == b.coefficients.end()) b.coefficients.push_back({c.name, c.components, 0});
+      else if (known->components != c.components)
+        throw SceneError(fmt::format("{}: {}.{} reads the coefficient '{}' with {} components, another output with {}",
+                                     scene.source, k->module, k->name, c.name, c.components, known->components));
+    }
     b.basis_order = std::max({b.basis_order, k->basis_order, k->coefficient_basis_order});
   }
 
@@ -337,6 +342,30 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
       handle = b.expressions->add(f.value.expression(), u.components, f.where);
     b.initial_expression.push_back(handle);
   }
+  std::vector<std::string> coefficient_names;
+  for (const auto& c : b.coefficients) coefficient_names.push_back(c.name);
+  for (const auto& f : scene.coefficients) {
+    const auto c = std::find_if(b.coefficients.begin(), b.coefficients.end(),
+                                [&](const UnknownField& x) { return x.name == f.unknown; });
+    if (c == b.coefficients.end()) {
+      const std::string guess = closest_name(f.unknown, coefficient_names);
+      std::string list;
+      for (const auto& n : coefficient_names) list += (list.empty() ? "" : ", ") + n;
+      throw SceneError(fmt::format("{}: '{}' is no coefficient field of the forms{} ({})", f.where, f.unknown,
+                                   guess.empty() ? "" : "; did you mean '" + guess + "'?",
+                                   list.empty() ? "they read none" : "they read: " + list));
+    }
+    int handle = -1;
+    if (f.kind == SceneInitialField::Kind::value && !f.value.is_number())
+      handle = b.expressions->add(f.value.expression(), c->components, f.where);
+    b.coefficient_expression.push_back(handle);
+  }
+  for (const auto& c : b.coefficients)
+    if (std::none_of(scene.coefficients.begin(), scene.coefficients.end(),
+                     [&](const SceneInitialField& f) { return f.unknown == c.name; }))
+      throw SceneError(fmt::format("{}: missing key 'coefficients.{}': the forms read the known nodal field '{}' ({} "
+                                   "component{}; give a number, an expression of x or {{file, field}})",
+                                   scene.source, c.name, c.name, c.components, c.components == 1 ? "" : "s"));
   for (const auto& d : scene.dirichlet) {
     const UnknownField& u = check_unknown(d.unknown, d.where + ": key 'unknown'");
     for (const int c : d.components)
@@ -431,21 +460,29 @@ std::vector<int> boundary_nodes(const Scene& scene, const NodeSet& nodes, const 
   return out;
 }
 
-std::vector<double> initial_state(const BoundScene& b, const NodeSet& nodes) {
-  const Scene& scene = *b.scene;
-  const auto bs = static_cast<std::size_t>(b.dofs_per_node);
+namespace {
+
+/// Values at the nodes (original order, dofs interleaved as in `layout`, `per_node` per node) of
+/// the nodal fields of a scene table ([initial], [coefficients]): numbers, expressions (handles into
+/// the scene's expressions, -1 for a number) or fields of a previous run's output on the same nodes.
+std::vector<double> nodal_values(const BoundScene& b, const std::vector<SceneInitialField>& entries,
+                                 const std::vector<int>& handles, const std::vector<UnknownField>& layout, int per_node,
+                                 const NodeSet& nodes) {
+  const auto bs = static_cast<std::size_t>(per_node);
   std::vector<double> state(nodes.size() * bs, 0.0);
   std::vector<double> value(3);
-  for (std::size_t i = 0; i < scene.initial.size(); ++i) {
-    const SceneInitialField& f = scene.initial[i];
-    const UnknownField& u = b.unknown(f.unknown);
+  for (std::size_t i = 0; i < entries.size(); ++i) {
+    const SceneInitialField& f = entries[i];
+    const auto field = std::find_if(layout.begin(), layout.end(), [&](const UnknownField& u) { return u.name == f.unknown; });
+    if (field == layout.end()) continue;
+    const UnknownField& u = *field;
     const auto off = static_cast<std::size_t>(u.offset);
     if (f.kind == SceneInitialField::Kind::file) {
       const FieldFile file = read_field_hdf5(f.file);
       const auto it = file.fields.find(f.field);
       if (it == file.fields.end()) throw SceneError(fmt::format("{}: {} has no field '{}'", f.where, f.file.string(), f.field));
       if (it->second.components != u.components)
-        throw SceneError(fmt::format("{}: field '{}' of {} has {} components, unknown '{}' has {}", f.where, f.field,
+        throw SceneError(fmt::format("{}: field '{}' of {} has {} components, '{}' has {}", f.where, f.field,
                                      f.file.string(), it->second.components, u.name, u.components));
       if (file.nodes.size() != nodes.size() || file.nodes.coords != nodes.coords)
         throw SceneError(fmt::format("{}: {} was computed on other nodes ({} nodes); a field is read back on the node set "
@@ -456,7 +493,7 @@ std::vector<double> initial_state(const BoundScene& b, const NodeSet& nodes) {
           state[a * bs + off + std::size_t(c)] = it->second.values[a * std::size_t(u.components) + std::size_t(c)];
       continue;
     }
-    const int handle = b.initial_expression[i];
+    const int handle = handles[i];
     for (std::size_t a = 0; a < nodes.size(); ++a) {
       if (handle >= 0) b.expressions->evaluate(handle, nodes.point(a), value);
       else std::fill(value.begin(), value.end(), f.value.number());
@@ -464,6 +501,12 @@ std::vector<double> initial_state(const BoundScene& b, const NodeSet& nodes) {
     }
   }
   return state;
+}
+
+}  // namespace
+
+std::vector<double> initial_state(const BoundScene& b, const NodeSet& nodes) {
+  return nodal_values(b, b.scene->initial, b.initial_expression, b.unknowns, b.dofs_per_node, nodes);
 }
 
 namespace {
@@ -582,8 +625,22 @@ ProblemResult solve_problem(MPI_Comm comm, const BoundScene& b, const ProblemInp
     scales.push_back(s != input.scales.end() ? s->second : c.scale);
   }
   std::vector<double> rho_bar;
+  std::vector<PetscVector> coefficient_vectors;  // alive as long as the assemblers reading them
   auto make = [&](const kernel::FormKernels* k) {
     auto a = std::make_unique<Assembler>(disc, *k);
+    if (k->n_coefficients > 0) {
+      // The kernel's own layout of its coefficient fields, filled from [coefficients].
+      std::vector<UnknownField> layout;
+      int per_node = 0;
+      for (int i = 0; i < k->n_coefficients; ++i) {
+        layout.push_back({k->coefficients[i].name, k->coefficients[i].components, per_node});
+        per_node += k->coefficients[i].components;
+      }
+      const std::vector<double> values = nodal_values(b, scene.coefficients, b.coefficient_expression, layout, per_node, nodes);
+      coefficient_vectors.push_back(a->create_coefficient_vector());
+      set_from_original(disc, values, per_node, coefficient_vectors.back());
+      a->set_coefficients(coefficient_vectors.back());
+    }
     for (int i = 0; i < k->n_constants; ++i) {
       const double v = constants.at(k->constants[i]);
       if (std::isnan(v))

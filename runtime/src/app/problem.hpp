@@ -57,6 +57,8 @@ struct BoundScene {
   std::shared_ptr<PointExpressions> expressions;
   std::vector<int> initial_expression;    ///< per scene.initial entry: expression handle or -1
   std::vector<int> dirichlet_expression;  ///< per scene.dirichlet entry: expression handle or -1
+  std::vector<UnknownField> coefficients;  ///< the known nodal fields the kernels read (offsets unused)
+  std::vector<int> coefficient_expression; ///< per scene.coefficients entry: expression handle or -1
   std::map<std::string, int, std::less<>> qdata_expression;  ///< qdata given by value: expression handle or -1 (a number)
   std::vector<std::string> zero_mean;     ///< unknowns fixed by ∫ u dx = 0 (scalar unknowns)
 

@@ -280,9 +280,12 @@ void read_dirichlet(const Section& root, Scene& s) {
   }
 }
 
-void read_initial(const Section& root, Scene& s) {
-  const auto t = root.optional_any_table("initial");
-  if (!t) return;
+/// A table of nodal fields by name ([initial], [coefficients]): a number, an expression, or
+/// {file, field} naming a previous run's HDF5 output.
+std::vector<SceneInitialField> read_nodal_fields(const Section& root, const char* table, const Scene& s) {
+  std::vector<SceneInitialField> out;
+  const auto t = root.optional_any_table(table);
+  if (!t) return out;
   for (const auto& [name, node_ptr] : in_file_order(t->entries())) {
     const toml::node& node = *node_ptr;
     SceneInitialField f;
@@ -299,9 +302,14 @@ void read_initial(const Section& root, Scene& s) {
     } else {
       f.value = value_of(*t, name, node);
     }
-    s.initial.push_back(std::move(f));
+    out.push_back(std::move(f));
   }
+  return out;
 }
+
+void read_initial(const Section& root, Scene& s) { s.initial = read_nodal_fields(root, "initial", s); }
+
+void read_coefficients(const Section& root, Scene& s) { s.coefficients = read_nodal_fields(root, "coefficients", s); }
 
 void read_qdata(const Section& root, Scene& s) {
   const auto t = root.optional_any_table("qdata");
@@ -413,7 +421,7 @@ Scene parse_scene(std::string_view text, std::string source_name, std::span<cons
                      ": TOML syntax error: " + std::string(e.description()));
   }
   std::vector<std::string_view> tables{"scene", "domain", "nodes", "model", "constants", "constraints", "dirichlet",
-                                       "initial", "qdata", "solver", "reference", "output"};
+                                       "initial", "coefficients", "qdata", "solver", "reference", "output"};
   tables.insert(tables.end(), extensions.begin(), extensions.end());
   // The initializer_list interface of SceneTable wants a list: check the top-level keys here.
   for (const auto& [key, node] : document->root) {
@@ -439,6 +447,7 @@ Scene parse_scene(std::string_view text, std::string source_name, std::span<cons
   read_constraints(root, s);
   read_dirichlet(root, s);
   read_initial(root, s);
+  read_coefficients(root, s);
   read_qdata(root, s);
   read_solver(root, s);
   read_reference(root, s);
