@@ -1,6 +1,6 @@
 // Scene files (docs/scenes.md): a complete scene loads with every field, each broken scene gives its
 // message (file, line, key path, reason, did-you-mean), the sections of any model ([model],
-// [constants], [constraints], [[dirichlet]], [initial], [qdata], [solver], [reference], [output]),
+// [constants], [constraints], [[dirichlet]], [initial], [coefficients], [qdata], [solver], [reference], [output]),
 // extension tables kept for their model, the demos, and the helpers (closest_name,
 // ellipsoid_signed_distance). Names that refer to forms are checked by app::bind_scene, not here;
 // the [vesicle] extension is tested in test_vesicle_scene.cpp.
@@ -691,7 +691,7 @@ TEST(SceneTables, UnknownTableWithSuggestion) {
   // Nothing close: the tables are listed.
   t = kMinimal + "[mesh]\nsize = 3\n";
   expect_error(t, {"unknown table [mesh]; the tables of a scene are [scene], [domain], [nodes], [model], [constants], "
-                   "[constraints], [dirichlet], [initial], [qdata], [solver], [reference], [output]"});
+                   "[constraints], [dirichlet], [initial], [coefficients], [qdata], [solver], [reference], [output]"});
   // The old format's [adaptivity] is no table of the reader.
   t = kMinimal + "[adaptivity]\nstages = []\n";
   expect_error(t, {"unknown table [adaptivity]"});
