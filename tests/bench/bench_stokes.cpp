@@ -6,7 +6,6 @@
 //   bench_stokes [--quick] [--out DIR]
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <filesystem>
 #include <iostream>
 #include <string>
@@ -14,6 +13,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "bench_common.hpp"
 #include "lmeform/output.hpp"
 #include "lmeform/petsc.hpp"
 #include "lmeform/scene.hpp"
@@ -84,12 +84,13 @@ void print_rates(const std::vector<Record>& ladder) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  bool quick = false;
-  std::filesystem::path out = "build/bench";
-  for (int i = 1; i < argc; ++i) {
-    if (std::strcmp(argv[i], "--quick") == 0) quick = true;
-    else if (std::strcmp(argv[i], "--out") == 0 && i + 1 < argc) out = argv[++i];
+  const bench::BenchOptions options = bench::parse_bench_options(argc, argv);
+  if (!options.unknown.empty()) {
+    std::cerr << "bench_stokes: unknown option " << options.unknown.front() << " (use --quick, --out DIR)\n";
+    return 2;
   }
+  const bool quick = options.quick;
+  const std::filesystem::path out = options.out;
   PetscSession session(&argc, &argv);
   try {
     const std::vector<int> ladder = quick ? std::vector<int>{9, 17, 33} : std::vector<int>{9, 17, 33, 65};

@@ -64,6 +64,12 @@ namespace lmeform::app {
 
 namespace {
 
+/// "; did you mean 'x'?" for the candidate closest to a misspelt name, else "".
+std::string did_you_mean(std::string_view name, const std::vector<std::string>& candidates) {
+  const std::string guess = closest_name(name, candidates);
+  return guess.empty() ? std::string() : "; did you mean '" + guess + "'?";
+}
+
 const char* kind_name(kernel::FunctionalKind k) {
   switch (k) {
     case kernel::FunctionalKind::Energy: return "energy";
@@ -109,13 +115,11 @@ const kernel::FormKernels* find_output(const BoundScene& b, const SceneName& nam
         throw SceneError(fmt::format("{}: form {} declares '{}' in dimension {} only; this scene is {}D", name.where,
                                      m->name, output, dims, dim));
       }
-  std::string list;
-  for (const auto& c : candidates) list += (list.empty() ? "'" : ", '") + c + "'";
-  const std::string guess = closest_name(output, candidates);
   throw SceneError(fmt::format("{}: no {} output '{}' in the scene's forms{}{}", name.where, kind_name(kind), output,
-                               guess.empty() ? "" : "; did you mean '" + guess + "'?",
-                               list.empty() ? fmt::format(" (they define no {} output)", kind_name(kind))
-                                            : fmt::format(" ({} outputs: {})", kind_name(kind), list)));
+                               did_you_mean(output, candidates),
+                               candidates.empty() ? fmt::format(" (they define no {} output)", kind_name(kind))
+                                                  : fmt::format(" ({} outputs: '{}')", kind_name(kind),
+                                                                fmt::join(candidates, "', '"))));
 }
 
 std::vector<UnknownField> unknowns_of(const kernel::FormKernels& k) {
@@ -235,17 +239,12 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
     for (int i = 0; i < k->n_constants; ++i)
       if (std::find(form_constants.begin(), form_constants.end(), k->constants[i]) == form_constants.end())
         form_constants.emplace_back(k->constants[i]);
-  auto list_constants = [&]() {
-    std::string list;
-    for (const auto& c : form_constants) list += (list.empty() ? "" : ", ") + c;
-    return list.empty() ? std::string("they have none") : list;
-  };
+  const std::string constant_list =
+      form_constants.empty() ? std::string("they have none") : fmt::format("{}", fmt::join(form_constants, ", "));
   for (const auto& [name, value] : scene.constants) {
     if (std::find(form_constants.begin(), form_constants.end(), name) != form_constants.end()) continue;
-    const std::string guess = closest_name(name, form_constants);
     throw SceneError(fmt::format("{}: no form of the problem has a constant '{}'{} (the forms' constants: {})",
-                                 scene.where_constant(name), name, guess.empty() ? "" : "; did you mean '" + guess + "'?",
-                                 list_constants()));
+                                 scene.where_constant(name), name, did_you_mean(name, form_constants), constant_list));
   }
   for (const auto* k : b.kernels()) {
     for (int i = 0; i < k->n_constants; ++i) {
@@ -265,7 +264,7 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
       } else {
         throw SceneError(fmt::format("{}: missing key 'constants.{}': form {} ({}) needs the constant '{}' and gives it "
                                      "no default (the forms' constants: {})",
-                                     scene.source, name, k->module, k->source, name, list_constants()));
+                                     scene.source, name, k->module, k->source, name, constant_list));
       }
     }
   }
@@ -303,12 +302,10 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
       if (std::find(needed.begin(), needed.end(), k->qdata[i].name) == needed.end()) needed.emplace_back(k->qdata[i].name);
   for (const auto& q : scene.qdata) {
     if (std::find(needed.begin(), needed.end(), q.name) != needed.end()) continue;
-    const std::string guess = closest_name(q.name, needed);
-    std::string list;
-    for (const auto& n : needed) list += (list.empty() ? "" : ", ") + n;
     throw SceneError(fmt::format("{}: no form of the problem reads quadrature data '{}'{} ({})", q.where, q.name,
-                                 guess.empty() ? "" : "; did you mean '" + guess + "'?",
-                                 list.empty() ? "they read none" : "they read: " + list));
+                                 did_you_mean(q.name, needed),
+                                 needed.empty() ? std::string("they read none")
+                                                : fmt::format("they read: {}", fmt::join(needed, ", "))));
   }
   for (const auto& n : needed) {
     const bool given = std::any_of(scene.qdata.begin(), scene.qdata.end(), [&](const SceneQdata& q) { return q.name == n; });
@@ -325,11 +322,8 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
   auto check_unknown = [&](const std::string& name, const std::string& where) -> const UnknownField& {
     for (const auto& u : b.unknowns)
       if (u.name == name) return u;
-    const std::string guess = closest_name(name, unknown_names);
-    std::string list;
-    for (const auto& n : unknown_names) list += (list.empty() ? "" : ", ") + n;
     throw SceneError(fmt::format("{}: '{}' is no unknown of the problem{} (unknowns: {})", where, name,
-                                 guess.empty() ? "" : "; did you mean '" + guess + "'?", list));
+                                 did_you_mean(name, unknown_names), fmt::join(unknown_names, ", ")));
   };
   std::map<std::string, double, std::less<>> expression_constants = b.constants;
   for (auto& [name, value] : expression_constants)
@@ -348,12 +342,10 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
     const auto c = std::find_if(b.coefficients.begin(), b.coefficients.end(),
                                 [&](const UnknownField& x) { return x.name == f.unknown; });
     if (c == b.coefficients.end()) {
-      const std::string guess = closest_name(f.unknown, coefficient_names);
-      std::string list;
-      for (const auto& n : coefficient_names) list += (list.empty() ? "" : ", ") + n;
       throw SceneError(fmt::format("{}: '{}' is no coefficient field of the forms{} ({})", f.where, f.unknown,
-                                   guess.empty() ? "" : "; did you mean '" + guess + "'?",
-                                   list.empty() ? "they read none" : "they read: " + list));
+                                   did_you_mean(f.unknown, coefficient_names),
+                                   coefficient_names.empty() ? std::string("they read none")
+                                                             : fmt::format("they read: {}", fmt::join(coefficient_names, ", "))));
     }
     int handle = -1;
     if (f.kind == SceneInitialField::Kind::value && !f.value.is_number())
