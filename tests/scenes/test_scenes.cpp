@@ -445,14 +445,21 @@ TEST(SceneConstraints, NumberOrTableInFileOrder) {
 
 TEST(SceneConstraints, BrokenConstraints) {
   std::string t = kMinimal + "[constraints]\narea = \"A0\"\n";
-  expect_error(t, {at_line(t, "area ="), "key 'constraints.area' must be a number (the target) or a table { target = ..., "
-                                         "scale = ... }, found a string"});
+  expect_error(t, {at_line(t, "area ="), "key 'constraints.area' must be a number (the target), \"initial\" (the value at "
+                                         "the start) or a table { target = ..., scale = ... }, got 'A0'"});
   t = kMinimal + "[constraints]\narea = { taget = 1.0 }\n";
   expect_error(t, {at_line(t, "area ="), "unknown key 'constraints.area.taget'; did you mean 'target'?"});
   t = kMinimal + "[constraints]\narea = { target = 1.0, scale = 0 }\n";
   expect_error(t, {at_line(t, "area ="), "key 'constraints.area.scale' must be positive, got 0"});
   t = kMinimal + "[constraints]\narea = { target = \"x\" }\n";
-  expect_error(t, {"key 'constraints.area.target' must be a number, found a string"});
+  expect_error(t, {"key 'constraints.area.target' must be a number or \"initial\" (the value at the start), got 'x'"});
+  // "initial": the value at the start state, in both spellings.
+  const Scene u = parse(kMinimal + "[constraints]\narea = \"initial\"\nvolume = { target = \"initial\", scale = 2.0 }\n");
+  ASSERT_EQ(u.constraints.size(), 2u);
+  EXPECT_TRUE(u.constraints[0].initial);
+  EXPECT_FALSE(u.constraints[0].target);
+  EXPECT_TRUE(u.constraints[1].initial);
+  EXPECT_EQ(u.constraints[1].scale, 2.0);
 }
 
 // ---------------------------------------------------------------------------------------------

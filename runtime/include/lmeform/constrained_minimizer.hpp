@@ -38,13 +38,27 @@ struct ConstrainedMinimizerOptions {
   double constraint_tolerance = 1e-10;  ///< stage 2: relative constraint residuals
   int max_newton_iterations = 25;
   bool skip_augmented_stage = false;
+  /// KKT Newton: false assembles and factors the Hessian once per minimize() and reuses it (a
+  /// chord method: cheaper iterations, linear convergence), refreshing it only when a step fails.
+  bool refresh_hessian_every_iteration = true;
   std::ostream* log = nullptr;          ///< progress lines (rank 0); nullptr: silent
+};
+
+/// An added quadratic (s/2) (u − c)ᵀ K (u − c) with a fixed symmetric positive semi-definite K,
+/// centre c and weight s: with s = 1/Δt, the objective of a variational time step
+/// ½ (y − yⁿ)ᵀ K(yⁿ) (y − yⁿ) + Δt E(y), divided by Δt so that gradients and multipliers keep the
+/// units of the energy. K must come from an Assembler of the energy's discretization and block
+/// size (the same nonzero pattern). Both objects stay owned by the caller.
+struct ProximalTerm {
+  Mat K = nullptr;
+  Vec center = nullptr;
+  double weight = 1;
 };
 
 struct ConstrainedIterate {
   std::string stage;        ///< "AL" or "KKT"
   int iteration = 0;
-  double energy = 0;
+  double energy = 0;            ///< the objective (with a proximal term: (s/2) dᵀKd + E)
   double gradient_norm = 0;     ///< of L_A (AL) or of the KKT residual (KKT)
   double constraint_norm = 0;   ///< max relative constraint residual
   double seconds = 0;           ///< since the start
@@ -53,13 +67,18 @@ struct ConstrainedIterate {
 struct ConstrainedResult {
   bool converged = false;
   std::string message;                  ///< why it stopped
-  double energy = 0;
+  double energy = 0;                    ///< Σ energy terms at the result (without the proximal term)
+  double objective = 0;                 ///< what was minimized (= energy without a proximal term)
   std::vector<double> multipliers;      ///< ν_i (e.g. tension for area, pressure for volume)
   std::vector<double> constraint_values;
   std::vector<double> relative_residuals;
   int augmented_iterations = 0;         ///< Newton steps in stage 1
   int outer_iterations = 0;             ///< multiplier updates
   int newton_iterations = 0;            ///< KKT steps
+  int gradient_evaluations = 0;         ///< value + gradient passes (line-search trials included)
+  int hessian_evaluations = 0;          ///< Hessian assemblies (each followed by one factorization)
+  double seconds_hessian = 0;           ///< of the total: Hessian assembly
+  double seconds_factor = 0;            ///< of the total: factorizations and solves
   std::vector<ConstrainedIterate> history;
   double seconds_augmented = 0, seconds_newton = 0;
 };
@@ -75,6 +94,11 @@ class ConstrainedMinimizer {
 
   /// Dofs held at their current values in u (owned, global, renumbered).
   void set_fixed_dofs(std::vector<PetscInt> dofs) { fixed_ = std::move(dofs); }
+  /// Changes the target c_i of constraint i (a prescribed history such as a deflation).
+  void set_target(std::size_t i, double target) { constraints_.at(i).target = target; }
+  [[nodiscard]] const std::vector<ScalarConstraint>& constraints() const noexcept { return constraints_; }
+  /// Adds (s/2) (u − c)ᵀ K (u − c) to the objective (see ProximalTerm); {} removes it.
+  void set_proximal_term(ProximalTerm term) { proximal_ = term; }
 
   /// Minimizes from the state in u (which also holds the Dirichlet values); u is overwritten.
   /// `multipliers` (optional) are the starting ν, in the scaled units ν_i·scale_i. Never throws for non-convergence: the result
@@ -95,6 +119,9 @@ class ConstrainedMinimizer {
   std::vector<ScalarConstraint> constraints_;
   ConstrainedMinimizerOptions options_;
   std::vector<PetscInt> fixed_;
+  ProximalTerm proximal_;
+  PetscVector proximal_difference_, proximal_product_;
+  ConstrainedResult* counters_ = nullptr;  // the result being filled (evaluation counts and times)
   PetscMatrix hessian_;
   PetscLinearSolver ksp_;
   double start_time_ = 0;

@@ -70,6 +70,19 @@ struct FieldFile {
 /// naming the path and what is missing or malformed (e.g. "missing dataset /nodes").
 [[nodiscard]] FieldFile read_field_hdf5(const std::filesystem::path& path);
 
+/// One step of a time series: a file written by write_field_hdf5 and its time.
+struct TimeSeriesStep {
+  double time = 0;
+  std::filesystem::path h5_file;  ///< relative to the folder of the collection file
+  int dim = 2;                    ///< 2 or 3
+  std::size_t nodes = 0, cells = 0;
+  std::vector<std::pair<std::string, int>> fields;  ///< (name, components) as written
+};
+
+/// Writes (atomically) an XDMF 3 temporal collection over the steps' HDF5 files: ParaView opens
+/// it as one data set with a time slider. The steps' own geometry is used, so moving nodes move.
+void write_xdmf_time_series(const std::filesystem::path& path, std::span<const TimeSeriesStep> steps);
+
 /// Writes a small text file (JSON, CSV, a table) atomically: "<path>.tmp", flushed and fsynced,
 /// then renamed onto `path`. On failure the temporary is removed and std::runtime_error names the
 /// path and the OS error; an existing `path` is left as it was.

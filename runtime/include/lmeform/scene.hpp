@@ -96,6 +96,7 @@ struct SceneConstraint {
   std::string where;
   std::optional<double> target;        ///< unset: the form's target constant, as given in [constants]
   std::optional<double> scale;         ///< |C − c| / scale is the relative residual; unset: |target| or 1
+  bool initial = false;                ///< "initial": the target is the constraint's value at the start state
 };
 
 /// [[dirichlet]]: prescribed nodal values of chosen components of an unknown on parts of the boundary.
@@ -124,9 +125,13 @@ struct SceneQdata {
   std::string name;
   /// "support_size": rho-bar, the nodal spacing of the point's LME neighbours weighted by their
   /// basis values; "zero": zeros (e.g. a reference field to be set by a model); "value": `value`
-  /// (a number, or an expression of x and the constants) at every quadrature point.
+  /// (a number, or an expression of x and the constants) at every quadrature point; "field": the
+  /// value, gradient or Hessian of a scalar nodal field of [coefficients] interpolated with the
+  /// LME basis at every quadrature point (a Lagrangian form's reference field φ0, ∇φ0, ∇∇φ0).
   std::string provider;
   SceneValue value;                    ///< provider "value"
+  std::string field;                   ///< provider "field": the [coefficients] entry
+  int derivative = 0;                  ///< provider "field": 0 value, 1 gradient, 2 Hessian
   std::string where;
 };
 

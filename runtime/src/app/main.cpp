@@ -31,6 +31,7 @@
 #include "lmeform/output.hpp"
 #include "lmeform/petsc.hpp"
 #include "lmeform/scene.hpp"
+#include "dynamics.hpp"
 #include "run_scene.hpp"
 
 namespace {
@@ -71,7 +72,7 @@ std::pair<std::string, double> parse_constant_setting(const std::string& text) {
 }
 
 int run(const std::string& scene_path, const std::string& json_path, const std::string& output_override,
-        const std::vector<std::string>& settings) {
+        const std::vector<std::string>& settings, bool restart) {
   const int rank = PetscSession::rank();
   std::ostream* log = rank == 0 ? &std::cout : nullptr;
   const auto t_start = std::chrono::steady_clock::now();
@@ -100,6 +101,8 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
   MPI_Bcast(&ok, 1, MPI_INT, 0, PETSC_COMM_WORLD);
   if (ok == 0) throw std::runtime_error(rank == 0 ? why : "an output cannot be written");
 
+  if (scene.has_extension(app::kDynamicsExtension)) return app::run_dynamics_command(PETSC_COMM_WORLD, scene, out_dir, json_path, restart);
+  if (restart) throw SceneError(fmt::format("{}: --restart resumes a run with [dynamics]; this scene has none", scene.source));
   const app::SceneRun run = app::run_scene(PETSC_COMM_WORLD, scene, log);
   const auto& stages = run.stages;
   const app::StageRecord& last = stages.back();
@@ -258,6 +261,8 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--json", json_path, "write the run's figures (energy, errors, iterations, stages, wall_s)");
   run_cmd->add_option("--output", output_dir, "output directory (default: the scene's [output] directory)");
   run_cmd->add_option("--set", settings, "set a constant, NAME=VALUE (repeatable; wins over the scene's [constants])");
+  bool restart = false;
+  run_cmd->add_flag("--restart", restart, "resume a run with [dynamics] from its last checkpoint in the output directory");
   run_cmd->allow_extras();  // PETSc options (-ksp_type gmres, -snes_monitor, ...) pass through
 #ifdef LMEFORM_HAVE_CHECK
   CheckCommandOptions check_options;
@@ -276,7 +281,7 @@ int main(int argc, char** argv) {
     for (const auto& extra : run_cmd->remaining())
       if (extra.starts_with("--"))
         throw SceneError(fmt::format("unknown option '{}' of 'lmeform run' (PETSc options take one dash: -ksp_type ...)", extra));
-    return run(scene_path, json_path, output_dir, settings);
+    return run(scene_path, json_path, output_dir, settings, restart);
   } catch (const SceneError& e) {
     std::cerr << "lmeform: scene error: " << e.what() << "\n";
     return 1;

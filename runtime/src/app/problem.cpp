@@ -9,6 +9,7 @@
 #include <limits>
 #include <memory>
 #include <numeric>
+#include <optional>
 #include <ostream>
 #include <set>
 #include <sstream>
@@ -62,13 +63,12 @@ PetscErrorCode snes_jacobian(SNES, Vec u, Mat J, Mat, void* ctx) {
 
 namespace lmeform::app {
 
-namespace {
-
-/// "; did you mean 'x'?" for the candidate closest to a misspelt name, else "".
 std::string did_you_mean(std::string_view name, const std::vector<std::string>& candidates) {
   const std::string guess = closest_name(name, candidates);
   return guess.empty() ? std::string() : "; did you mean '" + guess + "'?";
 }
+
+namespace {
 
 const char* kind_name(kernel::FunctionalKind k) {
   switch (k) {
@@ -149,11 +149,12 @@ std::vector<const kernel::FormKernels*> BoundScene::kernels() const {
   for (const auto& c : constraints) out.push_back(c.kernel);
   for (const auto* k : {residual, bilinear, linear})
     if (k != nullptr) out.push_back(k);
+  out.insert(out.end(), auxiliary.begin(), auxiliary.end());
   return out;
 }
 
 BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, const std::vector<std::string>& provided_constants,
-                      const std::vector<std::string>& provided_qdata) {
+                      const std::vector<std::string>& provided_qdata, const std::vector<SceneName>& auxiliary_energies) {
   BoundScene b;
   b.scene = &scene;
   b.kind = scene.model.kind;
@@ -195,6 +196,8 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
     throw SceneError(fmt::format("{}: [constraints] apply to energy minimization; this scene solves a {} problem",
                                  scene.constraints.front().where, b.kind == ProblemKind::residual ? "residual" : "linear"));
 
+  for (const auto& a : auxiliary_energies) b.auxiliary.push_back(find_output(b, a, kernel::FunctionalKind::Energy));
+
   // Constraints, by the form's constraint output names.
   for (const auto& c : scene.constraints) {
     BoundConstraint bc;
@@ -211,9 +214,13 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
   b.unknowns = unknowns_of(*primary);
   b.dofs_per_node = primary->dofs_per_node;
   for (const auto* k : b.kernels()) {
+    const bool auxiliary = std::find(b.auxiliary.begin(), b.auxiliary.end(), k) != b.auxiliary.end();
+    if (auxiliary && k->dofs_per_node != b.dofs_per_node)
+      throw SceneError(fmt::format("{}: {}.{} has {} dofs per node, the problem {}", scene.source, k->module, k->name,
+                                   k->dofs_per_node, b.dofs_per_node));
     const auto u = unknowns_of(*k);
-    bool same = u.size() == b.unknowns.size();
-    for (std::size_t i = 0; same && i < u.size(); ++i)
+    bool same = auxiliary || u.size() == b.unknowns.size();
+    for (std::size_t i = 0; same && !auxiliary && i < u.size(); ++i)
       same = u[i].components == b.unknowns[i].components &&
              (k->kind == kernel::FunctionalKind::Linear || primary->kind == kernel::FunctionalKind::Bilinear ||
               u[i].name == b.unknowns[i].name);
@@ -223,6 +230,8 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
                                    scene.source, primary->module, primary->name, k->module, k->name));
     for (int i = 0; i < k->n_coefficients; ++i) {
       const kernel::FieldInfo& c = k->coefficients[i];
+      if (auxiliary && std::any_of(b.unknowns.begin(), b.unknowns.end(), [&](const UnknownField& f) { return f.name == c.name; }))
+        continue;  // the unknown's current value, set by the model
       const auto known = std::find_if(b.coefficients.begin(), b.coefficients.end(),
                                       [&](const UnknownField& f) { return f.name == c.name; });
       if (known == b.coefficients.end()) b.coefficients.push_back({c.name, c.components, 0});
@@ -256,6 +265,7 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
       }
       const bool is_target = std::any_of(b.constraints.begin(), b.constraints.end(),
                                          [&](const BoundConstraint& c) { return c.target_constant == name; });
+      // (a target of a constraint given "initial" is set from the start state in build_problem_space)
       const bool provided = std::find(provided_constants.begin(), provided_constants.end(), name) != provided_constants.end();
       if (k->constant_defaults != nullptr && !std::isnan(k->constant_defaults[i])) {
         b.constants[name] = k->constant_defaults[i];
@@ -281,6 +291,9 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
                                        sc.where, *sc.target, bc.target_constant, scene.constants.at(bc.target_constant)));
         b.constants[bc.target_constant] = *sc.target;
       }
+    } else if (sc.initial) {
+      bc.initial = true;
+      bc.target = std::numeric_limits<double>::quiet_NaN();
     } else if (bc.target_constant.empty()) {
       bc.target = bc.kernel->target_value;
     } else {
@@ -292,7 +305,7 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
                                      "constraints.{} = TARGET or constants.{}",
                                      sc.where, bc.name, bc.target_constant, bc.name, bc.target_constant));
     }
-    bc.scale = sc.scale.value_or(std::abs(bc.target) > 0 ? std::abs(bc.target) : 1.0);
+    bc.scale = sc.scale.value_or(std::abs(bc.target) > 0 ? std::abs(bc.target) : 1.0);  // "initial": set with the target
   }
 
   // Quadrature data: every datum the kernels read is supplied by the scene or by the model.
@@ -335,6 +348,24 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
     if (f.kind == SceneInitialField::Kind::value && !f.value.is_number())
       handle = b.expressions->add(f.value.expression(), u.components, f.where);
     b.initial_expression.push_back(handle);
+  }
+  // Scalar nodal fields that quadrature data interpolate are coefficients too.
+  for (const auto& q : scene.qdata) {
+    if (q.provider != "field") continue;
+    int size = 0;
+    for (const auto* k : b.kernels())
+      for (int i = 0; i < k->n_qdata; ++i)
+        if (k->qdata[i].name == q.name) size = k->qdata[i].size;
+    const int expected = q.derivative == 0 ? 1 : q.derivative == 1 ? dim : dim * dim;
+    if (size != expected)
+      throw SceneError(fmt::format("{}: '{}' has {} values per point; the {} of a scalar field has {}", q.where, q.name, size,
+                                   q.derivative == 0 ? "value" : q.derivative == 1 ? "gradient" : "Hessian", expected));
+    const auto known = std::find_if(b.coefficients.begin(), b.coefficients.end(), [&](const UnknownField& f) { return f.name == q.field; });
+    if (known == b.coefficients.end()) b.coefficients.push_back({q.field, 1, 0});
+    else if (known->components != 1)
+      throw SceneError(fmt::format("{}: key 'field': '{}' has {} components; quadrature data interpolate scalar fields", q.where,
+                                   q.field, known->components));
+    b.basis_order = std::max(b.basis_order, q.derivative);
   }
   std::vector<std::string> coefficient_names;
   for (const auto& c : b.coefficients) coefficient_names.push_back(c.name);
@@ -497,6 +528,13 @@ std::vector<double> nodal_values(const BoundScene& b, const std::vector<SceneIni
 
 }  // namespace
 
+std::vector<double> coefficient_values(const BoundScene& b, const std::string& name, int components, const NodeSet& nodes) {
+  if (std::none_of(b.scene->coefficients.begin(), b.scene->coefficients.end(),
+                   [&](const SceneInitialField& f) { return f.unknown == name; }))
+    throw SceneError(fmt::format("{}: [coefficients] gives no field '{}'", b.scene->source, name));
+  return nodal_values(b, b.scene->coefficients, b.coefficient_expression, {{name, components, 0}}, components, nodes);
+}
+
 std::vector<double> initial_state(const BoundScene& b, const NodeSet& nodes) {
   return nodal_values(b, b.scene->initial, b.initial_expression, b.unknowns, b.dofs_per_node, nodes);
 }
@@ -581,14 +619,56 @@ void configure_direct_solver(KSP ksp) {
   LMEFORM_PETSC_CHECK(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
 }
 
+
+/// φ, ∇φ or ∇∇φ of a scalar nodal field (original node order) at the quadrature points of this
+/// rank's elements, jet-size values each (others 0): the reference field of a Lagrangian form.
+/// `field_basis` interpolates (its node b is original node `original_of[b]`); with a null basis the
+/// discretization's own.
+std::vector<double> interpolated_field_qdata(const Discretization& disc, std::span<const double> original_values, int derivative,
+                                             const LmeBasis* field_basis) {
+  const auto& quad = disc.quadrature();
+  const auto& lists = disc.point_lists();
+  const int dim = disc.dim();
+  const std::size_t size = derivative == 0 ? 1 : derivative == 1 ? std::size_t(dim) : std::size_t(dim * dim);
+  const std::size_t first = derivative == 0 ? 0 : derivative == 1 ? 1 : 1 + std::size_t(dim);
+  const auto original = disc.original_index();
+  std::vector<double> out(quad.size() * size, 0.0);
+  std::vector<int> own_list;
+  for (int e = 0; e < disc.n_elements(); ++e) {
+    for (int q = disc.element_first_point(e); q < disc.element_first_point(e) + disc.element_point_count(e); ++q) {
+      const auto x = quad.point(std::size_t(q));
+      std::span<const int> list = lists[std::size_t(q)];
+      if (field_basis != nullptr) {
+        own_list = field_basis->neighbours(x);
+        list = own_list;
+      }
+      const auto jet = (field_basis != nullptr ? *field_basis : disc.basis()).evaluate(x, list, derivative);
+      for (std::size_t m = 0; m < list.size(); ++m) {
+        const auto node = field_basis != nullptr ? std::size_t(list[m]) : std::size_t(original[std::size_t(list[m])]);
+        const double phi = original_values[node];
+        if (derivative < 2) {
+          for (std::size_t c = 0; c < size; ++c) out[std::size_t(q) * size + c] += jet[(first + c) * list.size() + m] * phi;
+        } else {
+          for (int i = 0; i < dim; ++i)
+            for (int j = i; j < dim; ++j) {
+              const auto row = static_cast<std::size_t>(kernel::hessian_slot(i, j, dim));
+              const double v = jet[row * list.size() + m] * phi;
+              out[std::size_t(q) * size + std::size_t(i * dim + j)] += v;
+              if (i != j) out[std::size_t(q) * size + std::size_t(j * dim + i)] += v;
+            }
+        }
+      }
+    }
+  }
+  return out;
+}
+
 }  // namespace
 
-ProblemResult solve_problem(MPI_Comm comm, const BoundScene& b, const ProblemInput& input) {
+ProblemSpace build_problem_space(MPI_Comm comm, const BoundScene& b, const ProblemInput& input) {
   const Scene& scene = *b.scene;
-  const auto t0 = std::chrono::steady_clock::now();
-  ProblemResult result;
-  result.nodes = input.nodes;
-  const NodeSet& nodes = result.nodes;
+  ProblemSpace space;
+  const NodeSet& nodes = input.nodes;
   const int bs = b.dofs_per_node;
 
   DiscretizationOptions options;
@@ -596,15 +676,12 @@ ProblemResult solve_problem(MPI_Comm comm, const BoundScene& b, const ProblemInp
   options.lme = input.lme;
   options.quadrature_points = scene.nodes.quadrature_points;
   options.basis_order = std::max(b.basis_order, 1);  // |∇u| at the nodes and H1 errors need gradients
-  const Discretization disc(comm, nodes, options);
-  {
-    const auto h = disc.basis().spacing();
-    result.h_min = *std::min_element(h.begin(), h.end());
-    result.h_mean = std::accumulate(h.begin(), h.end(), 0.0) / static_cast<double>(h.size());
-  }
+  space.disc = std::make_unique<Discretization>(comm, nodes, options);
+  const Discretization& disc = *space.disc;
 
   // Constants: the bound values, the input's overrides, the constraint targets.
-  std::map<std::string, double, std::less<>> constants = b.constants;
+  std::map<std::string, double, std::less<>>& constants = space.constants;
+  constants = b.constants;
   for (const auto& [name, value] : input.constants) constants[name] = value;
   std::vector<double> targets, scales;
   for (const auto& c : b.constraints) {
@@ -617,7 +694,11 @@ ProblemResult solve_problem(MPI_Comm comm, const BoundScene& b, const ProblemInp
     scales.push_back(s != input.scales.end() ? s->second : c.scale);
   }
   std::vector<double> rho_bar;
-  std::vector<PetscVector> coefficient_vectors;  // alive as long as the assemblers reading them
+  std::map<std::pair<std::string, int>, std::vector<double>> interpolated;  // (field, derivative) -> qdata
+  // Scalar fields of an axisymmetric scene are even in r: interpolated with the mirrored basis even
+  // when the unknowns' basis is not (a deformation's y_r is odd, so its basis has the axis as hull).
+  std::optional<LmeBasis> field_basis;
+  const bool mirror_fields = scene.axisymmetric() && input.lme.mirror_axis < 0;
   auto make = [&](const kernel::FormKernels* k) {
     auto a = std::make_unique<Assembler>(disc, *k);
     if (k->n_coefficients > 0) {
@@ -629,12 +710,15 @@ ProblemResult solve_problem(MPI_Comm comm, const BoundScene& b, const ProblemInp
         per_node += k->coefficients[i].components;
       }
       const std::vector<double> values = nodal_values(b, scene.coefficients, b.coefficient_expression, layout, per_node, nodes);
-      coefficient_vectors.push_back(a->create_coefficient_vector());
-      set_from_original(disc, values, per_node, coefficient_vectors.back());
-      a->set_coefficients(coefficient_vectors.back());
+      space.coefficient_vectors.push_back(a->create_coefficient_vector());
+      set_from_original(disc, values, per_node, space.coefficient_vectors.back());
+      a->set_coefficients(space.coefficient_vectors.back());
     }
     for (int i = 0; i < k->n_constants; ++i) {
-      const double v = constants.at(k->constants[i]);
+      const bool initial_target = std::any_of(b.constraints.begin(), b.constraints.end(), [&](const BoundConstraint& c) {
+        return c.initial && c.target_constant == k->constants[i];
+      });
+      const double v = initial_target ? 0.0 : constants.at(k->constants[i]);  // an initial target: set below
       if (std::isnan(v))
         throw SceneError(fmt::format("{}: the constant '{}' of {}.{} has no value", scene.source, k->constants[i], k->module, k->name));
       a->set_constant(k->constants[i], v);
@@ -645,24 +729,41 @@ ProblemResult solve_problem(MPI_Comm comm, const BoundScene& b, const ProblemInp
       for (int i = 0; i < k->n_qdata; ++i) {
         const auto provider = std::find_if(scene.qdata.begin(), scene.qdata.end(),
                                            [&](const SceneQdata& q) { return q.name == k->qdata[i].name; });
+        const auto per_point = std::size_t(k->qdata_per_point);
+        const int size = k->qdata[i].size;
         if (provider != scene.qdata.end() && provider->provider == "value") {
-          const int size = k->qdata[i].size;
           const int handle = b.qdata_expression.at(provider->name);
           std::vector<double> v(static_cast<std::size_t>(size), handle < 0 ? provider->value.number() : 0.0);
           for (std::size_t q = 0; q < disc.quadrature().size(); ++q) {
             if (handle >= 0) b.expressions->evaluate(handle, disc.quadrature().point(q), v);
-            for (int c = 0; c < size; ++c)
-              data[q * std::size_t(k->qdata_per_point) + std::size_t(offset + c)] = v[std::size_t(c)];
+            for (int c = 0; c < size; ++c) data[q * per_point + std::size_t(offset + c)] = v[std::size_t(c)];
           }
         }
         if (provider != scene.qdata.end() && provider->provider == "support_size") {
-          if (k->qdata[i].size != 1)
+          if (size != 1)
             throw SceneError(fmt::format("{}: \"support_size\" is a scalar; '{}' has {} values per point", provider->where,
-                                         provider->name, k->qdata[i].size));
+                                         provider->name, size));
           if (rho_bar.empty()) rho_bar = support_size_qdata(disc);
-          for (std::size_t q = 0; q < rho_bar.size(); ++q) data[q * std::size_t(k->qdata_per_point) + std::size_t(offset)] = rho_bar[q];
+          for (std::size_t q = 0; q < rho_bar.size(); ++q) data[q * per_point + std::size_t(offset)] = rho_bar[q];
         }
-        offset += k->qdata[i].size;
+        if (provider != scene.qdata.end() && provider->provider == "field") {
+          auto& values = interpolated[{provider->field, provider->derivative}];
+          if (values.empty()) {
+            const std::vector<double> field =
+                nodal_values(b, scene.coefficients, b.coefficient_expression, {{provider->field, 1, 0}}, 1, nodes);
+            if (mirror_fields && !field_basis) {
+              LmeOptions lme = input.lme;
+              lme.mirror_axis = 0;
+              lme.mirror_position = 0.0;
+              const std::vector<double> gamma{scene.nodes.gamma};
+              field_basis.emplace(nodes, gamma, lme);
+            }
+            values = interpolated_field_qdata(disc, field, provider->derivative, field_basis ? &*field_basis : nullptr);
+          }
+          for (std::size_t q = 0; q < disc.quadrature().size(); ++q)
+            for (int c = 0; c < size; ++c) data[q * per_point + std::size_t(offset + c)] = values[q * std::size_t(size) + std::size_t(c)];
+        }
+        offset += size;
       }
       a->set_qdata(data);
     }
@@ -670,12 +771,12 @@ ProblemResult solve_problem(MPI_Comm comm, const BoundScene& b, const ProblemInp
   };
 
   // The state: the given start, or the scene's [initial]; Dirichlet values imposed on it.
-  std::vector<double> state = input.initial.empty() ? initial_state(b, nodes) : input.initial;
+  std::vector<double>& state = space.state;
+  state = input.initial.empty() ? initial_state(b, nodes) : input.initial;
   if (state.size() != nodes.size() * std::size_t(bs))
     throw std::invalid_argument(fmt::format("solve_problem: the initial state has {} values for {} nodes x {} dofs",
                                             state.size(), nodes.size(), bs));
-  std::vector<std::pair<int, int>> fixed_pairs;
-  std::vector<char> first_scalar_fixed(nodes.size(), 0);
+  space.first_scalar_fixed.assign(nodes.size(), 0);
   std::vector<double> value(3);
   for (std::size_t i = 0; i < scene.dirichlet.size(); ++i) {
     const SceneDirichlet& d = scene.dirichlet[i];
@@ -694,39 +795,81 @@ ProblemResult solve_problem(MPI_Comm comm, const BoundScene& b, const ProblemInp
       else std::fill(value.begin(), value.end(), d.value.number());
       for (const int c : comps) {
         state[std::size_t(n) * std::size_t(bs) + std::size_t(u.offset + c)] = value[u.components == 1 ? 0 : std::size_t(c)];
-        fixed_pairs.emplace_back(n, u.offset + c);
+        space.fixed_pairs.emplace_back(n, u.offset + c);
       }
-      if (u.offset == 0 && u.components == 1) first_scalar_fixed[std::size_t(n)] = 1;
+      if (u.offset == 0 && u.components == 1) space.first_scalar_fixed[std::size_t(n)] = 1;
     }
   }
-  const std::vector<PetscInt> fixed = owned_dofs(disc, fixed_pairs, bs);
+  space.fixed = owned_dofs(disc, space.fixed_pairs, bs);
 
-  const ScopedPetscOptions petsc_options(scene.solver.petsc_options);
-  std::vector<std::unique_ptr<Assembler>> assemblers;
-  std::vector<Assembler*> energy_terms;
-  std::vector<ScalarConstraint> constraints;
   for (const auto* k : b.energy) {
-    assemblers.push_back(make(k));
-    energy_terms.push_back(assemblers.back().get());
+    space.assemblers.push_back(make(k));
+    space.energy_terms.push_back(space.assemblers.back().get());
   }
   for (std::size_t i = 0; i < b.constraints.size(); ++i) {
-    assemblers.push_back(make(b.constraints[i].kernel));
-    constraints.push_back({b.constraints[i].name, assemblers.back().get(), targets[i], scales[i]});
-    result.constraint_names.push_back(b.constraints[i].name);
+    space.assemblers.push_back(make(b.constraints[i].kernel));
+    space.constraints.push_back({b.constraints[i].name, space.assemblers.back().get(), targets[i], scales[i]});
   }
-  Assembler* primary = nullptr;
-  if (b.kind == ProblemKind::minimization) primary = energy_terms.front();
+  if (b.kind == ProblemKind::minimization) space.primary = space.energy_terms.front();
   if (b.residual != nullptr) {
-    assemblers.push_back(make(b.residual));
-    primary = assemblers.back().get();
+    space.assemblers.push_back(make(b.residual));
+    space.primary = space.assemblers.back().get();
   }
-  Assembler* linear = nullptr;
   if (b.bilinear != nullptr) {
-    assemblers.push_back(make(b.bilinear));
-    primary = assemblers.back().get();
-    assemblers.push_back(make(b.linear));
-    linear = assemblers.back().get();
+    space.assemblers.push_back(make(b.bilinear));
+    space.primary = space.assemblers.back().get();
+    space.assemblers.push_back(make(b.linear));
+    space.linear = space.assemblers.back().get();
   }
+  for (const auto* k : b.auxiliary) {
+    space.assemblers.push_back(make(k));
+    space.auxiliary.push_back(space.assemblers.back().get());
+  }
+  // Targets given as "initial": the constraint's value at the start (the scale follows unless given).
+  if (std::any_of(b.constraints.begin(), b.constraints.end(), [](const BoundConstraint& c) { return c.initial; })) {
+    PetscVector u = space.primary->create_vector();
+    set_from_original(disc, state, bs, u);
+    for (std::size_t i = 0; i < b.constraints.size(); ++i) {
+      if (!b.constraints[i].initial || input.targets.contains(b.constraints[i].name)) continue;
+      ScalarConstraint& c = space.constraints[i];
+      c.target = c.functional->value(u);
+      if (!input.scales.contains(c.name) && !scene.constraints[i].scale) c.scale = std::abs(c.target) > 0 ? std::abs(c.target) : 1.0;
+      const std::string& name = b.constraints[i].target_constant;
+      if (name.empty()) continue;
+      constants[name] = c.target;
+      for (auto& a : space.assemblers)
+        for (int j = 0; j < a->form().n_constants; ++j)
+          if (a->form().constants[j] == name) a->set_constant(name, c.target);
+    }
+  }
+  return space;
+}
+
+ProblemResult solve_problem(MPI_Comm comm, const BoundScene& b, const ProblemInput& input) {
+  const Scene& scene = *b.scene;
+  const auto t0 = std::chrono::steady_clock::now();
+  const ScopedPetscOptions petsc_options(scene.solver.petsc_options);
+  ProblemResult result;
+  result.nodes = input.nodes;
+  const NodeSet& nodes = result.nodes;
+  const int bs = b.dofs_per_node;
+  ProblemSpace space = build_problem_space(comm, b, input);
+  const Discretization& disc = *space.disc;
+  {
+    const auto h = disc.basis().spacing();
+    result.h_min = *std::min_element(h.begin(), h.end());
+    result.h_mean = std::accumulate(h.begin(), h.end(), 0.0) / static_cast<double>(h.size());
+  }
+  const auto& constants = space.constants;
+  const auto& fixed_pairs = space.fixed_pairs;
+  const auto& fixed = space.fixed;
+  const auto& first_scalar_fixed = space.first_scalar_fixed;
+  const auto& energy_terms = space.energy_terms;
+  const auto& constraints = space.constraints;
+  Assembler* primary = space.primary;
+  Assembler* linear = space.linear;
+  for (const auto& c : b.constraints) result.constraint_names.push_back(c.name);
+  const std::vector<double>& state = space.state;
   PetscVector u = primary->create_vector();
   set_from_original(disc, state, bs, u);
   result.seconds_setup = seconds_since(t0);

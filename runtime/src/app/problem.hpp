@@ -9,12 +9,15 @@
 
 #include <iosfwd>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "expressions.hpp"
+#include "lmeform/assembler.hpp"
 #include "lmeform/constrained_minimizer.hpp"
+#include "lmeform/discretization.hpp"
 #include "lmeform/delaunay.hpp"
 #include "lmeform/form_registry.hpp"
 #include "lmeform/lme_basis.hpp"
@@ -36,6 +39,7 @@ struct BoundConstraint {
   double target = 0;
   double scale = 1;
   std::string target_constant;         ///< the form's constant holding the target ("" for a number)
+  bool initial = false;                ///< the target is the constraint's value at the start state
 };
 
 /// A scene with its forms loaded and every name checked against them.
@@ -44,6 +48,10 @@ struct BoundScene {
   std::vector<const FormModule*> modules;
   ProblemKind kind = ProblemKind::minimization;
   std::vector<const kernel::FormKernels*> energy;  ///< minimization: the summed energy terms
+  /// Energies a model assembles besides the problem's own (a time integrator's dissipation): their
+  /// constants and data are checked like the problem's; they may have other unknown names (same
+  /// dofs per node), and a coefficient named after an unknown of the problem is its current value.
+  std::vector<const kernel::FormKernels*> auxiliary;
   std::vector<BoundConstraint> constraints;
   const kernel::FormKernels* residual = nullptr;
   const kernel::FormKernels* bilinear = nullptr;
@@ -72,10 +80,12 @@ struct BoundScene {
 /// names, unknowns, quadrature data, expressions. Throws SceneError naming file, line and key, or
 /// FormLoadError for a form that cannot be loaded.
 /// `provided_constants`: constants a model sets itself (not required in [constants]);
-/// `provided_qdata`: quadrature data a model supplies itself.
+/// `provided_qdata`: quadrature data a model supplies itself; `auxiliary_energies`: energy outputs
+/// a model assembles besides the problem (BoundScene::auxiliary).
 [[nodiscard]] BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log,
                                     const std::vector<std::string>& provided_constants = {},
-                                    const std::vector<std::string>& provided_qdata = {});
+                                    const std::vector<std::string>& provided_qdata = {},
+                                    const std::vector<SceneName>& auxiliary_energies = {});
 
 /// What one solve starts from; empty members take the scene's choice.
 struct ProblemInput {
@@ -122,6 +132,29 @@ struct ProblemResult {
   std::string zero_mean_method;
 };
 
+/// The assembly side of one problem on one node set: the discretization, one Assembler per output
+/// with its constants, coefficients and quadrature data set, the Dirichlet dofs and the start.
+/// What solve_problem solves once, and what a time integrator steps.
+struct ProblemSpace {
+  std::unique_ptr<Discretization> disc;
+  std::map<std::string, double, std::less<>> constants;  ///< every constant, resolved (targets included)
+  std::vector<std::unique_ptr<Assembler>> assemblers;    ///< owners of the pointers below
+  std::vector<PetscVector> coefficient_vectors;          ///< alive as long as the assemblers reading them
+  std::vector<Assembler*> energy_terms;                  ///< BoundScene::energy, in order
+  std::vector<ScalarConstraint> constraints;             ///< BoundScene::constraints, targets and scales set
+  std::vector<Assembler*> auxiliary;                     ///< BoundScene::auxiliary, in order
+  Assembler* primary = nullptr;                          ///< owns the dof layout (first energy, residual, bilinear)
+  Assembler* linear = nullptr;
+  std::vector<std::pair<int, int>> fixed_pairs;          ///< (original node, dof within the node) with Dirichlet values
+  std::vector<PetscInt> fixed;                           ///< the same as owned global dofs
+  std::vector<char> first_scalar_fixed;                  ///< per original node: the first scalar unknown is prescribed
+  std::vector<double> state;                             ///< the start (original order), Dirichlet values imposed
+};
+
+/// Builds the ProblemSpace of input.nodes (collective over comm). Throws SceneError for a constant
+/// without a value or quadrature data of the wrong shape.
+[[nodiscard]] ProblemSpace build_problem_space(MPI_Comm comm, const BoundScene& b, const ProblemInput& input);
+
 /// One solve on input.nodes. Collective over comm. Throws for what cannot run (an LME evaluation
 /// that fails, a linear solve that breaks down); a solver that does not converge is reported in the
 /// result instead.
@@ -134,6 +167,11 @@ struct ProblemResult {
 /// Values of the scene's [initial] fields at the nodes (original order, dofs interleaved; unknowns
 /// without an entry start at 0).
 [[nodiscard]] std::vector<double> initial_state(const BoundScene& bound, const NodeSet& nodes);
+
+/// Values at the nodes (original order) of one entry of the scene's [coefficients] (components
+/// interleaved). Throws SceneError when the scene gives no such field.
+[[nodiscard]] std::vector<double> coefficient_values(const BoundScene& bound, const std::string& name, int components,
+                                                     const NodeSet& nodes);
 
 /// One solve of a run: a single solve, or a stage of a model's schedule.
 struct StageRecord {
@@ -164,6 +202,9 @@ struct SceneRun {
 };
 
 
+
+/// "; did you mean 'x'?" for the candidate closest to a misspelt name, else "".
+[[nodiscard]] std::string did_you_mean(std::string_view name, const std::vector<std::string>& candidates);
 
 /// The original indices of the nodes on a named boundary part (box sides, "hull", "axis").
 [[nodiscard]] std::vector<int> boundary_nodes(const Scene& scene, const NodeSet& nodes, const std::string& part);

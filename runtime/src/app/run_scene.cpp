@@ -8,12 +8,13 @@
 
 #include "lmeform/cvt.hpp"
 #include "lmeform/node_sets.hpp"
+#include "dynamics.hpp"
 #include "vesicle.hpp"
 
 namespace lmeform::app {
 
 std::span<const std::string_view> model_extensions() {
-  static const std::string_view extensions[] = {kVesicleExtension};
+  static const std::string_view extensions[] = {kVesicleExtension, kDynamicsExtension};
   return extensions;
 }
 

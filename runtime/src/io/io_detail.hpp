@@ -35,4 +35,15 @@ void remove_quietly(const std::filesystem::path& file) noexcept;
 [[nodiscard]] std::string xdmf_document(std::string_view h5_file_name, int dim, std::size_t nodes, std::size_t cells,
                                         const std::vector<std::pair<std::string, int>>& fields);
 
+struct XdmfStep {
+  double time = 0;
+  std::string h5_file;  ///< relative to the .xmf
+  int dim = 2;
+  std::size_t nodes = 0, cells = 0;
+  std::vector<std::pair<std::string, int>> fields;
+};
+
+/// An XDMF 3 temporal collection of write_field_hdf5 files (ParaView plays it as an animation).
+[[nodiscard]] std::string xdmf_time_series_document(const std::vector<XdmfStep>& steps);
+
 }  // namespace lmeform::io_detail

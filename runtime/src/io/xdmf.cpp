@@ -3,6 +3,7 @@
 #include <stdexcept>
 
 #include "io_detail.hpp"
+#include "lmeform/output.hpp"
 
 namespace lmeform::io_detail {
 namespace {
@@ -36,42 +37,84 @@ const char* attribute_type(int components) {
 
 }  // namespace
 
-std::string xdmf_document(std::string_view h5_file_name, int dim, std::size_t nodes, std::size_t cells,
-                          const std::vector<std::pair<std::string, int>>& fields) {
+namespace {
+
+/// One <Grid> over the datasets of a write_field_hdf5 file; `time` adds a <Time> (a time series step).
+void write_grid(std::ostringstream& x, std::string_view h5_file_name, int dim, std::size_t nodes, std::size_t cells,
+                const std::vector<std::pair<std::string, int>>& fields, const std::string& name, const double* time,
+                std::string_view indent) {
   if (dim != 2 && dim != 3) {
-    throw std::invalid_argument("xdmf_document: XDMF sidecars need dimension 2 or 3, got " + std::to_string(dim));
+    throw std::invalid_argument("xdmf: XDMF needs dimension 2 or 3, got " + std::to_string(dim));
   }
   const std::string file = xml_escape(h5_file_name);
   const int per_cell = dim + 1;
-  std::ostringstream x;
-  x << "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
-    << "<!DOCTYPE Xdmf SYSTEM \"Xdmf.dtd\" []>\n"
-    << "<Xdmf Version=\"3.0\" xmlns:xi=\"http://www.w3.org/2001/XInclude\">\n"
-    << "  <Domain>\n"
-    << "    <Grid Name=\"lmeform\" GridType=\"Uniform\">\n"
-    << "      <Topology TopologyType=\"" << (dim == 2 ? "Triangle" : "Tetrahedron") << "\" NumberOfElements=\""
+  x << indent << "<Grid Name=\"" << xml_escape(name) << "\" GridType=\"Uniform\">\n";
+  if (time != nullptr) {
+    std::ostringstream t;
+    t.precision(17);
+    t << *time;
+    x << indent << "  <Time Value=\"" << t.str() << "\"/>\n";
+  }
+  x << indent << "  <Topology TopologyType=\"" << (dim == 2 ? "Triangle" : "Tetrahedron") << "\" NumberOfElements=\""
     << cells << "\" NodesPerElement=\"" << per_cell << "\">\n"
-    << "        <DataItem Dimensions=\"" << cells << ' ' << per_cell
+    << indent << "    <DataItem Dimensions=\"" << cells << ' ' << per_cell
     << "\" NumberType=\"Int\" Precision=\"4\" Format=\"HDF\">" << file << ":/cells</DataItem>\n"
-    << "      </Topology>\n"
-    << "      <Geometry GeometryType=\"" << (dim == 2 ? "XY" : "XYZ") << "\">\n"
-    << "        <DataItem Dimensions=\"" << nodes << ' ' << dim
+    << indent << "  </Topology>\n"
+    << indent << "  <Geometry GeometryType=\"" << (dim == 2 ? "XY" : "XYZ") << "\">\n"
+    << indent << "    <DataItem Dimensions=\"" << nodes << ' ' << dim
     << "\" NumberType=\"Float\" Precision=\"8\" Format=\"HDF\">" << file << ":/nodes</DataItem>\n"
-    << "      </Geometry>\n";
-  for (const auto& [name, components] : fields) {
-    const std::string escaped = xml_escape(name);
-    x << "      <Attribute Name=\"" << escaped << "\" AttributeType=\"" << attribute_type(components)
+    << indent << "  </Geometry>\n";
+  for (const auto& [field, components] : fields) {
+    const std::string escaped = xml_escape(field);
+    x << indent << "  <Attribute Name=\"" << escaped << "\" AttributeType=\"" << attribute_type(components)
       << "\" Center=\"Node\">\n"
-      << "        <DataItem Dimensions=\"" << nodes;
+      << indent << "    <DataItem Dimensions=\"" << nodes;
     if (components > 1) x << ' ' << components;
     x << "\" NumberType=\"Float\" Precision=\"8\" Format=\"HDF\">" << file << ":/fields/" << escaped
       << "</DataItem>\n"
-      << "      </Attribute>\n";
+      << indent << "  </Attribute>\n";
   }
-  x << "    </Grid>\n"
-    << "  </Domain>\n"
-    << "</Xdmf>\n";
+  x << indent << "</Grid>\n";
+}
+
+const char* const kHeader =
+    "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
+    "<!DOCTYPE Xdmf SYSTEM \"Xdmf.dtd\" []>\n"
+    "<Xdmf Version=\"3.0\" xmlns:xi=\"http://www.w3.org/2001/XInclude\">\n"
+    "  <Domain>\n";
+const char* const kFooter = "  </Domain>\n</Xdmf>\n";
+
+}  // namespace
+
+std::string xdmf_document(std::string_view h5_file_name, int dim, std::size_t nodes, std::size_t cells,
+                          const std::vector<std::pair<std::string, int>>& fields) {
+  std::ostringstream x;
+  x << kHeader;
+  write_grid(x, h5_file_name, dim, nodes, cells, fields, "lmeform", nullptr, "    ");
+  x << kFooter;
+  return x.str();
+}
+
+std::string xdmf_time_series_document(const std::vector<XdmfStep>& steps) {
+  std::ostringstream x;
+  x << kHeader << "    <Grid Name=\"series\" GridType=\"Collection\" CollectionType=\"Temporal\">\n";
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    const XdmfStep& s = steps[i];
+    write_grid(x, s.h5_file, s.dim, s.nodes, s.cells, s.fields, "step " + std::to_string(i), &s.time, "      ");
+  }
+  x << "    </Grid>\n" << kFooter;
   return x.str();
 }
 
 }  // namespace lmeform::io_detail
+
+namespace lmeform {
+
+void write_xdmf_time_series(const std::filesystem::path& path, std::span<const TimeSeriesStep> steps) {
+  std::vector<io_detail::XdmfStep> items;
+  items.reserve(steps.size());
+  for (const TimeSeriesStep& s : steps) items.push_back({s.time, s.h5_file.generic_string(), s.dim, s.nodes, s.cells, s.fields});
+  write_text_atomically(path, io_detail::xdmf_time_series_document(items));
+}
+
+}  // namespace lmeform

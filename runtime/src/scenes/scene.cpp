@@ -221,12 +221,23 @@ void read_constraints(const Section& root, Scene& s) {
     c.where = t->where(name);
     if (node.is_number()) {
       c.target = t->number_of(name, node);
+    } else if (node.is_string()) {
+      if (*node.value<std::string>() != "initial")
+        t->fail_key(name, "must be a number (the target), \"initial\" (the value at the start) or a table { target = ..., "
+                          "scale = ... }, got '" + *node.value<std::string>() + "'");
+      c.initial = true;
     } else if (node.is_table()) {
       const Section ct = t->table_of(name, node, {"target", "scale"});
-      c.target = ct.optional_number("target");
+      if (const toml::node* target = ct.node("target"); target != nullptr && target->is_string()) {
+        if (*target->value<std::string>() != "initial")
+          ct.fail_key("target", "must be a number or \"initial\" (the value at the start), got '" + *target->value<std::string>() + "'");
+        c.initial = true;
+      } else
+
+        c.target = ct.optional_number("target");
       if (ct.has("scale")) c.scale = ct.positive("scale", ct.number("scale"));
     } else {
-      t->wrong_type(name, node, "a number (the target) or a table { target = ..., scale = ... }");
+      t->wrong_type(name, node, "a number (the target), \"initial\" or a table { target = ..., scale = ... }");
     }
     s.constraints.push_back(std::move(c));
   }
@@ -321,6 +332,23 @@ void read_qdata(const Section& root, Scene& s) {
     q.where = t->where(name);
     // A string other than the two provider names is an expression ("sin(pi*x[0])*e(0)"); a bare
     // word close to a provider name is taken for a misspelt provider.
+    if (node.is_table()) {
+      // { field = "phi", jet = "value" | "gradient" | "hessian" }
+      const Section ft = t->table_of(name, node, {"field", "jet"});
+      q.provider = "field";
+      q.field = ft.string("field");
+      static const std::vector<std::string> jets{"value", "gradient", "hessian"};
+      const std::string jet = ft.optional_string("jet").value_or("value");
+      const auto it = std::find(jets.begin(), jets.end(), jet);
+      if (it == jets.end()) {
+        const std::string guess = closest_name(jet, jets);
+        ft.fail_key("jet", "must be 'value', 'gradient' or 'hessian', got '" + jet + "'" +
+                               (guess.empty() ? std::string() : "; did you mean '" + guess + "'?"));
+      }
+      q.derivative = static_cast<int>(it - jets.begin());
+      s.qdata.push_back(std::move(q));
+      continue;
+    }
     static const std::vector<std::string> providers{"support_size", "zero"};
     const std::string text = node.is_string() ? *node.value<std::string>() : std::string();
     const bool word = !text.empty() && std::all_of(text.begin(), text.end(), [](unsigned char c) {

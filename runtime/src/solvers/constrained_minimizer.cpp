@@ -13,7 +13,8 @@
 namespace lmeform {
 
 struct ConstrainedMinimizer::Evaluation {
-  double energy = 0;
+  double energy = 0;              // the objective
+  double model_energy = 0;        // Σ energy terms
   std::vector<double> values;     // C_i
   std::vector<double> residuals;  // C_i − c_i
   PetscVector energy_gradient;
@@ -71,9 +72,25 @@ void ConstrainedMinimizer::evaluate(Vec u, const std::vector<double>& sigma, boo
     ev.gradients.clear();
     for (std::size_t i = 0; i < k; ++i) ev.gradients.push_back(energy_->create_vector());
   }
-  ev.energy = energy_->value_and_vector(u, ev.energy_gradient);
-  for (std::size_t t = 1; t < energy_terms_.size(); ++t) ev.energy += energy_terms_[t]->add_value_and_vector(u, ev.energy_gradient, 1.0);
+  ev.model_energy = energy_->value_and_vector(u, ev.energy_gradient);
+  for (std::size_t t = 1; t < energy_terms_.size(); ++t)
+    ev.model_energy += energy_terms_[t]->add_value_and_vector(u, ev.energy_gradient, 1.0);
+  ev.energy = ev.model_energy;
+  if (proximal_.K != nullptr) {
+    // (s/2) dᵀKd + E, gradient s K d + ∇E, d = u − c.
+    if (!proximal_difference_) {
+      proximal_difference_ = energy_->create_vector();
+      proximal_product_ = energy_->create_vector();
+    }
+    LMEFORM_PETSC_CHECK(VecWAXPY(proximal_difference_, -1.0, proximal_.center, u));
+    LMEFORM_PETSC_CHECK(MatMult(proximal_.K, proximal_difference_, proximal_product_));
+    PetscScalar dKd = 0;
+    LMEFORM_PETSC_CHECK(VecDot(proximal_difference_, proximal_product_, &dKd));
+    LMEFORM_PETSC_CHECK(VecAXPY(ev.energy_gradient, proximal_.weight, proximal_product_));
+    ev.energy = ev.model_energy + 0.5 * proximal_.weight * static_cast<double>(dKd);
+  }
   zero_fixed(ev.energy_gradient);
+  if (counters_ != nullptr) ++counters_->gradient_evaluations;
   ev.values.resize(k);
   ev.residuals.resize(k);
   for (std::size_t i = 0; i < k; ++i) {
@@ -90,24 +107,34 @@ void ConstrainedMinimizer::evaluate(Vec u, const std::vector<double>& sigma, boo
 
 void ConstrainedMinimizer::assemble_hessian(Vec u, const std::vector<double>& sigma) {
   const std::size_t k = constraints_.size();
+  const double t0 = MPI_Wtime();
   {
-    // ∇²E − Σ σ_i ∇²C_i in one pass (linear constraints such as the volume add nothing).
+    // ∇²E − Σ σ_i ∇²C_i (+ s K) in one pass (linear constraints such as the volume add nothing).
     std::vector<Assembler::MatrixTerm> terms;
     for (Assembler* term : energy_terms_) terms.push_back({term, 1.0});
     for (std::size_t i = 0; i < k; ++i) terms.push_back({constraints_[i].functional, -sigma[i] / constraints_[i].scale});
     energy_->matrix_sum(u, terms, hessian_);
+    if (proximal_.K != nullptr) LMEFORM_PETSC_CHECK(MatAXPY(hessian_, proximal_.weight, proximal_.K, SAME_NONZERO_PATTERN));
     // Fixed dofs: identity rows and columns, so the Newton step leaves them alone.
     LMEFORM_PETSC_CHECK(MatZeroRowsColumns(hessian_, static_cast<PetscInt>(fixed_.size()), fixed_.data(), 1.0, nullptr, nullptr));
+  }
+  if (counters_ != nullptr) {
+    ++counters_->hessian_evaluations;
+    counters_->seconds_hessian += MPI_Wtime() - t0;
   }
 }
 
 void ConstrainedMinimizer::factor(Mat A) {
+  const double t0 = MPI_Wtime();
   LMEFORM_PETSC_CHECK(KSPSetOperators(ksp_, A, A));
   LMEFORM_PETSC_CHECK(KSPSetUp(ksp_));
+  if (counters_ != nullptr) counters_->seconds_factor += MPI_Wtime() - t0;
 }
 
 void ConstrainedMinimizer::solve(Vec b, Vec x) {
+  const double t0 = MPI_Wtime();
   LMEFORM_PETSC_CHECK(KSPSolve(ksp_, b, x));
+  if (counters_ != nullptr) counters_->seconds_factor += MPI_Wtime() - t0;
   KSPConvergedReason reason;
   LMEFORM_PETSC_CHECK(KSPGetConvergedReason(ksp_, &reason));
   if (reason < 0) {
@@ -131,6 +158,11 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
   if (multipliers.size() != k) throw std::invalid_argument("constrained minimizer: wrong number of starting multipliers");
   start_time_ = MPI_Wtime();
   ConstrainedResult result;
+  struct CountersScope {
+    ConstrainedResult*& slot;
+    ~CountersScope() { slot = nullptr; }
+  } counters_scope{counters_};
+  counters_ = &result;
   std::vector<double>& nu = multipliers;
   double mu = options_.penalty;
 
@@ -255,6 +287,9 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
   {
     evaluate(u, nu, false, ev);  // then kept current by the line search
     int damped_steps = 0;         // consecutive steps the line search shortened
+    bool have_factor = false;     // a factorization of this minimize() exists
+    bool hessian_current = false; // ... and it is the Hessian at u
+    bool stale_failed = false;    // a step with a reused Hessian failed: refresh it
     for (int it = 0; it <= options_.max_newton_iterations; ++it) {
       lagrangian_gradient(ev, nu, rhs);
       const double gnorm = norm(rhs);
@@ -279,8 +314,14 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
                          " iterations (|grad L| = " + std::to_string(gnorm) + ")";
         break;
       }
-      assemble_hessian(u, nu);
-      factor(hessian_);
+      if (!have_factor || stale_failed || options_.refresh_hessian_every_iteration) {
+        assemble_hessian(u, nu);
+        factor(hessian_);
+        have_factor = hessian_current = true;
+        stale_failed = false;
+      } else {
+        hessian_current = false;
+      }
       // Schur complement on the multipliers: dφ = H⁻¹(−r1 + G dν), (Gᵀ H⁻¹ G) dν = −r + Gᵀ H⁻¹ r1.
       // The Hessian is badly scaled (ε/h⁴, 1/r near the axis), so the step is refined against the
       // true residual of the KKT system with the same factorization: without it Newton stalls at
@@ -340,6 +381,18 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
         }
       }
       damped_steps = alpha < 1.0 ? damped_steps + 1 : 0;
+      if ((!accepted || damped_steps >= 3) && !hessian_current) {
+        // The reused Hessian is too far from the current one: refresh it and try again from here.
+        stale_failed = true;
+        damped_steps = 0;
+        if (accepted) {
+          LMEFORM_PETSC_CHECK(VecCopy(trial, u));
+          nu = nu_trial;
+          std::swap(ev, trial_ev);
+          ++result.newton_iterations;
+        }
+        continue;
+      }
       if (!accepted || damped_steps >= 3) {
         // No step along the Newton direction reduces the residual, or only short ones, three times
         // in a row: far from the quadratic regime. Back to the augmented Lagrangian (below).
@@ -370,7 +423,8 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
   }
   }
   result.seconds_newton = seconds_newton;
-  result.energy = ev.energy;
+  result.energy = ev.model_energy;
+  result.objective = ev.energy;
   result.constraint_values = ev.values;
   result.multipliers.resize(k);
   result.relative_residuals.resize(k);

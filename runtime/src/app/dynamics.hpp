@@ -1,0 +1,117 @@
+// Gradient-flow dynamics of any energy with a dissipation (seed Paper B): a scene with a [dynamics]
+// table moves its deformation unknown y (the nodal positions of a Lagrangian description) by
+//   VTI:            y^{n+1} = argmin ½ (y − yⁿ)ᵀ K(yⁿ) (y − yⁿ) + Δt E(y)   s.t. C_i(y) = c_i,
+//   forward Euler:  [K ∇C; ∇Cᵀ 0] [ẏ; σ] = [−∇E; 0],  y^{n+1} = yⁿ + Δt ẏ,
+// K the Hessian of the scene's dissipation output (quadratic in the velocity, its coefficient y set
+// to yⁿ). The constraints are the scene's ([constraints]; `area = "initial"` keeps the value of the
+// start). Adaptive Δt keeps the energy decrement per step near a target; a step whose Newton
+// fails, or whose map folds (det F ≤ 0 at a quadrature point), is rejected and retried with Δt/2,
+// leaving the accepted state untouched. Nothing here knows a particular model: the vesicle scenes
+// in demos/dynamics name the Lagrangian Helfrich forms, the reference phase field and the time unit
+// μR0³/k themselves.
+#pragma once
+
+#include <mpi.h>
+
+#include <filesystem>
+#include <iosfwd>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "lmeform/delaunay.hpp"
+#include "lmeform/node_set.hpp"
+#include "lmeform/scene.hpp"
+
+namespace lmeform::app {
+
+inline constexpr std::string_view kDynamicsExtension = "dynamics";
+
+/// A constant (or constraint target constant) that changes during the run: a rate over an interval
+/// or a jump at a time. Times in the scene's time unit (t*).
+struct ScheduledConstant {
+  std::string name;
+  std::string where;
+  enum class Kind { rate, jump } kind = Kind::rate;
+  double rate = 0;        ///< rate: relative change per unit t*, value(t) = v0 (1 + rate (min(t, until) − from)) for t > from
+  double from = 0, until = 0;
+  double at = 0;          ///< jump: the time
+  double value = 0;       ///< jump: the value from `at` on
+};
+
+/// The [dynamics] table.
+struct DynamicsSettings {
+  enum class Method { vti, forward_euler } method = Method::vti;
+  std::string deformation = "y";          ///< the unknown that is the motion
+  SceneName dissipation;                  ///< an energy output, quadratic in its unknown, reading `deformation`
+  double time_unit = 1;                   ///< t* = t / time_unit
+  double t_start = 0;                     ///< t* of the start
+  double t_end = 0;                       ///< t* of the end
+  double dt = 0;                          ///< the first Δt*
+  bool adaptive = true;
+  double dt_max = 0;                      ///< 0: unbounded
+  double dt_min = 0;                      ///< 0: dt · 2⁻²⁰
+  double growth = 2;                      ///< largest Δt factor per accepted step
+  double energy_decrement = 0;            ///< target |ΔE| per step; 0: the first step's
+  int target_newton = 4;                  ///< more Newton iterations than this: Δt shrinks
+  int max_steps = 100000;
+  int max_retries = 12;                   ///< halvings of one step before the run stops
+  bool hessian_every_iteration = false;   ///< VTI: else the Hessian of E once per step (seed)
+  double min_jacobian = 0;                ///< det F below this at a quadrature point rejects a step
+  int output_every = 10;                  ///< time-series files every N steps (0: start and end only)
+  int checkpoint_every = 0;               ///< checkpoint every N steps (0: none)
+  std::vector<double> report_times;       ///< t* where the run lands exactly and records E
+  std::vector<ScheduledConstant> schedule;
+  /// Start from this state (original node order, dofs interleaved) instead of the scene's [initial].
+  std::vector<double> start_state;
+  std::vector<double> start_multipliers;
+};
+
+[[nodiscard]] std::optional<DynamicsSettings> read_dynamics(const Scene& scene);
+
+/// One accepted step.
+struct DynamicsStep {
+  int step = 0;
+  double t_star = 0, dt_star = 0;
+  double energy = 0;
+  std::vector<double> constraints;        ///< values, in the scene's constraint order
+  std::vector<double> multipliers;
+  int newton_iterations = 0;
+  int rejected = 0;                       ///< attempts rejected before this one
+  double min_jacobian = 0;                ///< min det F over the quadrature points
+  double wall_s = 0;                      ///< since the start of the run
+};
+
+struct DynamicsRun {
+  std::vector<DynamicsStep> history;      ///< step 0 is the start
+  std::string failure;                    ///< empty when t_end was reached
+  std::vector<std::string> constraint_names;
+  int accepted = 0, rejected = 0;
+  int gradient_evaluations = 0, hessian_evaluations = 0;
+  double seconds_setup = 0, seconds_dissipation = 0, seconds_hessian = 0, seconds_solve = 0, seconds_reset = 0;
+  double wall_s = 0;
+  std::map<double, double> energy_at;     ///< report time -> E
+  NodeSet reference_nodes;                ///< original order
+  BackgroundCells cells;
+  std::vector<double> final_state;        ///< original order
+  std::vector<double> final_multipliers;
+  double h_min = 0;
+};
+
+struct DynamicsOutput {
+  std::filesystem::path directory;        ///< time series, history JSON, checkpoint
+  std::string name;
+  bool restart = false;                   ///< resume from directory/<name>_checkpoint.h5
+};
+
+/// Runs the scene's dynamics. `output` null: no files. Collective over comm. Throws SceneError for
+/// a scene that cannot run; a run that stops early says why in DynamicsRun::failure.
+[[nodiscard]] DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettings& settings,
+                                       const DynamicsOutput* output, std::ostream* log);
+
+/// `lmeform run` of a scene with [dynamics]: the run, its files, the closing table; the exit code.
+int run_dynamics_command(MPI_Comm comm, const Scene& scene, const std::filesystem::path& out_dir,
+                         const std::string& json_path, bool restart);
+
+}  // namespace lmeform::app
