@@ -1,0 +1,230 @@
+#!/usr/bin/python3
+"""Plot an lmeform dynamics run: energy/time-step/constraint history and shape snapshots.
+
+    /usr/bin/python3 scripts/plot_dynamics.py RUN_history.json --out PREFIX
+        [--reference-energy E] [--snapshots K] [--mirror]
+        [--compare OTHER_history.json ...] [--labels LABEL ...]
+
+RUN_history.json is written by `lmeform run` for a dynamics scene; its "series" entries name HDF5
+field files relative to the JSON's folder. Two figures are written:
+
+  PREFIX_energy.png     E* against t* (log t*, with --reference-energy as a dashed "static
+                        equilibrium" line, --compare runs overlaid), dt* against t* (log-log), and
+                        the relative drift |C(t) - C(0)| / |C(0)| of each constraint (floor 1e-17).
+  PREFIX_snapshots.png  K series files evenly spaced from first to last (default 4): nodes coloured
+                        by phi, the phi = 0 contour in black; --mirror adds the image r -> -r.
+
+--labels names the main run and then each --compare run (default: their "method" fields).
+Needs Debian's python3-matplotlib, python3-h5py and numpy (call /usr/bin/python3, not a pyenv one).
+"""
+
+import argparse
+import json
+import os
+import sys
+
+STEP_KEYS = ("t_star", "dt_star", "energy", "constraints")
+
+
+def fail(message):
+    print(f"plot_dynamics.py: {message}", file=sys.stderr)
+    sys.exit(1)
+
+
+def load_history(path):
+    try:
+        with open(path) as f:
+            history = json.load(f)
+    except (OSError, json.JSONDecodeError) as e:
+        fail(f"{path}: cannot read: {e}")
+    for key in ("method", "constraints", "steps", "series"):
+        if key not in history:
+            fail(f"{path}: missing key '{key}'")
+    for i, step in enumerate(history["steps"]):
+        missing = [k for k in STEP_KEYS if k not in step]
+        if missing:
+            fail(f"{path}: steps[{i}] is missing {', '.join(missing)}")
+    for i, entry in enumerate(history["series"]):
+        if "file" not in entry:
+            fail(f"{path}: series[{i}] is missing 'file'")
+    if not history["steps"]:
+        fail(f"{path}: no steps recorded")
+    return history
+
+
+def column(history, key):
+    import numpy as np
+    return np.array([s[key] for s in history["steps"]], dtype=float)
+
+
+def load_snapshot(path):
+    import h5py
+    import numpy as np
+
+    if not os.path.isfile(path):
+        fail(f"{path}: series file not found")
+    try:
+        f = h5py.File(path, "r")
+    except OSError as e:
+        fail(f"{path}: cannot open: {e}")
+    with f:
+        for name in ("nodes", "cells", "fields/phi"):
+            if name not in f:
+                fail(f"{path}: missing dataset /{name}")
+        nodes = np.asarray(f["nodes"][...], dtype=float)
+        cells = np.asarray(f["cells"][...], dtype=np.int64)
+        phi = np.asarray(f["fields/phi"][...], dtype=float)
+        t_star = float(f.attrs["t_star"]) if "t_star" in f.attrs else None
+    if nodes.ndim != 2 or nodes.shape[1] != 2 or cells.ndim != 2 or cells.shape[1] != 3:
+        fail(f"{path}: expected /nodes N x 2 and /cells M x 3, got {nodes.shape} and {cells.shape}")
+    if phi.shape != (nodes.shape[0],):
+        fail(f"{path}: /fields/phi is {phi.shape}; expected ({nodes.shape[0]},)")
+    return nodes, cells, phi, t_star
+
+
+def save(fig, path):
+    import matplotlib.pyplot as plt
+
+    try:
+        fig.savefig(path, dpi=150)
+    except OSError as e:
+        fail(f"{path}: cannot write: {e}")
+    finally:
+        plt.close(fig)
+    print(path)
+
+
+def plot_energy(runs, names, reference, path):
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig, (ax_e, ax_dt, ax_c) = plt.subplots(3, 1, figsize=(7, 9), sharex=True, layout="constrained")
+    main = runs[0]
+    t = column(main, "t_star")
+    pos = t > 0  # log t*: t* = 0 cannot be drawn
+    for run, name in zip(runs, names):
+        tr = column(run, "t_star")
+        ax_e.plot(tr[tr > 0], column(run, "energy")[tr > 0], label=name)
+    if reference is not None:
+        ax_e.axhline(reference, color="k", linestyle="--", linewidth=1, label="static equilibrium")
+    ax_e.set_xscale("log")
+    ax_e.set_ylabel("E*")
+    ax_e.legend()
+    ax_e.set_title(f"{main.get('scene', '')} ({main['method']})")
+
+    dt = column(main, "dt_star")
+    ax_dt.loglog(t[pos & (dt > 0)], dt[pos & (dt > 0)])
+    ax_dt.set_ylabel("dt*")
+
+    c = np.array([s["constraints"] for s in main["steps"]], dtype=float).reshape(len(t), -1)
+    c0 = np.where(c[0] != 0, np.abs(c[0]), 1.0)
+    drift = np.maximum(np.abs(c - c[0]) / c0, 1e-17)
+    cnames = main["constraints"]
+    for j in range(c.shape[1]):
+        ax_c.plot(t[pos], drift[pos, j], label=cnames[j] if j < len(cnames) else f"C{j}")
+    ax_c.set_yscale("log")
+    ax_c.set_ylabel("|C(t) - C(0)| / |C(0)|")
+    ax_c.set_xlabel("t*")
+    if c.shape[1]:
+        ax_c.legend()
+    for ax in (ax_e, ax_dt, ax_c):
+        ax.grid(True, which="major", alpha=0.3)
+    save(fig, path)
+
+
+def mirrored(nodes, cells, phi):
+    """Append the image r -> -r; nodes on the axis are shared by both halves."""
+    import numpy as np
+
+    off = np.flatnonzero(nodes[:, 0] != 0.0)
+    index = np.arange(len(nodes))
+    index[off] = len(nodes) + np.arange(off.size)
+    image = nodes[off] * [-1.0, 1.0]
+    return (np.vstack([nodes, image]), np.vstack([cells, index[cells][:, ::-1]]),
+            np.concatenate([phi, phi[off]]))
+
+
+def load_snapshots(history, folder, count):
+    """The series files evenly spaced in the list, always the first and the last."""
+    import numpy as np
+
+    series = history["series"]
+    if not series:
+        fail("the history lists no series files")
+    picks = sorted(set(np.linspace(0, len(series) - 1, max(count, 1)).round().astype(int)))
+    return [(series[i].get("time"), load_snapshot(os.path.join(folder, series[i]["file"])))
+            for i in picks]
+
+
+def plot_snapshots(snapshots, mirror, path):
+    import matplotlib.pyplot as plt
+    import matplotlib.tri as mtri
+    import numpy as np
+
+    snaps = [s for _, s in snapshots]
+    nodes = snaps[0][0]
+    extent = np.ptp(nodes, axis=0) * [2.0 if mirror else 1.0, 1.0]
+    panel = float(np.clip(2.9 * extent[0] / max(extent[1], 1e-12), 1.5, 6.0))
+    fig, axes = plt.subplots(1, len(snaps), figsize=(panel * len(snaps) + 1.0, 4.2), sharey=True,
+                             squeeze=False, layout="constrained")
+    fig.get_layout_engine().set(wspace=0.06)  # keep neighbouring r tick labels apart
+    for ax, (time, (nodes, cells, phi, t_star)) in zip(axes[0], snapshots):
+        if mirror:
+            nodes, cells, phi = mirrored(nodes, cells, phi)
+        r, z = nodes[:, 0], nodes[:, 1]
+        sc = ax.scatter(r, z, c=phi, s=1.5, cmap="coolwarm", vmin=-1, vmax=1, linewidths=0,
+                        rasterized=True)
+        if phi.min() < 0.0 < phi.max():
+            ax.tricontour(mtri.Triangulation(r, z, cells), phi, levels=[0.0], colors="k",
+                          linewidths=1.2)
+        ax.set_aspect("equal")
+        ax.set_xlabel("r")
+        t = t_star if t_star is not None else time
+        ax.set_title(f"t* = {t:.4g}" if t is not None else "t* = ?")
+    axes[0][0].set_ylabel("z")
+    fig.colorbar(sc, cax=axes[0][-1].inset_axes([1.04, 0.0, 0.04, 1.0]), label="phi")
+    save(fig, path)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("history", help="<name>_history.json written by lmeform run")
+    parser.add_argument("--out", required=True, help="output prefix: PREFIX_energy.png, PREFIX_snapshots.png")
+    parser.add_argument("--reference-energy", type=float, default=None,
+                        help="static equilibrium energy, drawn as a horizontal line")
+    parser.add_argument("--snapshots", type=int, default=4, help="number of shape panels (default 4)")
+    parser.add_argument("--mirror", action="store_true", help="also draw the image r -> -r")
+    parser.add_argument("--compare", nargs="+", default=[], metavar="HISTORY",
+                        help="further history files whose energy curves are overlaid")
+    parser.add_argument("--labels", nargs="+", default=None,
+                        help="curve labels: the main run, then each --compare run")
+    args = parser.parse_args()
+
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot  # noqa: F401
+        import numpy  # noqa: F401
+        import h5py  # noqa: F401
+    except ImportError as e:
+        fail(f"{e}; run with Debian's /usr/bin/python3 (python3-matplotlib, python3-h5py)")
+
+    runs = [load_history(p) for p in [args.history] + args.compare]
+    names = [r["method"] for r in runs]
+    if args.labels:
+        if len(args.labels) != len(runs):
+            fail(f"--labels gives {len(args.labels)} names for {len(runs)} runs")
+        names = args.labels
+
+    # Everything is read before anything is written: a missing series file leaves no half output.
+    snapshots = load_snapshots(runs[0], os.path.dirname(os.path.abspath(args.history)),
+                               args.snapshots)
+    folder = os.path.dirname(args.out)
+    if folder:
+        os.makedirs(folder, exist_ok=True)
+    plot_energy(runs, names, args.reference_energy, args.out + "_energy.png")
+    plot_snapshots(snapshots, args.mirror, args.out + "_snapshots.png")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,252 @@
+// Vesicle dynamics through the scene path ([dynamics], app/dynamics.cpp) on a coarse axisymmetric
+// box: the variational integrator decreases the energy step by step and keeps area and volume to
+// round-off; forward Euler at small steps agrees with it; a step whose map would fold is rejected
+// and retried with a shorter step, and one that cannot be taken names the quadrature point; a run
+// stopped at a checkpoint and resumed ends where the uninterrupted run ends; a scheduled deflation
+// moves the volume target; scene errors name the key.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <string>
+
+#include "dynamics.hpp"
+#include "lmeform/petsc.hpp"
+#include "lmeform/scene.hpp"
+
+namespace {
+
+using namespace lmeform;
+using app::DynamicsRun;
+using app::DynamicsSettings;
+
+// An oblate vesicle (v = 0.9, R0 = 0.4) in the box [0, 1] x [0, 1.5], h = 1/16, eps = 2h.
+std::string scene_text(const std::string& dynamics, const std::string& constraints = "area = \"initial\"\nvolume = \"initial\"\n") {
+  return R"scene(
+[scene]
+name = "dynamics_test"
+coordinates = "axisymmetric"
+[domain]
+lower = [0.0, 0.0]
+upper = [1.0, 1.5]
+[nodes]
+spacing = 0.0625
+gamma = 0.8
+[model]
+forms = ["helfrich_lagrangian_axisymmetric", "area_lagrangian_axisymmetric", "volume_lagrangian_axisymmetric",
+         "dissipation_axisymmetric"]
+energy = "bending"
+[constants]
+k = 1.0
+eps = 0.125
+C0 = 0.0
+mu = 1.0
+lambda = 0.0
+[constraints]
+)scene" + constraints + R"scene(
+[coefficients]
+phi = "tanh((1 - (x[0]/0.4732)^2 - ((x[1] - 0.75)/0.2573)^2) / (2*sqrt(x[0]^2/0.4732^4 + (x[1] - 0.75)^2/0.2573^4 + 1e-12)) / (sqrt(2)*eps))"
+[qdata]
+phi0 = { field = "phi", jet = "value" }
+gphi0 = { field = "phi", jet = "gradient" }
+hphi0 = { field = "phi", jet = "hessian" }
+[initial]
+y = "x[0]*e(0) + x[1]*e(1)"
+[[dirichlet]]
+boundary = ["r_max", "z_min", "z_max"]
+unknown = "y"
+value = "x[0]*e(0) + x[1]*e(1)"
+[[dirichlet]]
+boundary = ["axis"]
+unknown = "y"
+components = [0]
+value = 0.0
+[dynamics]
+dissipation = "dissipation"
+time_unit = 0.064
+)scene" + dynamics;
+}
+
+struct Case {
+  Scene scene;
+  DynamicsSettings settings;
+};
+
+Case make(const std::string& dynamics, const std::string& constraints = "area = \"initial\"\nvolume = \"initial\"\n") {
+  const std::string_view extensions[] = {app::kDynamicsExtension};
+  Case r{parse_scene(scene_text(dynamics, constraints), "dynamics_test.toml", extensions), {}};
+  r.settings = *app::read_dynamics(r.scene);
+  return r;
+}
+
+double relative_drift(const DynamicsRun& run, std::size_t constraint) {
+  double drift = 0;
+  const double c0 = run.history.front().constraints[constraint];
+  for (const auto& s : run.history) drift = std::max(drift, std::abs(s.constraints[constraint] - c0) / std::abs(c0));
+  return drift;
+}
+
+TEST(Dynamics, VariationalIntegratorDecreasesTheEnergyAndKeepsAreaAndVolume) {
+  const Case r = make("t_end = 0.03\ndt = 1e-3\n");
+  const DynamicsRun run = app::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
+  ASSERT_TRUE(run.failure.empty()) << run.failure;
+  ASSERT_GT(run.history.size(), 5u);
+  for (std::size_t s = 1; s < run.history.size(); ++s)
+    EXPECT_LT(run.history[s].energy, run.history[s - 1].energy) << "step " << s;
+  EXPECT_LT(run.history.back().energy, 0.97 * run.history.front().energy);
+  EXPECT_NEAR(run.history.back().t_star, 0.03, 1e-12);
+  EXPECT_LT(relative_drift(run, 0), 1e-10);
+  EXPECT_LT(relative_drift(run, 1), 1e-10);
+  // The Hessian of E once per step (the seed's saving): fewer Hessians than gradients.
+  EXPECT_EQ(run.hessian_evaluations, run.accepted);
+  EXPECT_GT(run.gradient_evaluations, run.hessian_evaluations);
+  // Area and volume conserved by a tension and a pressure.
+  EXPECT_GT(std::abs(run.final_multipliers[0]), 0.0);
+}
+
+TEST(Dynamics, ForwardEulerAgreesWithTheVariationalIntegratorAtSmallSteps) {
+  Case vti = make("t_end = 0.002\ndt = 1e-4\nadaptive = false\n");
+  Case euler = make("method = \"forward_euler\"\nt_end = 0.002\ndt = 2e-5\nadaptive = false\n");
+  const DynamicsRun a = app::run_dynamics(PETSC_COMM_WORLD, vti.scene, vti.settings, nullptr, nullptr);
+  const DynamicsRun b = app::run_dynamics(PETSC_COMM_WORLD, euler.scene, euler.settings, nullptr, nullptr);
+  ASSERT_TRUE(a.failure.empty() && b.failure.empty()) << a.failure << b.failure;
+  EXPECT_EQ(a.accepted, 20);
+  EXPECT_EQ(b.accepted, 100);
+  EXPECT_EQ(b.hessian_evaluations, 0);
+  const double e0 = a.history.front().energy;
+  const double ea = a.history.back().energy, eb = b.history.back().energy;
+  EXPECT_LT(ea, e0);
+  // Both first order in dt; over this interval they agree to 1e-5 of the energy and to 1 % of its decrease.
+  EXPECT_LT(std::abs(ea - eb), 1e-5 * e0);
+  EXPECT_LT(std::abs(ea - eb), 0.01 * (e0 - ea));
+  // Forward Euler linearizes the constraints: it drifts, the integrator does not.
+  EXPECT_GT(relative_drift(b, 0), 1e-12);
+  EXPECT_LT(relative_drift(a, 0), 1e-10);
+}
+
+TEST(Dynamics, AStepWhoseNewtonFailsIsRejectedAndRetried) {
+  // At most 4 Newton iterations: the first step at dt* = 0.02 needs more, is rejected, and is
+  // retried with halved steps until Newton converges; the run then reaches t_end.
+  Case r = make("t_end = 0.03\ndt = 0.02\n");
+  r.scene.solver.max_newton_iterations = 4;
+  const DynamicsRun run = app::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
+  ASSERT_TRUE(run.failure.empty()) << run.failure;
+  EXPECT_GT(run.rejected, 0);
+  EXPECT_GT(run.history[1].rejected, 0);
+  EXPECT_LT(run.history[1].dt_star, 0.02);
+  for (std::size_t s = 1; s < run.history.size(); ++s) {
+    EXPECT_LE(run.history[s].newton_iterations, 4) << "step " << s;
+    EXPECT_LT(run.history[s].energy, run.history[s - 1].energy) << "step " << s;
+  }
+  EXPECT_NEAR(run.history.back().t_star, 0.03, 1e-12);
+}
+
+TEST(Dynamics, TinyStepsConvergeDespiteRounding) {
+  // dt* = 1e-7: the proximal term is 1e7 times the energy's; Newton still meets its tolerance.
+  const Case r = make("t_end = 3e-7\ndt = 1e-7\nadaptive = false\n");
+  const DynamicsRun run = app::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
+  ASSERT_TRUE(run.failure.empty()) << run.failure;
+  EXPECT_EQ(run.accepted, 3);
+  EXPECT_EQ(run.rejected, 0);
+  EXPECT_LT(run.history.back().energy, run.history.front().energy);
+}
+
+TEST(Dynamics, AStepThatCannotBeTakenNamesTheQuadraturePointAndLeavesTheState) {
+  const Case r = make("t_end = 0.01\ndt = 0.01\nmin_jacobian = 1.5\nmax_retries = 3\n");
+  const DynamicsRun run = app::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
+  EXPECT_NE(run.failure.find("det F"), std::string::npos) << run.failure;
+  EXPECT_NE(run.failure.find("quadrature point"), std::string::npos) << run.failure;
+  EXPECT_NE(run.failure.find("failed 4 times"), std::string::npos) << run.failure;
+  ASSERT_EQ(run.history.size(), 1u);
+  // The accepted state (the start, y = X) is untouched.
+  const auto& X = run.reference_nodes.coords;
+  ASSERT_EQ(run.final_state.size(), X.size());
+  for (std::size_t i = 0; i < X.size(); ++i) EXPECT_EQ(run.final_state[i], X[i]);
+}
+
+TEST(Dynamics, ARunResumedFromItsCheckpointEndsLikeTheUninterruptedRun) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / "lmeform_test_dynamics_restart";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string dynamics = "t_end = 0.012\ndt = 1e-3\ncheckpoint_every = 4\noutput_every = 2\n";
+  const Case whole = make(dynamics);
+  app::DynamicsOutput out_whole{dir / "whole", "run", false};
+  std::filesystem::create_directories(out_whole.directory);
+  const DynamicsRun a = app::run_dynamics(PETSC_COMM_WORLD, whole.scene, whole.settings, &out_whole, nullptr);
+  ASSERT_TRUE(a.failure.empty()) << a.failure;
+
+  Case stopped = make(dynamics + "max_steps = 4\n");
+  app::DynamicsOutput out_parts{dir / "parts", "run", false};
+  std::filesystem::create_directories(out_parts.directory);
+  const DynamicsRun b = app::run_dynamics(PETSC_COMM_WORLD, stopped.scene, stopped.settings, &out_parts, nullptr);
+  EXPECT_NE(b.failure.find("max_steps"), std::string::npos) << b.failure;
+  EXPECT_TRUE(std::filesystem::exists(out_parts.directory / "run_checkpoint.h5"));
+  out_parts.restart = true;
+  const DynamicsRun c = app::run_dynamics(PETSC_COMM_WORLD, whole.scene, whole.settings, &out_parts, nullptr);
+  ASSERT_TRUE(c.failure.empty()) << c.failure;
+  ASSERT_EQ(c.history.size(), a.history.size());
+  for (std::size_t s = 0; s < a.history.size(); ++s) {
+    EXPECT_EQ(c.history[s].t_star, a.history[s].t_star) << "step " << s;
+    EXPECT_NEAR(c.history[s].energy, a.history[s].energy, 1e-12 * std::abs(a.history[s].energy)) << "step " << s;
+  }
+  ASSERT_EQ(c.final_state.size(), a.final_state.size());
+  double diff = 0;
+  for (std::size_t i = 0; i < a.final_state.size(); ++i) diff = std::max(diff, std::abs(c.final_state[i] - a.final_state[i]));
+  EXPECT_LT(diff, 1e-12);
+  // The time series of the resumed run lists the steps of both parts.
+  EXPECT_TRUE(std::filesystem::exists(out_parts.directory / "run.xmf"));
+  EXPECT_TRUE(std::filesystem::exists(out_parts.directory / "series" / "run_000012.h5"));
+  EXPECT_TRUE(std::filesystem::exists(out_parts.directory / "series" / "run_000002.h5"));
+  std::filesystem::remove_all(dir);
+}
+
+TEST(Dynamics, AScheduledDeflationMovesTheVolumeTarget) {
+  // V0(t) = V0(0) (1 - 2 t*) for t* <= 0.01: 2 % less volume at the end, area kept.
+  const Case r = make("t_end = 0.01\ndt = 1e-3\nadaptive = false\n[dynamics.schedule]\nV0 = { rate = -2.0, until = 0.01 }\n",
+                     "area = \"initial\"\nvolume = \"initial\"\n");
+  const DynamicsRun run = app::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
+  ASSERT_TRUE(run.failure.empty()) << run.failure;
+  const double v0 = run.history.front().constraints[1], v1 = run.history.back().constraints[1];
+  EXPECT_NEAR(v1 / v0, 0.98, 1e-9);
+  EXPECT_LT(relative_drift(run, 0), 1e-10);
+}
+
+TEST(Dynamics, BadScenesNameTheKey) {
+  auto error_of = [](const std::string& dynamics) {
+    try {
+      const Case r = make(dynamics);
+      (void)app::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
+    } catch (const SceneError& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  EXPECT_NE(error_of("t_end = 0.01\ndt = 1e-3\nmethod = \"forward-euler\"\n").find("did you mean"), std::string::npos);
+  std::string msg = error_of("t_end = 0.01\ndt = 1e-3\n[dynamics.schedule]\nC1 = { at = 0.0, value = 1.0 }\n");
+  EXPECT_NE(msg.find("'C1' is no constant of the forms; did you mean 'C0'?"), std::string::npos) << msg;
+  {
+    std::string text = scene_text("t_end = 0.01\ndt = 1e-3\n");
+    text.replace(text.find("dissipation = \"dissipation\""), 27, "dissipation = \"disipation\"");
+    const std::string_view extensions[] = {app::kDynamicsExtension};
+    const Scene scene = parse_scene(text, "dynamics_test.toml", extensions);
+    try {
+      (void)app::run_dynamics(PETSC_COMM_WORLD, scene, *app::read_dynamics(scene), nullptr, nullptr);
+      ADD_FAILURE() << "a misspelt dissipation output was accepted";
+    } catch (const SceneError& e) {
+      EXPECT_NE(std::string(e.what()).find("disipation"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("dissipation"), std::string::npos) << e.what();
+    }
+  }
+  msg = error_of("t_end = 0.01\ndt = -1.0\n");
+  EXPECT_NE(msg.find("dynamics.dt"), std::string::npos) << msg;
+  EXPECT_NE(error_of("t_end = 0.01\ndt = 1e-3\nadaptive = false\nreport_times = [0.5]\n").find("outside"), std::string::npos);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  ::testing::InitGoogleTest(&argc, argv);
+  lmeform::PetscSession session(&argc, &argv);
+  return RUN_ALL_TESTS();
+}
