@@ -165,11 +165,48 @@ TEST(Dynamics, AStepThatCannotBeTakenNamesTheQuadraturePointAndLeavesTheState) {
   for (std::size_t i = 0; i < X.size(); ++i) EXPECT_EQ(run.final_state[i], X[i]);
 }
 
-TEST(Dynamics, ARunResumedFromItsCheckpointEndsLikeTheUninterruptedRun) {
-  const std::filesystem::path dir = std::filesystem::temp_directory_path() / "lmeform_test_dynamics_restart";
+TEST(Dynamics, AResetOfTheReferenceChangesNothingAndTheRunContinuesTheSame) {
+  const Case plain = make("t_end = 0.012\ndt = 1e-3\n");
+  const Case with_resets = make("t_end = 0.012\ndt = 1e-3\nreset_every = 3\n");
+  const DynamicsRun a = app::run_dynamics(PETSC_COMM_WORLD, plain.scene, plain.settings, nullptr, nullptr);
+  const DynamicsRun b = app::run_dynamics(PETSC_COMM_WORLD, with_resets.scene, with_resets.settings, nullptr, nullptr);
+  ASSERT_TRUE(a.failure.empty() && b.failure.empty()) << a.failure << b.failure;
+  EXPECT_EQ(a.resets, 0);
+  ASSERT_GE(b.resets, 3);
+  ASSERT_EQ(b.reset_changes.size(), std::size_t(b.resets));
+  for (const auto& c : b.reset_changes) {
+    // The same physical state described from a new reference: E, area and volume to round-off.
+    EXPECT_LT(std::abs(c.energy), 1e-12);
+    for (const double v : c.constraints) EXPECT_LT(std::abs(v), 1e-12);
+  }
+  // After a reset det F restarts from 1.
+  EXPECT_GT(b.history.back().min_jacobian, a.history.back().min_jacobian);
+  // The motion is the same to the discretization error of the new basis.
+  const double ea = a.history.back().energy, eb = b.history.back().energy;
+  EXPECT_LT(std::abs(ea - eb), 1e-4 * ea) << ea << " vs " << eb;
+  EXPECT_LT(relative_drift(b, 0), 1e-10);
+  EXPECT_LT(relative_drift(b, 1), 1e-10);
+}
+
+TEST(Dynamics, AFoldingStepResetsTheReferenceWhenResetsAreOn) {
+  // det F may not fall below 0.995 from a reference: with resets on, a step that would cross it
+  // resets the reference instead of shrinking the step forever.
+  const Case r = make("t_end = 0.02\ndt = 0.002\nmin_jacobian = 0.995\nreset_distortion = 100.0\n");
+  const DynamicsRun run = app::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
+  ASSERT_TRUE(run.failure.empty()) << run.failure;
+  EXPECT_GT(run.resets, 0);
+  EXPECT_NEAR(run.history.back().t_star, 0.02, 1e-12);
+}
+
+class DynamicsRestart : public ::testing::TestWithParam<int> {};
+
+TEST_P(DynamicsRestart, ARunResumedFromItsCheckpointEndsLikeTheUninterruptedRun) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("lmeform_test_dynamics_restart_" + std::to_string(GetParam()));
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
-  const std::string dynamics = "t_end = 0.012\ndt = 1e-3\ncheckpoint_every = 4\noutput_every = 2\n";
+  // Without resets, and with a reset every 3 steps (the checkpoint at step 4 holds a carried quadrature).
+  const std::string dynamics = "t_end = 0.012\ndt = 1e-3\ncheckpoint_every = 4\noutput_every = 2\nreset_every = " +
+                               std::to_string(GetParam()) + "\n";
   const Case whole = make(dynamics);
   app::DynamicsOutput out_whole{dir / "whole", "run", false};
   std::filesystem::create_directories(out_whole.directory);
@@ -198,8 +235,14 @@ TEST(Dynamics, ARunResumedFromItsCheckpointEndsLikeTheUninterruptedRun) {
   EXPECT_TRUE(std::filesystem::exists(out_parts.directory / "run.xmf"));
   EXPECT_TRUE(std::filesystem::exists(out_parts.directory / "series" / "run_000012.h5"));
   EXPECT_TRUE(std::filesystem::exists(out_parts.directory / "series" / "run_000002.h5"));
+  if (GetParam() > 0) {
+    EXPECT_TRUE(std::filesystem::exists(out_parts.directory / "run_checkpoint_quadrature.h5"));
+    EXPECT_EQ(c.resets, a.resets);
+  }
   std::filesystem::remove_all(dir);
 }
+
+INSTANTIATE_TEST_SUITE_P(ResetsOffAndOn, DynamicsRestart, ::testing::Values(0, 3));
 
 TEST(Dynamics, AScheduledDeflationMovesTheVolumeTarget) {
   // V0(t) = V0(0) (1 - 2 t*) for t* <= 0.01: 2 % less volume at the end, area kept.

@@ -55,6 +55,14 @@ enum class OffProcessMode {
 [[nodiscard]] const char* to_string(BasisStorage s) noexcept;
 [[nodiscard]] const char* to_string(OffProcessMode m) noexcept;
 
+/// Background cells and quadrature points given instead of built from the nodes: a Lagrangian
+/// run's reset of the reference configuration carries its quadrature points (x̂ → y(x̂), weights
+/// × det F) to the new nodes, keeping the cells' connectivity (the nodes keep their identity).
+struct CarriedQuadrature {
+  BackgroundCells cells;     ///< connectivity in the original node numbering
+  CellQuadrature quadrature; ///< points grouped by cell (points_per_cell per cell, cell order)
+};
+
 struct DiscretizationOptions {
   std::vector<double> gamma{1.6};  ///< one γ for all nodes, or one per node (original numbering)
   LmeOptions lme{};
@@ -64,6 +72,7 @@ struct DiscretizationOptions {
   BasisStorage storage = BasisStorage::Full;
   OffProcessMode off_process = OffProcessMode::ZeroCommunication;
   bool use_metis = true;           ///< false: contiguous blocks of the original numbering
+  std::optional<CarriedQuadrature> carried;  ///< set: these cells and points, no triangulation
 };
 
 /// Wall-clock seconds of each stage (this rank).

@@ -3,12 +3,14 @@
 #include <Eigen/Dense>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <iostream>
 #include <limits>
+#include <memory>
 #include <numeric>
 #include <ostream>
 #include <sstream>
@@ -35,7 +37,7 @@ std::optional<DynamicsSettings> read_dynamics(const Scene& s) {
       s, kDynamicsExtension,
       {"method", "deformation", "dissipation", "time_unit", "t_start", "t_end", "dt", "adaptive", "dt_max",
        "dt_min", "growth", "energy_decrement", "target_newton", "max_steps", "max_retries", "hessian", "min_jacobian",
-       "output_every", "checkpoint_every", "report_times", "schedule"});
+       "output_every", "checkpoint_every", "report_times", "schedule", "reset_every", "reset_distortion"});
   if (!t) return std::nullopt;
   DynamicsSettings d;
   const std::string method = t->choice_of("method", t->optional_string("method").value_or("vti"), {"vti", "forward_euler"});
@@ -59,6 +61,10 @@ std::optional<DynamicsSettings> read_dynamics(const Scene& s) {
   d.hessian_every_iteration =
       t->choice_of("hessian", t->optional_string("hessian").value_or("step"), {"step", "iteration"}) == "iteration";
   d.min_jacobian = t->non_negative("min_jacobian", t->number("min_jacobian", 0.0));
+  d.reset_every = t->at_least("reset_every", t->integer("reset_every", d.reset_every), 0);
+  d.reset_distortion = t->non_negative("reset_distortion", t->number("reset_distortion", 0.0));
+  if (d.reset_distortion > 0 && d.reset_distortion <= 1)
+    t->fail_key("reset_distortion", fmt::format("= {} must exceed 1 (the ratio of F's singular values; 1 is no distortion)", d.reset_distortion));
   d.output_every = t->at_least("output_every", t->integer("output_every", d.output_every), 0);
   d.checkpoint_every = t->at_least("checkpoint_every", t->integer("checkpoint_every", d.checkpoint_every), 0);
   if (t->has("report_times")) {
@@ -106,46 +112,77 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 
 nlohmann::json number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); }
 
-/// The smallest det F = det(∂y/∂X) over the quadrature points, and where.
-struct JacobianMinimum {
-  double value = std::numeric_limits<double>::infinity();
+/// Measures of the deformation gradient F = ∂y/∂X over the quadrature points: the smallest det F
+/// (and where), and the largest distortion, the ratio of F's extreme singular values.
+struct DeformationMeasures {
+  double min_jacobian = std::numeric_limits<double>::infinity();
   int point = -1;
+  double max_distortion = 1;
 };
 
-JacobianMinimum min_jacobian(const Discretization& disc, const std::vector<double>& y_original, int bs, int offset) {
+/// F and ∂²y/∂X∂X at the quadrature points of element e (`tab` its tabulation at order 2 or 1).
+template <class PerPoint>
+void for_each_point_kinematics(const Discretization& disc, const std::vector<double>& y_original, int bs, int offset,
+                               int order, PerPoint&& per_point) {
   const int dim = disc.dim();
-  const int J = kernel::jet_size(dim, 1);
+  const int J = kernel::jet_size(dim, order);
   std::vector<double> tab(static_cast<std::size_t>(disc.max_element_points() * J * disc.max_element_nodes()));
   LmeWorkspace ws;
   const auto original = disc.original_index();
-  JacobianMinimum local;
-  double F[9];
+  std::array<double, 9> F{};
+  std::array<double, 27> H{};  // H[(k*dim + I)*dim + J] = ∂²y_k / ∂X_I ∂X_J
   for (int e = 0; e < disc.n_elements(); ++e) {
+    if (!disc.element_owned(e)) continue;
     const auto nodes = disc.element_nodes(e);
     const auto n = nodes.size();
-    disc.tabulate(e, 1, tab, ws);
+    disc.tabulate(e, order, tab, ws);
     for (int q = 0; q < disc.element_point_count(e); ++q) {
-      for (int i = 0; i < dim; ++i)
-        for (int j = 0; j < dim; ++j) {
+      auto y = [&](std::size_t a, int k) {
+        return y_original[std::size_t(original[std::size_t(nodes[a])]) * std::size_t(bs) + std::size_t(offset + k)];
+      };
+      for (int k = 0; k < dim; ++k)
+        for (int I = 0; I < dim; ++I) {
           double f = 0;
-          for (std::size_t a = 0; a < n; ++a)
-            f += tab[(std::size_t(q * J + 1 + j)) * n + a] *
-                 y_original[std::size_t(original[std::size_t(nodes[a])]) * std::size_t(bs) + std::size_t(offset + i)];
-          F[i * dim + j] = f;
+          for (std::size_t a = 0; a < n; ++a) f += tab[std::size_t(q * J + 1 + I) * n + a] * y(a, k);
+          F[std::size_t(k * dim + I)] = f;
+          if (order < 2) continue;
+          for (int K = I; K < dim; ++K) {
+            const auto slot = std::size_t(kernel::hessian_slot(I, K, dim));
+            double h = 0;
+            for (std::size_t a = 0; a < n; ++a) h += tab[(std::size_t(q * J) + slot) * n + a] * y(a, k);
+            H[std::size_t((k * dim + I) * dim + K)] = H[std::size_t((k * dim + K) * dim + I)] = h;
+          }
         }
-      const double det = dim == 1 ? F[0]
-                         : dim == 2 ? F[0] * F[3] - F[1] * F[2]
-                                    : F[0] * (F[4] * F[8] - F[5] * F[7]) - F[1] * (F[3] * F[8] - F[5] * F[6]) +
-                                          F[2] * (F[3] * F[7] - F[4] * F[6]);
-      if (det < local.value) local = {det, disc.element_first_point(e) + q};
+      per_point(disc.element_first_point(e) + q, e, q, tab, n, F, H);
     }
   }
+}
+
+DeformationMeasures deformation_measures(const Discretization& disc, const std::vector<double>& y_original, int bs, int offset) {
+  const int dim = disc.dim();
+  DeformationMeasures local;
+  for_each_point_kinematics(disc, y_original, bs, offset, 1,
+                            [&](int point, int, int, const std::vector<double>&, std::size_t, const std::array<double, 9>& F,
+                                const std::array<double, 27>&) {
+                              Eigen::MatrixXd M(dim, dim);
+                              for (int i = 0; i < dim; ++i)
+                                for (int j = 0; j < dim; ++j) M(i, j) = F[std::size_t(i * dim + j)];
+                              const double det = M.determinant();
+                              if (det < local.min_jacobian) {
+                                local.min_jacobian = det;
+                                local.point = point;
+                              }
+                              const Eigen::VectorXd sv = Eigen::JacobiSVD<Eigen::MatrixXd>(M).singularValues();
+                              if (sv[dim - 1] > 0) local.max_distortion = std::max(local.max_distortion, sv[0] / sv[dim - 1]);
+                            });
   struct {
     double value;
     int point;
-  } in{local.value, local.point}, out{};
+  } in{local.min_jacobian, local.point}, out{};
   MPI_Allreduce(&in, &out, 1, MPI_DOUBLE_INT, MPI_MINLOC, disc.comm());
-  return {out.value, out.point};
+  double distortion = local.max_distortion;
+  MPI_Allreduce(MPI_IN_PLACE, &distortion, 1, MPI_DOUBLE, MPI_MAX, disc.comm());
+  return {out.value, out.point, distortion};
 }
 
 void zero_dofs(Vec v, const std::vector<PetscInt>& dofs) {
@@ -168,6 +205,37 @@ double dot(Vec a, Vec b) {
 
 }  // namespace
 
+namespace {
+
+/// One reference configuration: its discretization and assemblers, the minimizer of a time step,
+/// the vectors of a step. Rebuilt by a reset of the reference configuration.
+struct Reference {
+  ProblemSpace space;
+  std::unique_ptr<ConstrainedMinimizer> minimizer;
+  PetscVector u, yn, trial, gradient, w;
+  std::vector<PetscVector> G, Z;
+  PetscMatrix K;
+  PetscLinearSolver euler_ksp;
+  NodeSet nodes;                        ///< the reference nodes (original order)
+};
+
+/// The scene's quadrature data that are jets of a nodal field, by field: value, gradient, Hessian names.
+struct FieldJets {
+  std::string value, gradient, hessian;
+};
+
+std::map<std::string, FieldJets> field_jets(const Scene& scene) {
+  std::map<std::string, FieldJets> jets;
+  for (const auto& q : scene.qdata) {
+    if (q.provider != "field") continue;
+    FieldJets& j = jets[q.field];
+    (q.derivative == 0 ? j.value : q.derivative == 1 ? j.gradient : j.hessian) = q.name;
+  }
+  return jets;
+}
+
+}  // namespace
+
 DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettings& settings, const DynamicsOutput* output,
                          std::ostream* log) {
   const auto t_begin = std::chrono::steady_clock::now();
@@ -184,6 +252,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     throw SceneError(fmt::format("{}: key 'dynamics.deformation': '{}' must be the problem's only unknown, a vector of {} "
                                  "components (the current positions y of the reference points)",
                                  scene.source, settings.deformation, dim));
+  const int offset = deformation->offset;
   const kernel::FormKernels& dissipation_kernel = *b.auxiliary.front();
   int coefficient_offset = -1, coefficients_per_node = 0;
   for (int i = 0; i < dissipation_kernel.n_coefficients; ++i) {
@@ -200,76 +269,101 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
       for (const auto& [n, v] : b.constants) names.push_back(n);
       throw SceneError(fmt::format("{}: '{}' is no constant of the forms{}", c.where, c.name, did_you_mean(c.name, names)));
     }
+  const std::map<std::string, FieldJets> jets = field_jets(scene);
+  const bool resets = settings.reset_every > 0 || settings.reset_distortion > 0;
+  if (resets)
+    for (const auto& [field, j] : jets)
+      if (!j.hessian.empty() && j.gradient.empty())
+        throw SceneError(fmt::format("{}: a reset pushes the Hessian of '{}' forward with its gradient: give [qdata] "
+                                     "{{ field = \"{}\", jet = \"gradient\" }} too",
+                                     scene.source, field, field));
 
-  ProblemInput input;
-  input.nodes = initial_nodes(scene, log);
-  input.lme.spacing_smoothing = scene.nodes.spacing_smoothing;
-  input.initial = settings.start_state;
-  input.log = log;
-  ProblemSpace space = build_problem_space(comm, b, input);
-  const Discretization& disc = *space.disc;
+  const bool euler = settings.method == DynamicsSettings::Method::forward_euler;
+  const NodeSet material_nodes = initial_nodes(scene, log);  // the reference of the start: node identities
+  run.cells = delaunay(material_nodes);
+  const std::size_t n_nodes = material_nodes.size();
   const int bs = b.dofs_per_node;
-  Assembler& dissipation = *space.auxiliary.front();
-  Vec dissipation_coefficients = space.coefficient_vectors.back();
-  run.reference_nodes = input.nodes;
-  run.cells = delaunay(input.nodes);
+  std::size_t k = 0;
+  std::vector<double> targets;  // the current constraint targets (schedules move them)
+
+  auto build = [&](const NodeSet& nodes, const std::vector<double>& state, std::optional<CarriedQuadrature> carried,
+                   std::map<std::string, std::vector<double>, std::less<>> qdata, bool keep_targets) {
+    auto r = std::make_unique<Reference>();
+    ProblemInput input;
+    input.nodes = nodes;
+    input.lme.spacing_smoothing = scene.nodes.spacing_smoothing;
+    input.initial = state;
+    input.log = nullptr;
+    input.carried = std::move(carried);
+    input.qdata_values = std::move(qdata);
+    if (keep_targets)
+      for (std::size_t i = 0; i < b.constraints.size(); ++i) input.targets[b.constraints[i].name] = targets[i];
+    r->space = build_problem_space(comm, b, input);
+    r->nodes = nodes;
+    ConstrainedMinimizerOptions options;
+    options.skip_augmented_stage = true;  // yⁿ satisfies the constraints: Newton on the KKT system from there
+    options.refresh_hessian_every_iteration = settings.hessian_every_iteration;
+    options.newton_tolerance = scene.solver.newton_tolerance;
+    options.constraint_tolerance = scene.solver.constraint_tolerance;
+    options.max_newton_iterations = scene.solver.max_newton_iterations;
+    options.penalty = scene.solver.penalty;
+    r->minimizer = std::make_unique<ConstrainedMinimizer>(r->space.energy_terms, r->space.constraints, options);
+    r->minimizer->set_fixed_dofs(r->space.fixed);
+    Assembler& primary = *r->space.primary;
+    r->u = primary.create_vector();
+    r->yn = primary.create_vector();
+    r->trial = primary.create_vector();
+    r->gradient = primary.create_vector();
+    r->w = primary.create_vector();
+    for (std::size_t i = 0; i < r->space.constraints.size(); ++i) {
+      r->G.push_back(primary.create_vector());
+      r->Z.push_back(primary.create_vector());
+    }
+    set_from_original(*r->space.disc, r->space.state, bs, r->u);
+    r->K = r->space.auxiliary.front()->create_matrix();
+    if (euler) {
+      LMEFORM_PETSC_CHECK(KSPCreate(comm, r->euler_ksp.out()));
+      LMEFORM_PETSC_CHECK(KSPSetType(r->euler_ksp, KSPPREONLY));
+      PC pc = nullptr;
+      LMEFORM_PETSC_CHECK(KSPGetPC(r->euler_ksp, &pc));
+      LMEFORM_PETSC_CHECK(PCSetType(pc, PCLU));
+      LMEFORM_PETSC_CHECK(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
+    }
+    return r;
+  };
+
+  std::unique_ptr<Reference> ref = build(material_nodes, settings.start_state, std::nullopt, {}, false);
+  k = ref->space.constraints.size();
+  for (const auto& c : ref->space.constraints) {
+    run.constraint_names.push_back(c.name);
+    targets.push_back(c.target);
+  }
   {
-    const auto h = disc.basis().spacing();
+    const auto h = ref->space.disc->basis().spacing();
     run.h_min = *std::min_element(h.begin(), h.end());
   }
-  for (const auto& c : space.constraints) run.constraint_names.push_back(c.name);
-  const std::size_t k = space.constraints.size();
-
-  ConstrainedMinimizerOptions options;
-  options.skip_augmented_stage = true;  // yⁿ satisfies the constraints: Newton on the KKT system from there
-  options.refresh_hessian_every_iteration = settings.hessian_every_iteration;
-  options.newton_tolerance = scene.solver.newton_tolerance;
-  options.constraint_tolerance = scene.solver.constraint_tolerance;
-  options.max_newton_iterations = scene.solver.max_newton_iterations;
-  options.penalty = scene.solver.penalty;
-  ConstrainedMinimizer minimizer(space.energy_terms, space.constraints, options);
-  minimizer.set_fixed_dofs(space.fixed);
-
-  PetscVector u = space.primary->create_vector(), yn = space.primary->create_vector(), trial = space.primary->create_vector();
-  PetscVector gradient = space.primary->create_vector(), w = space.primary->create_vector();
-  std::vector<PetscVector> G, Z;
-  for (std::size_t i = 0; i < k; ++i) {
-    G.push_back(space.primary->create_vector());
-    Z.push_back(space.primary->create_vector());
-  }
-  set_from_original(disc, space.state, bs, u);
-  PetscMatrix K = dissipation.create_matrix();
-  PetscLinearSolver euler_ksp;
-  if (settings.method == DynamicsSettings::Method::forward_euler) {
-    LMEFORM_PETSC_CHECK(KSPCreate(comm, euler_ksp.out()));
-    LMEFORM_PETSC_CHECK(KSPSetType(euler_ksp, KSPPREONLY));
-    PC pc = nullptr;
-    LMEFORM_PETSC_CHECK(KSPGetPC(euler_ksp, &pc));
-    LMEFORM_PETSC_CHECK(PCSetType(pc, PCLU));
-    LMEFORM_PETSC_CHECK(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
-  }
+  run.reference_nodes = material_nodes;
 
   auto energy_of = [&](Vec state) {
     double e = 0;
-    for (Assembler* term : space.energy_terms) e += term->value(state);
+    for (Assembler* term : ref->space.energy_terms) e += term->value(state);
     return e;
   };
   auto constraint_values = [&](Vec state) {
     std::vector<double> v;
-    for (const auto& c : space.constraints) v.push_back(c.functional->value(state));
+    for (const auto& c : ref->space.constraints) v.push_back(c.functional->value(state));
     return v;
   };
 
   // Scheduled constants start from their values at the start (a target given "initial" included).
-  const std::vector<double> start_constraints = constraint_values(u);
-  std::vector<double> base_targets;
-  for (std::size_t i = 0; i < k; ++i) base_targets.push_back(space.constraints[i].target);
+  const std::vector<double> start_constraints = constraint_values(ref->u);
+  const std::vector<double> base_targets = targets;
   auto apply_schedule = [&](double t) {
     for (const auto& c : settings.schedule) {
       const auto target_of = std::find_if(b.constraints.begin(), b.constraints.end(),
                                           [&](const BoundConstraint& bc) { return bc.target_constant == c.name; });
       const std::size_t ci = static_cast<std::size_t>(target_of - b.constraints.begin());
-      const double base = target_of != b.constraints.end() ? base_targets[ci] : space.constants.at(c.name);
+      const double base = target_of != b.constraints.end() ? base_targets[ci] : ref->space.constants.at(c.name);
       double value = base;
       if (c.kind == ScheduledConstant::Kind::rate) {
         if (t > c.from) value = base * (1 + c.rate * (std::min(t, c.until) - c.from));
@@ -277,40 +371,47 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
         value = c.value;
       }
       if (target_of != b.constraints.end()) {
-        minimizer.set_target(ci, value);
+        targets[ci] = value;
+        ref->minimizer->set_target(ci, value);
         continue;
       }
-      for (auto& a : space.assemblers)
+      for (auto& a : ref->space.assemblers)
         for (int i = 0; i < a->form().n_constants; ++i)
           if (a->form().constants[i] == c.name) a->set_constant(c.name, value);
     }
   };
 
-  auto set_dissipation_state = [&](Vec state) {
+  auto assemble_dissipation = [&](Vec state) {
+    const double t0 = MPI_Wtime();
+    Assembler& dissipation = *ref->space.auxiliary.front();
+    Vec coefficients = ref->space.coefficient_vectors.back();
     {
       const VecReadView y(state);
-      VecWriteView c(dissipation_coefficients);
+      VecWriteView c(coefficients);
       const PetscInt owned = y.size() / bs;
       for (PetscInt a = 0; a < owned; ++a)
-        for (int i = 0; i < dim; ++i)
-          c[a * coefficients_per_node + coefficient_offset + i] = y[a * bs + deformation->offset + i];
+        for (int i = 0; i < dim; ++i) c[a * coefficients_per_node + coefficient_offset + i] = y[a * bs + offset + i];
     }
-    dissipation.set_coefficients(dissipation_coefficients);  // the assembler keeps a ghosted copy
+    dissipation.set_coefficients(coefficients);  // the assembler keeps a ghosted copy
+    dissipation.matrix(state, ref->K);
+    run.seconds_dissipation += MPI_Wtime() - t0;
   };
 
   std::vector<double> nu(k, 0.0);  // scaled multipliers
   if (!settings.start_multipliers.empty()) {
     if (settings.start_multipliers.size() != k) throw std::invalid_argument("run_dynamics: wrong number of starting multipliers");
-    for (std::size_t i = 0; i < k; ++i) nu[i] = settings.start_multipliers[i] * space.constraints[i].scale;
+    for (std::size_t i = 0; i < k; ++i) nu[i] = settings.start_multipliers[i] * ref->space.constraints[i].scale;
   }
 
   double t = settings.t_start;
   double dt = settings.dt;
   double target_decrement = settings.energy_decrement;
   int step = 0;
+  int steps_since_reset = 0;
   std::vector<TimeSeriesStep> series;
-  std::vector<double> velocity(input.nodes.size() * std::size_t(bs), 0.0);
+  std::vector<double> velocity(n_nodes * std::size_t(bs), 0.0);
   const fs::path checkpoint_path = output != nullptr ? output->directory / (output->name + "_checkpoint.h5") : fs::path();
+  const fs::path quadrature_path = output != nullptr ? output->directory / (output->name + "_checkpoint_quadrature.h5") : fs::path();
   const fs::path history_path = output != nullptr ? output->directory / (output->name + "_history.json") : fs::path();
 
   auto record = [&](Vec state, double energy, int newton, int rejected, double dt_taken) {
@@ -320,39 +421,42 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     s.dt_star = dt_taken;
     s.energy = energy;
     s.constraints = constraint_values(state);
-    for (std::size_t i = 0; i < k; ++i) s.multipliers.push_back(nu[i] / space.constraints[i].scale);
+    for (std::size_t i = 0; i < k; ++i) s.multipliers.push_back(nu[i] / ref->space.constraints[i].scale);
     s.newton_iterations = newton;
     s.rejected = rejected;
-    s.min_jacobian = min_jacobian(disc, to_original(disc, state, bs), bs, deformation->offset).value;
+    const DeformationMeasures m = deformation_measures(*ref->space.disc, to_original(*ref->space.disc, state, bs), bs, offset);
+    s.min_jacobian = m.min_jacobian;
+    s.distortion = m.max_distortion;
+    s.resets = run.resets;
     s.wall_s = seconds_since(t_begin);
     run.history.push_back(s);
     if (out != nullptr) {
       std::string drift;
       for (std::size_t i = 0; i < k; ++i)
-        drift += fmt::format("  {} {:+.1e}", space.constraints[i].name,
+        drift += fmt::format("  {} {:+.1e}", ref->space.constraints[i].name,
                              (s.constraints[i] - start_constraints[i]) / std::max(std::abs(start_constraints[i]), 1e-300));
-      *out << fmt::format("step {:5d}  t* {:.4e}  dt* {:.3e}  E {:.8f}  Newton {:2d}  rejected {}{}  det F {:.3f}  {:.1f} s",
-                          s.step, s.t_star, s.dt_star, s.energy, newton, rejected, drift, s.min_jacobian, s.wall_s)
+      *out << fmt::format("step {:5d}  t* {:.4e}  dt* {:.3e}  E {:.8f}  Newton {:2d}  rejected {}  resets {}{}  det F {:.3f}  {:.1f} s",
+                          s.step, s.t_star, s.dt_star, s.energy, newton, rejected, run.resets, drift, s.min_jacobian, s.wall_s)
            << std::endl;
     }
   };
 
-  // Scalar coefficient fields (the reference phase field) go to every time-series file.
+  // Scalar coefficient fields (the reference phase field) go to every time-series file: material
+  // values, carried by the nodes.
   std::vector<std::pair<std::string, std::vector<double>>> scalar_fields;
   for (const auto& c : b.coefficients)
-    if (c.components == 1) scalar_fields.emplace_back(c.name, coefficient_values(b, c.name, 1, input.nodes));
+    if (c.components == 1) scalar_fields.emplace_back(c.name, coefficient_values(b, c.name, 1, material_nodes));
 
   auto write_series = [&](Vec state) {
     if (output == nullptr) return;
-    const std::vector<double> y = to_original(disc, state, bs);
+    const std::vector<double> y = to_original(*ref->space.disc, state, bs);
     if (rank != 0) return;
-    const std::size_t n = input.nodes.size();
-    std::vector<double> positions(n * std::size_t(dim)), displacement(n * std::size_t(dim)), v(n * std::size_t(dim));
-    for (std::size_t a = 0; a < n; ++a)
+    std::vector<double> positions(n_nodes * std::size_t(dim)), displacement(n_nodes * std::size_t(dim)), v(n_nodes * std::size_t(dim));
+    for (std::size_t a = 0; a < n_nodes; ++a)
       for (int i = 0; i < dim; ++i) {
-        const std::size_t s = a * std::size_t(bs) + std::size_t(deformation->offset + i);
+        const std::size_t s = a * std::size_t(bs) + std::size_t(offset + i);
         positions[a * std::size_t(dim) + std::size_t(i)] = y[s];
-        displacement[a * std::size_t(dim) + std::size_t(i)] = y[s] - input.nodes.point(a)[std::size_t(i)];
+        displacement[a * std::size_t(dim) + std::size_t(i)] = y[s] - material_nodes.point(a)[std::size_t(i)];
         v[a * std::size_t(dim) + std::size_t(i)] = velocity[s];
       }
     FieldViews fields;
@@ -367,7 +471,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     entry.time = t;
     entry.h5_file = file;
     entry.dim = dim;
-    entry.nodes = n;
+    entry.nodes = n_nodes;
     entry.cells = run.cells.size();
     for (const auto& [name, view] : fields) entry.fields.emplace_back(name, view.components);
     series.push_back(entry);
@@ -377,7 +481,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
   auto history_json = [&]() {
     nlohmann::json js;
     js["scene"] = scene.name;
-    js["method"] = settings.method == DynamicsSettings::Method::vti ? "vti" : "forward_euler";
+    js["method"] = euler ? "forward_euler" : "vti";
     js["time_unit"] = settings.time_unit;
     js["constraints"] = run.constraint_names;
     js["steps"] = nlohmann::json::array();
@@ -391,15 +495,19 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
                              {"newton_iterations", s.newton_iterations},
                              {"rejected", s.rejected},
                              {"min_jacobian", number(s.min_jacobian)},
+                             {"distortion", number(s.distortion)},
+                             {"resets", s.resets},
                              {"wall_s", s.wall_s}});
     js["series"] = nlohmann::json::array();
     for (const auto& s : series) js["series"].push_back({{"time", s.time}, {"file", s.h5_file.generic_string()}});
     return js;
   };
 
+  // The reference configuration's quadrature (points, weights) and its field jets: what a reset
+  // changes, written with a checkpoint so that a restart continues on the same reference.
   auto write_checkpoint = [&]() {
     if (output == nullptr) return;
-    const std::vector<double> y = to_original(disc, u, bs);
+    const std::vector<double> y = to_original(*ref->space.disc, ref->u, bs);
     if (rank != 0) return;
     OutputAttributes attributes{{"step", static_cast<std::int64_t>(step)},
                                 {"t_star", t},
@@ -407,11 +515,129 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
                                 {"target_decrement", target_decrement},
                                 {"accepted", static_cast<std::int64_t>(run.accepted)},
                                 {"rejected", static_cast<std::int64_t>(run.rejected)},
+                                {"resets", static_cast<std::int64_t>(run.resets)},
+                                {"steps_since_reset", static_cast<std::int64_t>(steps_since_reset)},
                                 {"scene", scene.source}};
-    for (std::size_t i = 0; i < k; ++i) attributes.emplace(fmt::format("multiplier_{}", i), nu[i]);
+    for (std::size_t i = 0; i < k; ++i) {
+      attributes.emplace(fmt::format("multiplier_{}", i), nu[i]);
+      attributes.emplace(fmt::format("target_{}", i), targets[i]);
+    }
+    if (run.resets > 0) {
+      // The quadrature as a point set (no cells) with its weights and jets as point data.
+      const CellQuadrature& quad = ref->space.disc->quadrature();
+      FieldViews qfields;
+      qfields.emplace("weight", FieldView{quad.weights, 1});
+      for (const auto& [name, values] : ref->space.qdata) {
+        const int size = static_cast<int>(values.size() / quad.size());
+        qfields.emplace("qdata_" + name, FieldView{values, size});
+      }
+      BackgroundCells none;
+      none.dim = dim;
+      none.vertices_per_cell = dim + 1;
+      write_field_hdf5(quadrature_path, NodeSet(dim, quad.points), none, qfields,
+                       {{"step", static_cast<std::int64_t>(step)}, {"points_per_cell", static_cast<std::int64_t>(quad.points_per_cell)}});
+    }
     write_text_atomically(history_path, history_json().dump(1) + "\n");
-    write_field_hdf5(checkpoint_path, input.nodes, run.cells, {{"state", FieldView{y, bs}}, {"velocity", FieldView{velocity, bs}}},
+    write_field_hdf5(checkpoint_path, ref->nodes, run.cells,
+                     {{"state", FieldView{y, bs}}, {"velocity", FieldView{velocity, bs}}, {"material_nodes", FieldView{material_nodes.coords, dim}}},
                      attributes);
+  };
+
+  // Reset of the reference configuration (seed Fig. 3.8): the current positions become the nodes,
+  // the quadrature points are carried (x̂ → y(x̂), w → w det F), the field values at the points are
+  // kept, their gradients and Hessians pushed forward, the basis rebuilt; nothing is projected.
+  auto reset_reference = [&]() {
+    const double t0 = MPI_Wtime();
+    const double energy_before = energy_of(ref->u);
+    const std::vector<double> constraints_before = constraint_values(ref->u);
+    const Discretization& disc = *ref->space.disc;
+    const std::vector<double> y = to_original(disc, ref->u, bs);
+    const CellQuadrature& quad = disc.quadrature();
+    const std::size_t Q = quad.size();
+    CarriedQuadrature carried;
+    carried.cells = run.cells;
+    carried.quadrature.dim = dim;
+    carried.quadrature.points_per_cell = quad.points_per_cell;
+    carried.quadrature.points.assign(Q * std::size_t(dim), 0.0);
+    carried.quadrature.weights.assign(Q, 0.0);
+    std::map<std::string, std::vector<double>, std::less<>> pushed;
+    for (const auto& [field, j] : jets) {
+      if (!j.value.empty()) pushed[j.value] = ref->space.qdata.at(j.value);  // material: unchanged
+      if (!j.gradient.empty()) pushed[j.gradient].assign(Q * std::size_t(dim), 0.0);
+      if (!j.hessian.empty()) pushed[j.hessian].assign(Q * std::size_t(dim * dim), 0.0);
+    }
+    const auto original = disc.original_index();
+    for_each_point_kinematics(
+        disc, y, bs, offset, 2,
+        [&](int point, int e, int q, const std::vector<double>& tab, std::size_t n, const std::array<double, 9>& F,
+            const std::array<double, 27>& H) {
+          const auto p = std::size_t(point);
+          const int J = kernel::jet_size(dim, 2);
+          const auto nodes = disc.element_nodes(e);
+          for (int i = 0; i < dim; ++i) {
+            double x = 0;
+            for (std::size_t a = 0; a < n; ++a)
+              x += tab[std::size_t(q * J) * n + a] * y[std::size_t(original[std::size_t(nodes[a])]) * std::size_t(bs) + std::size_t(offset + i)];
+            carried.quadrature.points[p * std::size_t(dim) + std::size_t(i)] = x;
+          }
+          Eigen::MatrixXd Fm(dim, dim);
+          for (int i = 0; i < dim; ++i)
+            for (int I = 0; I < dim; ++I) Fm(i, I) = F[std::size_t(i * dim + I)];
+          carried.quadrature.weights[p] = quad.weights[p] * Fm.determinant();
+          const Eigen::MatrixXd Fi = Fm.inverse();  // Fi(I, i) = ∂X_I / ∂y_i
+          for (const auto& [field, j] : jets) {
+            if (j.gradient.empty()) continue;
+            const auto& g0 = ref->space.qdata.at(j.gradient);
+            Eigen::VectorXd G0(dim), g(dim);
+            for (int I = 0; I < dim; ++I) G0[I] = g0[p * std::size_t(dim) + std::size_t(I)];
+            g = Fi.transpose() * G0;  // ∂φ/∂y_i = Fi_Ii ∂φ0/∂X_I
+            for (int i = 0; i < dim; ++i) pushed[j.gradient][p * std::size_t(dim) + std::size_t(i)] = g[i];
+            if (j.hessian.empty()) continue;
+            // ∂²φ/∂y_i∂y_j = Fi_Ii Fi_Jj (∂²φ0/∂X_I∂X_J − Σ_k ∂φ/∂y_k ∂²y_k/∂X_I∂X_J)
+            const auto& h0 = ref->space.qdata.at(j.hessian);
+            Eigen::MatrixXd M(dim, dim);
+            for (int I = 0; I < dim; ++I)
+              for (int K = 0; K < dim; ++K) {
+                double m = h0[p * std::size_t(dim * dim) + std::size_t(I * dim + K)];
+                for (int kk = 0; kk < dim; ++kk) m -= g[kk] * H[std::size_t((kk * dim + I) * dim + K)];
+                M(I, K) = m;
+              }
+            const Eigen::MatrixXd h = Fi.transpose() * M * Fi;
+            for (int i = 0; i < dim; ++i)
+              for (int jj = 0; jj < dim; ++jj) pushed[j.hessian][p * std::size_t(dim * dim) + std::size_t(i * dim + jj)] = h(i, jj);
+          }
+        });
+    // Each point was computed on the rank owning its element.
+    auto sum = [&](std::vector<double>& v) {
+      MPI_Allreduce(MPI_IN_PLACE, v.data(), static_cast<int>(v.size()), MPI_DOUBLE, MPI_SUM, comm);
+    };
+    sum(carried.quadrature.points);
+    sum(carried.quadrature.weights);
+    for (const auto& [field, j] : jets) {
+      if (!j.gradient.empty()) sum(pushed[j.gradient]);
+      if (!j.hessian.empty()) sum(pushed[j.hessian]);
+    }
+    std::vector<double> positions(n_nodes * std::size_t(dim));
+    for (std::size_t a = 0; a < n_nodes; ++a)
+      for (int i = 0; i < dim; ++i) positions[a * std::size_t(dim) + std::size_t(i)] = y[a * std::size_t(bs) + std::size_t(offset + i)];
+    NodeSet nodes(dim, positions);
+    ref = build(nodes, y, std::move(carried), std::move(pushed), true);
+    // The same physical state: energy and constraints unchanged up to the basis' consistency error.
+    ResetChange change;
+    change.energy = (energy_of(ref->u) - energy_before) / std::abs(energy_before);
+    const std::vector<double> constraints_after = constraint_values(ref->u);
+    for (std::size_t i = 0; i < k; ++i)
+      change.constraints.push_back((constraints_after[i] - constraints_before[i]) / std::abs(constraints_before[i]));
+    run.reset_changes.push_back(change);
+    if (out != nullptr) {
+      std::string c;
+      for (std::size_t i = 0; i < k; ++i) c += fmt::format(", {} {:+.1e}", run.constraint_names[i], change.constraints[i]);
+      *out << fmt::format("  reset {} of the reference configuration at step {}: relative change of E {:+.1e}{}\n", run.resets + 1,
+                          step, change.energy, c);
+    }
+    ++run.resets;
+    steps_since_reset = 0;
+    run.seconds_reset += MPI_Wtime() - t0;
   };
 
   bool resumed = false;
@@ -420,36 +646,64 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
       throw std::runtime_error(fmt::format("--restart: no checkpoint in {} (expected {} and {})", output->directory.string(),
                                            checkpoint_path.filename().string(), history_path.filename().string()));
     const FieldFile cp = read_field_hdf5(checkpoint_path);
-    if (cp.nodes.coords != input.nodes.coords)
-      throw std::runtime_error(fmt::format("--restart: {} was written for other nodes than the scene's", checkpoint_path.string()));
-    auto attr = [&](const char* name) -> const OutputAttribute& {
-      const auto it = cp.attributes.find(name);
-      if (it == cp.attributes.end()) throw std::runtime_error(fmt::format("--restart: {} has no attribute '{}'", checkpoint_path.string(), name));
+    auto attr = [&](const FieldFile& f, const fs::path& path, const std::string& name) -> const OutputAttribute& {
+      const auto it = f.attributes.find(name);
+      if (it == f.attributes.end()) throw std::runtime_error(fmt::format("--restart: {} has no attribute '{}'", path.string(), name));
       return it->second;
     };
-    set_from_original(disc, cp.fields.at("state").values, bs, u);
-    velocity = cp.fields.at("velocity").values;
-    step = static_cast<int>(std::get<std::int64_t>(attr("step")));
-    t = std::get<double>(attr("t_star"));
-    dt = std::get<double>(attr("dt_star"));
-    target_decrement = std::get<double>(attr("target_decrement"));
-    run.accepted = static_cast<int>(std::get<std::int64_t>(attr("accepted")));
-    run.rejected = static_cast<int>(std::get<std::int64_t>(attr("rejected")));
-    for (std::size_t i = 0; i < k; ++i) nu[i] = std::get<double>(attr(fmt::format("multiplier_{}", i).c_str()));
+    auto field = [&](const std::string& name) -> const std::vector<double>& {
+      const auto it = cp.fields.find(name);
+      if (it == cp.fields.end()) throw std::runtime_error(fmt::format("--restart: {} has no field '{}'", checkpoint_path.string(), name));
+      return it->second.values;
+    };
+    if (field("material_nodes") != material_nodes.coords)
+      throw std::runtime_error(fmt::format("--restart: {} was written for other nodes than the scene's", checkpoint_path.string()));
+    step = static_cast<int>(std::get<std::int64_t>(attr(cp, checkpoint_path, "step")));
+    run.resets = static_cast<int>(std::get<std::int64_t>(attr(cp, checkpoint_path, "resets")));
+    if (run.resets > 0) {
+      const FieldFile qf = read_field_hdf5(quadrature_path);
+      if (std::get<std::int64_t>(attr(qf, quadrature_path, "step")) != step)
+        throw std::runtime_error(fmt::format("--restart: {} belongs to another step than {}", quadrature_path.string(), checkpoint_path.string()));
+      CarriedQuadrature carried;
+      carried.cells = run.cells;
+      carried.quadrature.dim = dim;
+      carried.quadrature.points_per_cell = static_cast<int>(std::get<std::int64_t>(attr(qf, quadrature_path, "points_per_cell")));
+      carried.quadrature.points = qf.nodes.coords;
+      carried.quadrature.weights = qf.fields.at("weight").values;
+      std::map<std::string, std::vector<double>, std::less<>> qdata;
+      for (const auto& [name, f] : qf.fields)
+        if (name.starts_with("qdata_")) qdata[name.substr(6)] = f.values;
+      for (std::size_t i = 0; i < k; ++i) targets[i] = std::get<double>(attr(cp, checkpoint_path, fmt::format("target_{}", i)));
+      ref = build(cp.nodes, field("state"), std::move(carried), std::move(qdata), true);
+    } else {
+      for (std::size_t i = 0; i < k; ++i) targets[i] = std::get<double>(attr(cp, checkpoint_path, fmt::format("target_{}", i)));
+      set_from_original(*ref->space.disc, field("state"), bs, ref->u);
+    }
+    velocity = field("velocity");
+    t = std::get<double>(attr(cp, checkpoint_path, "t_star"));
+    dt = std::get<double>(attr(cp, checkpoint_path, "dt_star"));
+    target_decrement = std::get<double>(attr(cp, checkpoint_path, "target_decrement"));
+    run.accepted = static_cast<int>(std::get<std::int64_t>(attr(cp, checkpoint_path, "accepted")));
+    run.rejected = static_cast<int>(std::get<std::int64_t>(attr(cp, checkpoint_path, "rejected")));
+    steps_since_reset = static_cast<int>(std::get<std::int64_t>(attr(cp, checkpoint_path, "steps_since_reset")));
+    for (std::size_t i = 0; i < k; ++i) nu[i] = std::get<double>(attr(cp, checkpoint_path, fmt::format("multiplier_{}", i)));
     std::ifstream in(history_path);
     const nlohmann::json js = nlohmann::json::parse(in);
+    auto number_or_nan = [](const nlohmann::json& v) { return v.is_null() ? std::nan("") : v.get<double>(); };
     for (const auto& s : js.at("steps")) {
       if (s.at("step").get<int>() > step) break;
       DynamicsStep d;
       d.step = s.at("step");
       d.t_star = s.at("t_star");
       d.dt_star = s.at("dt_star");
-      d.energy = s.at("energy").is_null() ? std::nan("") : s.at("energy").get<double>();
+      d.energy = number_or_nan(s.at("energy"));
       d.constraints = s.at("constraints").get<std::vector<double>>();
       d.multipliers = s.at("multipliers").get<std::vector<double>>();
       d.newton_iterations = s.at("newton_iterations");
       d.rejected = s.at("rejected");
-      d.min_jacobian = s.at("min_jacobian").is_null() ? std::nan("") : s.at("min_jacobian").get<double>();
+      d.min_jacobian = number_or_nan(s.at("min_jacobian"));
+      d.distortion = number_or_nan(s.at("distortion"));
+      d.resets = s.at("resets");
       d.wall_s = s.at("wall_s");
       run.history.push_back(d);
     }
@@ -459,7 +713,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
       e.time = s.at("time");
       e.h5_file = s.at("file").get<std::string>();
       e.dim = dim;
-      e.nodes = input.nodes.size();
+      e.nodes = n_nodes;
       e.cells = run.cells.size();
       e.fields = {{"displacement", dim}, {"velocity", dim}};
       for (const auto& [name, values] : scalar_fields) e.fields.emplace_back(name, 1);
@@ -467,13 +721,13 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
       series.push_back(e);
     }
     resumed = true;
-    if (out != nullptr) *out << fmt::format("resumed from {} at step {}, t* {:.6e}\n", checkpoint_path.string(), step, t);
+    if (out != nullptr) *out << fmt::format("resumed from {} at step {}, t* {:.6e}, {} resets\n", checkpoint_path.string(), step, t, run.resets);
   }
   run.seconds_setup = seconds_since(t_begin);
   if (!resumed) {
     apply_schedule(t);
-    record(u, energy_of(u), 0, 0, 0.0);
-    write_series(u);
+    record(ref->u, energy_of(ref->u), 0, 0, 0.0);
+    write_series(ref->u);
   }
 
   const double real_time = settings.time_unit;  // Δt = Δt* · time_unit
@@ -486,29 +740,31 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
       run.failure = fmt::format("stopped after max_steps = {} steps at t* = {:.6e}", settings.max_steps, t);
       break;
     }
+    // A reset every N steps, or when F is too distorted.
+    if (resets && ((settings.reset_every > 0 && steps_since_reset >= settings.reset_every) ||
+                   (settings.reset_distortion > 0 && run.history.back().distortion > settings.reset_distortion))) {
+      reset_reference();
+      apply_schedule(t);
+    }
     const double energy_before = run.history.back().energy;
     double dt_try = dt;
     int rejected = 0;
-    bool accepted = false;
+    bool accepted = false, reset_for_this_step = false;
     ConstrainedResult last;
     std::string why;
     while (!accepted) {
       double dt_step = std::min(dt_try, settings.t_end - t);
       if (next_report < settings.report_times.size()) dt_step = std::min(dt_step, settings.report_times[next_report] - t);
       apply_schedule(t + dt_step);
-      LMEFORM_PETSC_CHECK(VecCopy(u, yn));
-      {
-        const double t0 = MPI_Wtime();
-        set_dissipation_state(yn);
-        dissipation.matrix(yn, K);
-        run.seconds_dissipation += MPI_Wtime() - t0;
-      }
-      bool ok = true;
-      if (settings.method == DynamicsSettings::Method::vti) {
-        LMEFORM_PETSC_CHECK(VecCopy(yn, trial));
-        minimizer.set_proximal_term({K, yn, 1.0 / (dt_step * real_time)});
+      Reference& r = *ref;
+      LMEFORM_PETSC_CHECK(VecCopy(r.u, r.yn));
+      assemble_dissipation(r.yn);
+      bool ok = true, folded = false;
+      if (!euler) {
+        LMEFORM_PETSC_CHECK(VecCopy(r.yn, r.trial));
+        r.minimizer->set_proximal_term({r.K, r.yn, 1.0 / (dt_step * real_time)});
         std::vector<double> nu_trial = nu;
-        last = minimizer.minimize(trial, nu_trial);
+        last = r.minimizer->minimize(r.trial, nu_trial);
         run.gradient_evaluations += last.gradient_evaluations;
         run.hessian_evaluations += last.hessian_evaluations;
         run.seconds_hessian += last.seconds_hessian;
@@ -518,60 +774,57 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
       } else {
         // [K G; Gᵀ 0][ẏ; σ] = [−∇E; 0] by the Schur complement on σ, one factorization of K.
         const double t0 = MPI_Wtime();
-        LMEFORM_PETSC_CHECK(MatZeroRowsColumns(K, static_cast<PetscInt>(space.fixed.size()), space.fixed.data(), 1.0, nullptr, nullptr));
-        LMEFORM_PETSC_CHECK(KSPSetOperators(euler_ksp, K, K));
-        LMEFORM_PETSC_CHECK(KSPSetUp(euler_ksp));
-        LMEFORM_PETSC_CHECK(VecSet(gradient, 0.0));
-        double e = 0;
-        for (Assembler* term : space.energy_terms) e += term->add_value_and_vector(yn, gradient, -1.0);
-        (void)e;
-        zero_dofs(gradient, space.fixed);
+        LMEFORM_PETSC_CHECK(MatZeroRowsColumns(r.K, static_cast<PetscInt>(r.space.fixed.size()), r.space.fixed.data(), 1.0, nullptr, nullptr));
+        LMEFORM_PETSC_CHECK(KSPSetOperators(r.euler_ksp, r.K, r.K));
+        LMEFORM_PETSC_CHECK(KSPSetUp(r.euler_ksp));
+        LMEFORM_PETSC_CHECK(VecSet(r.gradient, 0.0));
+        for (Assembler* term : r.space.energy_terms) (void)term->add_value_and_vector(r.yn, r.gradient, -1.0);
+        zero_dofs(r.gradient, r.space.fixed);
         for (std::size_t i = 0; i < k; ++i) {
-          (void)space.constraints[i].functional->value_and_vector(yn, G[i]);
-          zero_dofs(G[i], space.fixed);
+          (void)r.space.constraints[i].functional->value_and_vector(r.yn, r.G[i]);
+          zero_dofs(r.G[i], r.space.fixed);
         }
         ++run.gradient_evaluations;
-        LMEFORM_PETSC_CHECK(KSPSolve(euler_ksp, gradient, w));
+        LMEFORM_PETSC_CHECK(KSPSolve(r.euler_ksp, r.gradient, r.w));
         Eigen::MatrixXd S(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k));
         Eigen::VectorXd rhs(static_cast<Eigen::Index>(k));
-        for (std::size_t i = 0; i < k; ++i) LMEFORM_PETSC_CHECK(KSPSolve(euler_ksp, G[i], Z[i]));
+        for (std::size_t i = 0; i < k; ++i) LMEFORM_PETSC_CHECK(KSPSolve(r.euler_ksp, r.G[i], r.Z[i]));
         for (std::size_t i = 0; i < k; ++i) {
-          rhs[Eigen::Index(i)] = dot(G[i], w);
-          for (std::size_t j = 0; j < k; ++j) S(Eigen::Index(i), Eigen::Index(j)) = dot(G[i], Z[j]);
+          rhs[Eigen::Index(i)] = dot(r.G[i], r.w);
+          for (std::size_t j = 0; j < k; ++j) S(Eigen::Index(i), Eigen::Index(j)) = dot(r.G[i], r.Z[j]);
         }
         const Eigen::VectorXd sigma = k > 0 ? Eigen::VectorXd(S.fullPivLu().solve(rhs)) : Eigen::VectorXd();
-        for (std::size_t i = 0; i < k; ++i) LMEFORM_PETSC_CHECK(VecAXPY(w, -sigma[Eigen::Index(i)], Z[i]));
-        LMEFORM_PETSC_CHECK(VecWAXPY(trial, dt_step * real_time, w, yn));
-        for (std::size_t i = 0; i < k; ++i) nu[i] = -sigma[Eigen::Index(i)] * space.constraints[i].scale;
+        for (std::size_t i = 0; i < k; ++i) LMEFORM_PETSC_CHECK(VecAXPY(r.w, -sigma[Eigen::Index(i)], r.Z[i]));
+        LMEFORM_PETSC_CHECK(VecWAXPY(r.trial, dt_step * real_time, r.w, r.yn));
         run.seconds_solve += MPI_Wtime() - t0;
         last = ConstrainedResult{};
-        last.energy = energy_of(trial);
+        last.energy = energy_of(r.trial);
         last.converged = std::isfinite(last.energy);
+        for (std::size_t i = 0; i < k; ++i) last.multipliers.push_back(-sigma[Eigen::Index(i)]);
         ok = last.converged;
         if (!ok) why = "the energy is not finite";
       }
       if (ok) {
-        const JacobianMinimum jm = min_jacobian(disc, to_original(disc, trial, bs), bs, deformation->offset);
-        if (!(jm.value > settings.min_jacobian)) {
+        const DeformationMeasures m = deformation_measures(*r.space.disc, to_original(*r.space.disc, r.trial, bs), bs, offset);
+        if (!(m.min_jacobian > settings.min_jacobian)) {
           ok = false;
-          const auto x = disc.quadrature().point(std::size_t(jm.point));
-          why = fmt::format("det F = {:.3e} at quadrature point {} (reference position ({:.4g}, {:.4g}))", jm.value, jm.point, x[0],
-                            dim > 1 ? x[1] : 0.0);
+          folded = true;
+          const auto x = r.space.disc->quadrature().point(std::size_t(m.point));
+          why = fmt::format("det F = {:.3e} at quadrature point {} (reference position ({:.4g}, {:.4g}){})", m.min_jacobian, m.point,
+                            x[0], dim > 1 ? x[1] : 0.0, run.resets > 0 ? fmt::format(", reference {}", run.resets) : "");
         }
       }
       if (ok) {
         accepted = true;
-        if (settings.method == DynamicsSettings::Method::vti) {
-          nu = std::vector<double>(k);
-          for (std::size_t i = 0; i < k; ++i) nu[i] = last.multipliers[i] * space.constraints[i].scale;
-        }
+        for (std::size_t i = 0; i < k; ++i) nu[i] = last.multipliers[i] * r.space.constraints[i].scale;
         {
-          const std::vector<double> y1 = to_original(disc, trial, bs), y0 = to_original(disc, yn, bs);
+          const std::vector<double> y1 = to_original(*r.space.disc, r.trial, bs), y0 = to_original(*r.space.disc, r.yn, bs);
           for (std::size_t i = 0; i < velocity.size(); ++i) velocity[i] = (y1[i] - y0[i]) / (dt_step * real_time);
         }
-        LMEFORM_PETSC_CHECK(VecCopy(trial, u));
+        LMEFORM_PETSC_CHECK(VecCopy(r.trial, r.u));
         t += dt_step;
         ++step;
+        ++steps_since_reset;
         ++run.accepted;
         while (next_report < settings.report_times.size() && settings.report_times[next_report] <= t + t_tolerance) {
           run.energy_at[settings.report_times[next_report]] = last.energy;
@@ -597,6 +850,13 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
       }
       ++rejected;
       ++run.rejected;
+      if (folded && resets && !reset_for_this_step) {
+        // The map folds from this reference: reset it to the current state and try again.
+        if (out != nullptr) *out << fmt::format("  step {} rejected at dt* {:.3e}: {}; resetting the reference\n", step + 1, dt_step, why);
+        reset_reference();
+        reset_for_this_step = true;
+        continue;
+      }
       if (out != nullptr) *out << fmt::format("  step {} rejected at dt* {:.3e}: {}; retrying with dt* {:.3e}\n", step + 1, dt_step, why, dt_step / 2);
       dt_try = dt_step / 2;
       if (rejected > settings.max_retries || dt_try < dt_min) break;
@@ -606,16 +866,15 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
       apply_schedule(t);
       break;
     }
-    record(u, last.energy, settings.method == DynamicsSettings::Method::vti ? last.newton_iterations : 0, rejected, dt_try);
+    record(ref->u, last.energy, euler ? 0 : last.newton_iterations, rejected, dt_try);
     const bool finished = t >= settings.t_end - t_tolerance;
-    if (settings.output_every > 0 && (step % settings.output_every == 0 || finished)) write_series(u);
-    else if (finished) write_series(u);
+    if ((settings.output_every > 0 && step % settings.output_every == 0) || finished) write_series(ref->u);
     if (settings.checkpoint_every > 0 && step % settings.checkpoint_every == 0) write_checkpoint();
   }
   if (!run.failure.empty() && settings.checkpoint_every > 0) write_checkpoint();
   if (output != nullptr && rank == 0) write_text_atomically(history_path, history_json().dump(1) + "\n");
-  run.final_state = to_original(disc, u, bs);
-  for (std::size_t i = 0; i < k; ++i) run.final_multipliers.push_back(nu[i] / space.constraints[i].scale);
+  run.final_state = to_original(*ref->space.disc, ref->u, bs);
+  for (std::size_t i = 0; i < k; ++i) run.final_multipliers.push_back(nu[i] / ref->space.constraints[i].scale);
   run.wall_s = seconds_since(t_begin);
   return run;
 }
@@ -651,6 +910,14 @@ int run_dynamics_command(MPI_Comm comm, const Scene& scene, const fs::path& out_
       std::printf("%-26s %.3e (final multiplier %.6g)\n", ("max drift of " + run.constraint_names[i]).c_str(), max_drift[i],
                   last.multipliers.empty() ? 0.0 : last.multipliers[i]);
     std::printf("%-26s %d accepted, %d rejected\n", "steps", run.accepted, run.rejected);
+    if (run.resets > 0) {
+      double worst = 0;
+      for (const auto& c : run.reset_changes) {
+        worst = std::max(worst, std::abs(c.energy));
+        for (const double v : c.constraints) worst = std::max(worst, std::abs(v));
+      }
+      std::printf("%-26s %d (largest relative change of E, area, volume by a reset %.1e)\n", "resets", run.resets, worst);
+    }
     if (run.history.size() > 1) std::printf("%-26s %.3e .. %.3e (ratio %.0f)\n", "dt*", dt_lo, dt_hi, dt_hi / dt_lo);
     std::printf("%-26s %d gradient, %d Hessian\n", "evaluations", run.gradient_evaluations, run.hessian_evaluations);
     std::printf("%-26s setup %.2f, dissipation K %.2f, Hessian of E %.2f, factor+solve %.2f, resets %.2f\n", "times (s)",
@@ -669,6 +936,7 @@ int run_dynamics_command(MPI_Comm comm, const Scene& scene, const fs::path& out_
       js["t_star"] = last.t_star;
       js["steps"] = run.accepted;
       js["rejected"] = run.rejected;
+      js["resets"] = run.resets;
       js["gradient_evaluations"] = run.gradient_evaluations;
       js["hessian_evaluations"] = run.hessian_evaluations;
       js["dt_min"] = number(dt_lo);

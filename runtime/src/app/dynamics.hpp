@@ -6,7 +6,9 @@
 // to yⁿ). The constraints are the scene's ([constraints]; `area = "initial"` keeps the value of the
 // start). Adaptive Δt keeps the energy decrement per step near a target; a step whose Newton
 // fails, or whose map folds (det F ≤ 0 at a quadrature point), is rejected and retried with Δt/2,
-// leaving the accepted state untouched. Nothing here knows a particular model: the vesicle scenes
+// leaving the accepted state untouched. The reference configuration can be reset to the current
+// one (every N steps, or when F is distorted, or when a step would fold the map) without any
+// projection: quadrature points are carried, reference field jets pushed forward. Nothing here knows a particular model: the vesicle scenes
 // in demos/dynamics name the Lagrangian Helfrich forms, the reference phase field and the time unit
 // μR0³/k themselves.
 #pragma once
@@ -59,6 +61,8 @@ struct DynamicsSettings {
   int max_retries = 12;                   ///< halvings of one step before the run stops
   bool hessian_every_iteration = false;   ///< VTI: else the Hessian of E once per step (seed)
   double min_jacobian = 0;                ///< det F below this at a quadrature point rejects a step
+  int reset_every = 0;                    ///< reset the reference configuration every N steps (0: never)
+  double reset_distortion = 0;            ///< ... or when σ_max/σ_min of F exceeds this (0: never)
   int output_every = 10;                  ///< time-series files every N steps (0: start and end only)
   int checkpoint_every = 0;               ///< checkpoint every N steps (0: none)
   std::vector<double> report_times;       ///< t* where the run lands exactly and records E
@@ -80,18 +84,28 @@ struct DynamicsStep {
   int newton_iterations = 0;
   int rejected = 0;                       ///< attempts rejected before this one
   double min_jacobian = 0;                ///< min det F over the quadrature points
+  double distortion = 1;                  ///< max σ_max/σ_min of F over the quadrature points
+  int resets = 0;                         ///< resets of the reference configuration so far
   double wall_s = 0;                      ///< since the start of the run
+};
+
+/// What a reset of the reference configuration changed (relative): zero up to round-off and the
+/// basis' consistency error, since it describes the same physical state.
+struct ResetChange {
+  double energy = 0;
+  std::vector<double> constraints;
 };
 
 struct DynamicsRun {
   std::vector<DynamicsStep> history;      ///< step 0 is the start
   std::string failure;                    ///< empty when t_end was reached
   std::vector<std::string> constraint_names;
-  int accepted = 0, rejected = 0;
+  int accepted = 0, rejected = 0, resets = 0;
   int gradient_evaluations = 0, hessian_evaluations = 0;
   double seconds_setup = 0, seconds_dissipation = 0, seconds_hessian = 0, seconds_solve = 0, seconds_reset = 0;
   double wall_s = 0;
   std::map<double, double> energy_at;     ///< report time -> E
+  std::vector<ResetChange> reset_changes; ///< one per reset
   NodeSet reference_nodes;                ///< original order
   BackgroundCells cells;
   std::vector<double> final_state;        ///< original order

@@ -620,8 +620,9 @@ void configure_direct_solver(KSP ksp) {
 }
 
 
-/// φ, ∇φ or ∇∇φ of a scalar nodal field (original node order) at the quadrature points of this
-/// rank's elements, jet-size values each (others 0): the reference field of a Lagrangian form.
+/// φ, ∇φ or ∇∇φ of a scalar nodal field (original node order) at every quadrature point (each rank
+/// computes the points of the elements it owns), jet-size values each: the reference field of a
+/// Lagrangian form.
 /// `field_basis` interpolates (its node b is original node `original_of[b]`); with a null basis the
 /// discretization's own.
 std::vector<double> interpolated_field_qdata(const Discretization& disc, std::span<const double> original_values, int derivative,
@@ -635,6 +636,7 @@ std::vector<double> interpolated_field_qdata(const Discretization& disc, std::sp
   std::vector<double> out(quad.size() * size, 0.0);
   std::vector<int> own_list;
   for (int e = 0; e < disc.n_elements(); ++e) {
+    if (!disc.element_owned(e)) continue;  // each point once over the ranks: summed below
     for (int q = disc.element_first_point(e); q < disc.element_first_point(e) + disc.element_point_count(e); ++q) {
       const auto x = quad.point(std::size_t(q));
       std::span<const int> list = lists[std::size_t(q)];
@@ -660,6 +662,7 @@ std::vector<double> interpolated_field_qdata(const Discretization& disc, std::sp
       }
     }
   }
+  MPI_Allreduce(MPI_IN_PLACE, out.data(), static_cast<int>(out.size()), MPI_DOUBLE, MPI_SUM, disc.comm());
   return out;
 }
 
@@ -676,6 +679,7 @@ ProblemSpace build_problem_space(MPI_Comm comm, const BoundScene& b, const Probl
   options.lme = input.lme;
   options.quadrature_points = scene.nodes.quadrature_points;
   options.basis_order = std::max(b.basis_order, 1);  // |∇u| at the nodes and H1 errors need gradients
+  options.carried = input.carried;
   space.disc = std::make_unique<Discretization>(comm, nodes, options);
   const Discretization& disc = *space.disc;
 
@@ -731,6 +735,16 @@ ProblemSpace build_problem_space(MPI_Comm comm, const BoundScene& b, const Probl
                                            [&](const SceneQdata& q) { return q.name == k->qdata[i].name; });
         const auto per_point = std::size_t(k->qdata_per_point);
         const int size = k->qdata[i].size;
+        if (const auto given = input.qdata_values.find(k->qdata[i].name); given != input.qdata_values.end()) {
+          if (given->second.size() != disc.quadrature().size() * std::size_t(size))
+            throw std::invalid_argument(fmt::format("build_problem_space: {} values of '{}' for {} points x {}",
+                                                    given->second.size(), given->first, disc.quadrature().size(), size));
+          for (std::size_t q = 0; q < disc.quadrature().size(); ++q)
+            for (int c = 0; c < size; ++c) data[q * per_point + std::size_t(offset + c)] = given->second[q * std::size_t(size) + std::size_t(c)];
+          space.qdata[given->first] = given->second;
+          offset += size;
+          continue;
+        }
         if (provider != scene.qdata.end() && provider->provider == "value") {
           const int handle = b.qdata_expression.at(provider->name);
           std::vector<double> v(static_cast<std::size_t>(size), handle < 0 ? provider->value.number() : 0.0);
@@ -760,6 +774,7 @@ ProblemSpace build_problem_space(MPI_Comm comm, const BoundScene& b, const Probl
             }
             values = interpolated_field_qdata(disc, field, provider->derivative, field_basis ? &*field_basis : nullptr);
           }
+          space.qdata[provider->name] = values;
           for (std::size_t q = 0; q < disc.quadrature().size(); ++q)
             for (int c = 0; c < size; ++c) data[q * per_point + std::size_t(offset + c)] = values[q * std::size_t(size) + std::size_t(c)];
         }

@@ -99,6 +99,11 @@ struct ProblemInput {
   std::ostream* log = nullptr;
   /// Only evaluate the energies and constraints at the start (ProblemResult::values), no solve.
   bool evaluate_only = false;
+  /// Cells and quadrature points carried from a previous reference configuration (a reset).
+  std::optional<CarriedQuadrature> carried;
+  /// Quadrature data given by value, by name (every global point, the datum's size each): they
+  /// replace the scene's provider (a reset's pushed-forward reference field).
+  std::map<std::string, std::vector<double>, std::less<>> qdata_values;
 };
 
 /// Error of one unknown against the scene's exact solution.
@@ -149,6 +154,8 @@ struct ProblemSpace {
   std::vector<PetscInt> fixed;                           ///< the same as owned global dofs
   std::vector<char> first_scalar_fixed;                  ///< per original node: the first scalar unknown is prescribed
   std::vector<double> state;                             ///< the start (original order), Dirichlet values imposed
+  /// Every quadrature datum the assemblers read, by name: all global points, the datum's size each.
+  std::map<std::string, std::vector<double>, std::less<>> qdata;
 };
 
 /// Builds the ProblemSpace of input.nodes (collective over comm). Throws SceneError for a constant

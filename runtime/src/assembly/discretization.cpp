@@ -114,10 +114,21 @@ Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, Discretizati
   // triangulations and qhull's choice depends on the input order).
   {
     StageClock clock(times_.cells);
-    const BackgroundCells original_cells = delaunay(nodes);
     rule_ = rule_for(nodes.dim, options_.quadrature_points);
-    quadrature_ = map_to_cells(original_cells, nodes, rule_);
-    cells_ = original_cells;
+    if (options_.carried) {
+      const CarriedQuadrature& c = *options_.carried;
+      if (c.cells.dim != nodes.dim || c.quadrature.dim != nodes.dim || c.quadrature.cells() != c.cells.size())
+        throw std::invalid_argument("Discretization: carried quadrature of " + std::to_string(c.quadrature.cells()) +
+                                    " cells for " + std::to_string(c.cells.size()) + " background cells");
+      for (const int v : c.cells.connectivity)
+        if (v < 0 || v >= n) throw std::invalid_argument("Discretization: a carried cell names node " + std::to_string(v));
+      quadrature_ = c.quadrature;
+      cells_ = c.cells;
+    } else {
+      const BackgroundCells original_cells = delaunay(nodes);
+      quadrature_ = map_to_cells(original_cells, nodes, rule_);
+      cells_ = original_cells;
+    }
     for (int& v : cells_.connectivity) v = partition_.new_index[static_cast<std::size_t>(v)];
   }
 
