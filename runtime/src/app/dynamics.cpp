@@ -37,7 +37,7 @@ std::optional<DynamicsSettings> read_dynamics(const Scene& s) {
       s, kDynamicsExtension,
       {"method", "deformation", "dissipation", "time_unit", "t_start", "t_end", "dt", "adaptive", "dt_max",
        "dt_min", "growth", "energy_decrement", "target_newton", "max_steps", "max_retries", "hessian", "min_jacobian",
-       "output_every", "checkpoint_every", "report_times", "schedule", "reset_every", "reset_distortion"});
+       "output_every", "checkpoint_every", "report_times", "schedule", "reset_every", "reset_distortion", "require_decrease"});
   if (!t) return std::nullopt;
   DynamicsSettings d;
   const std::string method = t->choice_of("method", t->optional_string("method").value_or("vti"), {"vti", "forward_euler"});
@@ -61,6 +61,7 @@ std::optional<DynamicsSettings> read_dynamics(const Scene& s) {
   d.hessian_every_iteration =
       t->choice_of("hessian", t->optional_string("hessian").value_or("step"), {"step", "iteration"}) == "iteration";
   d.min_jacobian = t->non_negative("min_jacobian", t->number("min_jacobian", 0.0));
+  d.require_decrease = t->boolean("require_decrease", d.require_decrease);
   d.reset_every = t->at_least("reset_every", t->integer("reset_every", d.reset_every), 0);
   d.reset_distortion = t->non_negative("reset_distortion", t->number("reset_distortion", 0.0));
   if (d.reset_distortion > 0 && d.reset_distortion <= 1)
@@ -803,6 +804,10 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
         for (std::size_t i = 0; i < k; ++i) last.multipliers.push_back(-sigma[Eigen::Index(i)]);
         ok = last.converged;
         if (!ok) why = "the energy is not finite";
+      }
+      if (ok && settings.require_decrease && !(last.energy <= energy_before + 1e-10 * std::abs(energy_before))) {
+        ok = false;
+        why = fmt::format("the energy rose from {:.10g} to {:.10g}", energy_before, last.energy);
       }
       if (ok) {
         const DeformationMeasures m = deformation_measures(*r.space.disc, to_original(*r.space.disc, r.trial, bs), bs, offset);

@@ -61,6 +61,7 @@ struct DynamicsSettings {
   int max_retries = 12;                   ///< halvings of one step before the run stops
   bool hessian_every_iteration = false;   ///< VTI: else the Hessian of E once per step (seed)
   double min_jacobian = 0;                ///< det F below this at a quadrature point rejects a step
+  bool require_decrease = false;          ///< a step that raises the energy is rejected (forward Euler's instability)
   int reset_every = 0;                    ///< reset the reference configuration every N steps (0: never)
   double reset_distortion = 0;            ///< ... or when σ_max/σ_min of F exceeds this (0: never)
   int output_every = 10;                  ///< time-series files every N steps (0: start and end only)

@@ -1,0 +1,161 @@
+// Seed Table 3.3 in form: the variational time integrator (VTI) at constant steps against forward
+// Euler at its largest stable constant step, over the same interval [t1*, t2*] of the oblate
+// relaxation (demos/dynamics/oblate_relaxation.toml), from the same state at t1* (reached by an
+// adaptive VTI run from the start). Per run: the energies at t1* and t2*, steps, gradient and
+// Hessian evaluations, wall time split into the assembly of K, of E's Hessian, the solves and the
+// resets. Forward Euler's largest stable step is searched over a descending ladder (interval / 10
+// down to interval / 10⁴): stable means the run reaches t2* with the energy never increasing
+// (beyond 1e-10 relative) and no folded map.
+//
+//   bench_dynamics [--quick] [--out DIR]      writes DIR/dynamics.json
+//
+// Quick: h = 1/16, eps = 0.125 and the window [1e-3, 3e-3]; full: the demo's grid (h = 0.025,
+// eps = 0.05) and the seed's window [1e-3, 1.1e-2].
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "bench_common.hpp"
+#include "dynamics.hpp"
+#include "lmeform/output.hpp"
+#include "lmeform/petsc.hpp"
+#include "lmeform/scene.hpp"
+
+namespace {
+
+using namespace lmeform;
+
+struct Record {
+  std::string method;
+  double dt_star = 0;
+  bool stable = true;
+  app::DynamicsRun run;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const bench::BenchOptions options = bench::parse_bench_options(argc, argv);
+  PetscSession session(&argc, &argv);
+  const int rank = PetscSession::rank();
+  const std::string_view extensions[] = {app::kDynamicsExtension};
+  Scene scene = load_scene(std::string(LMEFORM_SOURCE_DIR) + "/demos/dynamics/oblate_relaxation.toml", extensions);
+  const double t1 = 1e-3, t2 = options.quick ? 3e-3 : 1.1e-2;
+  if (options.quick) {
+    scene.nodes.spacing = 0.0625;
+    scene.constants["eps"] = 0.125;
+  }
+  app::DynamicsSettings base = *app::read_dynamics(scene);
+  base.output_every = 0;
+  base.checkpoint_every = 0;
+  base.report_times.clear();
+
+  // The common state at t1*: adaptive VTI from the start with small first steps.
+  app::DynamicsSettings lead = base;
+  lead.t_end = t1;
+  lead.dt = t1 / 10;
+  const app::DynamicsRun start = app::run_dynamics(PETSC_COMM_WORLD, scene, lead, nullptr, nullptr);
+  if (!start.failure.empty()) {
+    std::fprintf(stderr, "bench_dynamics: the run to t1* failed: %s\n", start.failure.c_str());
+    return 1;
+  }
+  if (rank == 0)
+    std::printf("state at t1* = %.1e: E = %.8f after %d adaptive VTI steps (%zu nodes, h_min %.4g)\n", t1,
+                start.history.back().energy, start.accepted, start.reference_nodes.size(), start.h_min);
+
+  auto window = [&](app::DynamicsSettings::Method method, double dt_star) {
+    app::DynamicsSettings s = base;
+    s.method = method;
+    s.adaptive = false;
+    s.dt = dt_star;
+    s.t_start = t1;
+    s.t_end = t2;
+    s.start_state = start.final_state;
+    s.start_multipliers = start.final_multipliers;
+    s.max_retries = 0;  // a constant step: a failure is a failure
+    s.require_decrease = method == app::DynamicsSettings::Method::forward_euler;  // instability ends the trial
+    s.max_steps = static_cast<int>(std::ceil((t2 - t1) / dt_star * 1.001)) + 1;
+    Record r;
+    r.method = method == app::DynamicsSettings::Method::vti ? "vti" : "forward_euler";
+    r.dt_star = dt_star;
+    r.run = app::run_dynamics(PETSC_COMM_WORLD, scene, s, nullptr, nullptr);
+    r.stable = r.run.failure.empty();
+    for (std::size_t i = 1; r.stable && i < r.run.history.size(); ++i)
+      if (!(r.run.history[i].energy <= r.run.history[i - 1].energy + 1e-10 * std::abs(r.run.history[i - 1].energy))) r.stable = false;
+    if (rank == 0)
+      std::printf("%-14s dt* %.1e: E(t2*) %.8f  steps %5d  grad %5d  hess %4d  %8.2f s%s\n", r.method.c_str(), dt_star,
+                  r.run.history.back().energy, r.run.accepted, r.run.gradient_evaluations, r.run.hessian_evaluations, r.run.wall_s,
+                  r.stable ? "" : ("  UNSTABLE: " + (r.run.failure.empty() ? std::string("the energy increased") : r.run.failure)).c_str());
+    return r;
+  };
+
+  std::vector<Record> records;
+  const double interval = t2 - t1;  // full: 1e-2, the seed's largest VTI step (one step)
+  for (const double dt : {interval, interval / 10, interval / 100}) records.push_back(window(app::DynamicsSettings::Method::vti, dt));
+  // Forward Euler: the largest stable step of a descending ladder.
+  std::vector<Record> euler_trials;
+  for (const double divisor : {10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1e3, 2e3, 5e3, 1e4}) {
+    const double dt = interval / divisor;
+    euler_trials.push_back(window(app::DynamicsSettings::Method::forward_euler, dt));
+    if (euler_trials.back().stable) break;
+  }
+  const Record* euler = euler_trials.back().stable ? &euler_trials.back() : nullptr;
+
+  nlohmann::json out = nlohmann::json::array();
+  auto add = [&](const Record& r, bool largest_stable) {
+    const app::DynamicsRun& run = r.run;
+    nlohmann::json j{{"method", r.method},
+                     {"dt_star", r.dt_star},
+                     {"t1_star", t1},
+                     {"t2_star", t2},
+                     {"energy_t1", run.history.front().energy},
+                     {"energy_t2", r.stable ? nlohmann::json(run.history.back().energy) : nlohmann::json(nullptr)},
+                     {"steps", run.accepted},
+                     {"gradient_evaluations", run.gradient_evaluations},
+                     {"hessian_evaluations", run.hessian_evaluations},
+                     {"wall_s", run.wall_s},
+                     {"assembly_K_s", run.seconds_dissipation},
+                     {"assembly_hessian_s", run.seconds_hessian},
+                     {"solve_s", run.seconds_solve},
+                     {"reset_s", run.seconds_reset},
+                     {"stable", r.stable},
+                     {"largest_stable", largest_stable},
+                     {"nodes", run.reference_nodes.size()},
+                     {"quick", options.quick}};
+    if (euler != nullptr && r.stable) {
+      j["relative_difference_to_forward_euler"] = (run.history.back().energy - euler->run.history.back().energy) /
+                                                  std::abs(euler->run.history.back().energy);
+      j["step_ratio_to_forward_euler"] = r.dt_star / euler->dt_star;
+    }
+    out.push_back(j);
+  };
+  for (const auto& r : records) add(r, false);
+  for (const auto& r : euler_trials) add(r, &r == euler);
+
+  if (rank == 0) {
+    std::printf("\nTable 3.3 in form: [t1*, t2*] = [%.1e, %.1e], E(t1*) = %.6f\n", t1, t2, start.history.back().energy);
+    std::printf("%-14s %9s %12s %7s %6s %6s %9s %12s %10s\n", "method", "dt*", "E(t2*)", "steps", "grad", "hess", "wall s",
+                "vs FE", "dt / FE dt");
+    for (const auto& j : out) {
+      if (j["method"] == "forward_euler" && !j["largest_stable"].get<bool>()) continue;
+      std::printf("%-14s %9.1e %12.6f %7d %6d %6d %9.2f %12s %10s\n", j["method"].get<std::string>().c_str(), j["dt_star"].get<double>(),
+                  j["energy_t2"].is_null() ? std::nan("") : j["energy_t2"].get<double>(), j["steps"].get<int>(),
+                  j["gradient_evaluations"].get<int>(), j["hessian_evaluations"].get<int>(), j["wall_s"].get<double>(),
+                  j.contains("relative_difference_to_forward_euler")
+                      ? fmt::format("{:+.2e}", j["relative_difference_to_forward_euler"].get<double>()).c_str()
+                      : "-",
+                  j.contains("step_ratio_to_forward_euler") ? fmt::format("{:.0f}", j["step_ratio_to_forward_euler"].get<double>()).c_str()
+                                                             : "-");
+    }
+    if (euler == nullptr) std::printf("forward Euler: no stable step down to %.1e\n", interval / 1e4);
+    std::filesystem::create_directories(options.out);
+    write_text_atomically(options.out / "dynamics.json", out.dump(2) + "\n");
+    std::printf("wrote %s\n", (options.out / "dynamics.json").string().c_str());
+  }
+  return 0;
+}
