@@ -13,6 +13,7 @@ field files relative to the JSON's folder. Two figures are written:
                         the relative drift |C(t) - C(0)| / |C(0)| of each constraint (floor 1e-17).
   PREFIX_snapshots.png  K series files evenly spaced from first to last (default 4): nodes coloured
                         by phi, the phi = 0 contour in black; --mirror adds the image r -> -r.
+  PREFIX_max_energy.png (--max-energy-shapes) each run's shape at its largest energy.
 
 --labels names the main run and then each --compare run (default: their "method" fields).
 Needs Debian's python3-matplotlib, python3-h5py and numpy (call /usr/bin/python3, not a pyenv one).
@@ -156,7 +157,22 @@ def load_snapshots(history, folder, count):
             for i in picks]
 
 
-def plot_snapshots(snapshots, mirror, path):
+def load_max_energy_snapshots(runs, paths):
+    """Per run, the series file nearest in time to the step of largest energy (kinetics)."""
+    import numpy as np
+
+    picks = []
+    for run, path in zip(runs, paths):
+        series = run["series"]
+        if not series:
+            fail(f"{path}: the history lists no series files")
+        t_max = run["steps"][int(np.argmax(column(run, "energy")))]["t_star"]
+        entry = min(series, key=lambda e: abs(e["time"] - t_max))
+        picks.append((entry["time"], load_snapshot(os.path.join(os.path.dirname(os.path.abspath(path)), entry["file"]))))
+    return picks
+
+
+def plot_snapshots(snapshots, mirror, path, titles=None):
     import matplotlib.pyplot as plt
     import matplotlib.tri as mtri
     import numpy as np
@@ -180,7 +196,10 @@ def plot_snapshots(snapshots, mirror, path):
         ax.set_aspect("equal")
         ax.set_xlabel("r")
         t = t_star if t_star is not None else time
-        ax.set_title(f"t* = {t:.4g}" if t is not None else "t* = ?")
+        title = f"t* = {t:.4g}" if t is not None else "t* = ?"
+        if titles:
+            title = f"{titles[list(axes[0]).index(ax)]}\n{title}"
+        ax.set_title(title)
     axes[0][0].set_ylabel("z")
     fig.colorbar(sc, cax=axes[0][-1].inset_axes([1.04, 0.0, 0.04, 1.0]), label="phi")
     save(fig, path)
@@ -196,6 +215,8 @@ def main():
     parser.add_argument("--mirror", action="store_true", help="also draw the image r -> -r")
     parser.add_argument("--compare", nargs="+", default=[], metavar="HISTORY",
                         help="further history files whose energy curves are overlaid")
+    parser.add_argument("--max-energy-shapes", action="store_true",
+                        help="also PREFIX_max_energy.png: each run's shape at its largest energy")
     parser.add_argument("--labels", nargs="+", default=None,
                         help="curve labels: the main run, then each --compare run")
     args = parser.parse_args()
@@ -219,11 +240,14 @@ def main():
     # Everything is read before anything is written: a missing series file leaves no half output.
     snapshots = load_snapshots(runs[0], os.path.dirname(os.path.abspath(args.history)),
                                args.snapshots)
+    peaks = load_max_energy_snapshots(runs, [args.history] + args.compare) if args.max_energy_shapes else None
     folder = os.path.dirname(args.out)
     if folder:
         os.makedirs(folder, exist_ok=True)
     plot_energy(runs, names, args.reference_energy, args.out + "_energy.png")
     plot_snapshots(snapshots, args.mirror, args.out + "_snapshots.png")
+    if peaks:
+        plot_snapshots(peaks, args.mirror, args.out + "_max_energy.png", titles=names)
 
 
 if __name__ == "__main__":

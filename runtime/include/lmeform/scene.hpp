@@ -47,7 +47,7 @@ struct SceneNodes {
   std::array<int, 3> counts{};         ///< Kind::counts: nodes per axis, both ends included
   int count = 0;                       ///< Kind::count: a uniform CVT of exactly this many nodes (uniform_cvt, 2D)
   int lloyd_iterations = 100;          ///< Kind::count: Lloyd iterations of that CVT
-  std::filesystem::path file;          ///< Kind::file: read_points() file, resolved against the scene's folder
+  std::filesystem::path file;          ///< Kind::file: read_points() file, or a run's HDF5 output (its nodes); resolved against the scene's folder
   double gamma = 0.8;                  ///< LME locality gamma (seed: 0.8)
   int spacing_smoothing = 5;           ///< smoothing passes on the nodal spacing h_a (smooth_spacing)
   int quadrature_points = 6;           ///< points of the simplex rule per background cell

@@ -56,7 +56,8 @@ struct DynamicsSettings {
   double dt_min = 0;                      ///< 0: dt · 2⁻²⁰
   double growth = 2;                      ///< largest Δt factor per accepted step
   double energy_decrement = 0;            ///< target |ΔE| per step; 0: the first step's
-  int target_newton = 4;                  ///< more Newton iterations than this: Δt shrinks
+  int target_newton = 8;                  ///< more Newton iterations than this: Δt shrinks (the chord
+                                          ///< iteration of a reused Hessian takes 3-5)
   int max_steps = 100000;
   int max_retries = 12;                   ///< halvings of one step before the run stops
   bool hessian_every_iteration = false;   ///< VTI: else the Hessian of E once per step (seed)

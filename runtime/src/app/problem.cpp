@@ -449,6 +449,13 @@ NodeSet initial_nodes(const Scene& scene, std::ostream* log) {
     }
     case SceneNodes::Kind::file: {
       try {
+        // A previous run's output (HDF5): its nodes, so that its fields can be read back on them.
+        if (scene.nodes.file.extension() == ".h5") {
+          NodeSet nodes = read_field_hdf5(scene.nodes.file).nodes;
+          if (nodes.dim != scene.dim())
+            throw std::runtime_error(fmt::format("{} holds {}D nodes, the scene is {}D", scene.nodes.file.string(), nodes.dim, scene.dim()));
+          return nodes;
+        }
         return read_points(scene.nodes.file, scene.dim(), &scene.domain);
       } catch (const std::runtime_error& e) {
         throw SceneError(fmt::format("{}: key 'nodes.file': {}", scene.source, e.what()));

@@ -1,0 +1,35 @@
+#!/usr/bin/env bash
+# Regenerates the dynamics results of docs/dynamics.md: the oblate relaxation (VTI, adaptive dt) and
+# its static equilibrium on the same grid, the kinetics of deflation at three rates, seed Table 3.3
+# in form (bench_dynamics, full mode), and the plots. Run from the repository root after `make build`.
+#   demos/dynamics/run_study.sh [build-dir]        (about 45 minutes on one core)
+set -euo pipefail
+build=${1:-build}
+lmeform=$build/lmeform
+out=$build/demo
+mkdir -p "$out" docs/figures
+python=/usr/bin/python3
+
+"$lmeform" run demos/dynamics/oblate_relaxation.toml --json "$out/oblate_relaxation.json"
+"$lmeform" run demos/dynamics/oblate_equilibrium.toml --json "$out/oblate_equilibrium.json"
+reference=$($python -c "import json; print(json.load(open('$out/oblate_equilibrium.json'))['energy'])")
+$python scripts/plot_dynamics.py "$out/oblate_relaxation/oblate_relaxation_history.json" --out docs/figures/oblate_relaxation \
+  --reference-energy "$reference" --mirror --snapshots 4
+
+# Kinetics: v = 0.9 -> 0.8 over t* = 0.1, 1 and 10, then relaxation at fixed volume.
+histories=()
+labels=()
+for until in 0.1 1 10; do
+  rate=$($python -c "print(-1.0 / 9.0 / $until)")
+  scene=$out/kinetics_$until.toml
+  sed -e "s/^V0 = .*/V0 = { rate = $rate, until = $until }/" -e "s/^name = .*/name = \"kinetics_$until\"/" \
+      -e "s#^directory = .*#directory = \"$out/kinetics_$until\"#" \
+      -e "s#\"../../build/demo/#\"$PWD/$out/#g" demos/dynamics/kinetics_deflation.toml > "$scene"
+  "$lmeform" run "$scene" --json "$out/kinetics_$until.json"
+  histories+=("$out/kinetics_$until/kinetics_${until}_history.json")
+  labels+=("deflation over t* = $until")
+done
+$python scripts/plot_dynamics.py "${histories[0]}" --out docs/figures/kinetics --compare "${histories[@]:1}" \
+  --labels "${labels[@]}" --mirror --snapshots 4 --max-energy-shapes
+
+"$build"/tests/app/bench_dynamics --out "$build/bench"
