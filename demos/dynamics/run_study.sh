@@ -16,7 +16,8 @@ reference=$($python -c "import json; print(json.load(open('$out/oblate_equilibri
 $python scripts/plot_dynamics.py "$out/oblate_relaxation/oblate_relaxation_history.json" --out docs/figures/oblate_relaxation \
   --reference-energy "$reference" --mirror --snapshots 4
 
-# Kinetics: v = 0.9 -> 0.8 over t* = 0.1, 1 and 10, then relaxation at fixed volume.
+# Kinetics: v = 0.9 -> 0.8 over t* = 0.1, 1 and 10, then relaxation at fixed volume (coarse grid).
+"$lmeform" run demos/dynamics/kinetics_start.toml --json "$out/kinetics_start.json"
 histories=()
 labels=()
 for until in 0.1 1 10; do
