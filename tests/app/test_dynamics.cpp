@@ -317,6 +317,19 @@ TEST_P(DynamicsCartesian, TheEnergyFallsAndAreaAndVolumeHold) {
 
 INSTANTIATE_TEST_SUITE_P(TwoAndThreeDimensions, DynamicsCartesian, ::testing::Values(2, 3));
 
+TEST(Dynamics, AJumpOfSpontaneousCurvatureActsFromItsTime) {
+  const Case plain = make("t_end = 0.004\ndt = 1e-3\nadaptive = false\n");
+  const Case jump = make("t_end = 0.004\ndt = 1e-3\nadaptive = false\n[dynamics.schedule]\nC0 = { at = 0.002, value = 3.0 }\n");
+  const DynamicsRun a = app::run_dynamics(PETSC_COMM_WORLD, plain.scene, plain.settings, nullptr, nullptr);
+  const DynamicsRun b = app::run_dynamics(PETSC_COMM_WORLD, jump.scene, jump.settings, nullptr, nullptr);
+  ASSERT_TRUE(a.failure.empty() && b.failure.empty()) << a.failure << b.failure;
+  ASSERT_EQ(a.history.size(), 5u);
+  ASSERT_EQ(b.history.size(), 5u);
+  // Steps ending before t* = 0.002 are the same; the step ending at 0.002 and later ones see C0 = 3.
+  EXPECT_NEAR(b.history[1].energy, a.history[1].energy, 1e-12 * a.history[1].energy);
+  for (std::size_t s = 2; s < 5; ++s) EXPECT_GT(std::abs(b.history[s].energy - a.history[s].energy), 1e-3) << "step " << s;
+}
+
 TEST(Dynamics, BadScenesNameTheKey) {
   auto error_of = [](const std::string& dynamics) {
     try {
