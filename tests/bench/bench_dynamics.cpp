@@ -8,6 +8,7 @@
 // on the way) with the energy never increasing (beyond 1e-10 relative) and no folded map.
 //
 //   bench_dynamics [--quick] [--out DIR]      writes DIR/dynamics.json
+//   bench_dynamics --out DIR -window 0.3 0.4  another interval: DIR/dynamics_0.3_0.4.json
 //
 // Quick: h = 1/16, eps = 0.125 and the window [1e-3, 3e-3]; full: the demo's grid (h = 0.025,
 // eps = 0.05) and the seed's window [1e-3, 1.1e-2].
@@ -47,7 +48,19 @@ int main(int argc, char** argv) {
   const int rank = PetscSession::rank();
   const std::string_view extensions[] = {app::kDynamicsExtension};
   Scene scene = load_scene(std::string(LMEFORM_SOURCE_DIR) + "/demos/dynamics/oblate_relaxation.toml", extensions);
-  const double t1 = 1e-3, t2 = options.quick ? 3e-3 : 1.1e-2;
+  // --window T1 T2 (PETSc-style, after --quick/--out): another interval of the same relaxation.
+  double t1 = 1e-3, t2 = options.quick ? 3e-3 : 1.1e-2;
+  std::string label = "seed";
+  for (int i = 1; i + 2 < argc + 1; ++i)
+    if (std::string_view(argv[i]) == "-window" && i + 2 < argc) {
+      t1 = std::stod(argv[i + 1]);
+      t2 = std::stod(argv[i + 2]);
+      label = fmt::format("{:g}_{:g}", t1, t2);
+    }
+  if (!(t2 > t1 && t1 > 0)) {
+    std::fprintf(stderr, "bench_dynamics: -window T1 T2 needs 0 < T1 < T2\n");
+    return 1;
+  }
   if (options.quick) {
     scene.nodes.spacing = 0.0625;
     scene.constants["eps"] = 0.125;
@@ -60,7 +73,7 @@ int main(int argc, char** argv) {
   // The common state at t1*: adaptive VTI from the start with small first steps.
   app::DynamicsSettings lead = base;
   lead.t_end = t1;
-  lead.dt = t1 / 10;
+  lead.dt = std::min(t1 / 10, 1e-4);
   const app::DynamicsRun start = app::run_dynamics(PETSC_COMM_WORLD, scene, lead, nullptr, nullptr);
   if (!start.failure.empty()) {
     std::fprintf(stderr, "bench_dynamics: the run to t1* failed: %s\n", start.failure.c_str());
@@ -180,8 +193,9 @@ int main(int argc, char** argv) {
     }
     if (euler == nullptr) std::printf("forward Euler: no stable step down to %.1e\n", interval / 1e4);
     std::filesystem::create_directories(options.out);
-    write_text_atomically(options.out / "dynamics.json", out.dump(2) + "\n");
-    std::printf("wrote %s\n", (options.out / "dynamics.json").string().c_str());
+    const std::string name = label == "seed" ? "dynamics.json" : "dynamics_" + label + ".json";
+    write_text_atomically(options.out / name, out.dump(2) + "\n");
+    std::printf("wrote %s\n", (options.out / name).string().c_str());
   }
   return 0;
 }
