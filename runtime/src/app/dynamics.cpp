@@ -20,6 +20,7 @@
 
 #include "lmeform/assembler.hpp"
 #include "lmeform/constrained_minimizer.hpp"
+#include "lmeform/cvt.hpp"
 #include "lmeform/delaunay.hpp"
 #include "lmeform/kernel.hpp"
 #include "lmeform/node_sets.hpp"
@@ -37,7 +38,8 @@ std::optional<DynamicsSettings> read_dynamics(const Scene& s) {
       s, kDynamicsExtension,
       {"method", "deformation", "dissipation", "time_unit", "t_start", "t_end", "dt", "adaptive", "dt_max",
        "dt_min", "growth", "energy_decrement", "target_newton", "max_steps", "max_retries", "hessian", "min_jacobian",
-       "output_every", "checkpoint_every", "report_times", "schedule", "reset_every", "reset_distortion", "require_decrease"});
+       "output_every", "checkpoint_every", "report_times", "schedule", "reset_every", "reset_distortion", "require_decrease", "remesh_every", "remesh_factor",
+       "remesh_iterations", "remesh_field", "remesh_fit_iterations"});
   if (!t) return std::nullopt;
   DynamicsSettings d;
   const std::string method = t->choice_of("method", t->optional_string("method").value_or("vti"), {"vti", "forward_euler"});
@@ -62,6 +64,11 @@ std::optional<DynamicsSettings> read_dynamics(const Scene& s) {
       t->choice_of("hessian", t->optional_string("hessian").value_or("step"), {"step", "iteration"}) == "iteration";
   d.min_jacobian = t->non_negative("min_jacobian", t->number("min_jacobian", 0.0));
   d.require_decrease = t->boolean("require_decrease", d.require_decrease);
+  d.remesh_every = t->at_least("remesh_every", t->integer("remesh_every", d.remesh_every), 0);
+  d.remesh_factor = t->non_negative("remesh_factor", t->number("remesh_factor", d.remesh_factor));
+  d.remesh_iterations = t->at_least("remesh_iterations", t->integer("remesh_iterations", d.remesh_iterations), 1);
+  if (t->has("remesh_field")) d.remesh_field = t->string("remesh_field");
+  d.remesh_fit_iterations = t->at_least("remesh_fit_iterations", t->integer("remesh_fit_iterations", d.remesh_fit_iterations), 0);
   d.reset_every = t->at_least("reset_every", t->integer("reset_every", d.reset_every), 0);
   d.reset_distortion = t->non_negative("reset_distortion", t->number("reset_distortion", 0.0));
   if (d.reset_distortion > 0 && d.reset_distortion <= 1)
@@ -271,6 +278,11 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
       throw SceneError(fmt::format("{}: '{}' is no constant of the forms{}", c.where, c.name, did_you_mean(c.name, names)));
     }
   const std::map<std::string, FieldJets> jets = field_jets(scene);
+  if (settings.remesh_every > 0 &&
+      std::none_of(b.coefficients.begin(), b.coefficients.end(), [&](const UnknownField& c) { return c.name == settings.remesh_field && c.components == 1; }))
+    throw SceneError(fmt::format("{}: key 'dynamics.remesh_field': '{}' is no scalar field of [coefficients] (the re-mesh "
+                                 "adapts the nodes to its gradient)",
+                                 scene.source, settings.remesh_field));
   const bool resets = settings.reset_every > 0 || settings.reset_distortion > 0;
   if (resets)
     for (const auto& [field, j] : jets)
@@ -280,15 +292,16 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
                                      scene.source, field, field));
 
   const bool euler = settings.method == DynamicsSettings::Method::forward_euler;
-  const NodeSet material_nodes = initial_nodes(scene, log);  // the reference of the start: node identities
+  NodeSet material_nodes = initial_nodes(scene, log);  // the nodes' identities (a re-mesh makes new ones)
   run.cells = delaunay(material_nodes);
-  const std::size_t n_nodes = material_nodes.size();
+  std::size_t n_nodes = material_nodes.size();
   const int bs = b.dofs_per_node;
   std::size_t k = 0;
   std::vector<double> targets;  // the current constraint targets (schedules move them)
 
   auto build = [&](const NodeSet& nodes, const std::vector<double>& state, std::optional<CarriedQuadrature> carried,
-                   std::map<std::string, std::vector<double>, std::less<>> qdata, bool keep_targets) {
+                   std::map<std::string, std::vector<double>, std::less<>> qdata, bool keep_targets,
+                   std::map<std::string, std::vector<double>, std::less<>> coefficients = {}) {
     auto r = std::make_unique<Reference>();
     ProblemInput input;
     input.nodes = nodes;
@@ -297,6 +310,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     input.log = nullptr;
     input.carried = std::move(carried);
     input.qdata_values = std::move(qdata);
+    input.coefficient_values = std::move(coefficients);
     if (keep_targets)
       for (std::size_t i = 0; i < b.constraints.size(); ++i) input.targets[b.constraints[i].name] = targets[i];
     r->space = build_problem_space(comm, b, input);
@@ -409,6 +423,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
   double target_decrement = settings.energy_decrement;
   int step = 0;
   int steps_since_reset = 0;
+  int steps_since_remesh = 0;
   std::vector<TimeSeriesStep> series;
   std::vector<double> velocity(n_nodes * std::size_t(bs), 0.0);
   const fs::path checkpoint_path = output != nullptr ? output->directory / (output->name + "_checkpoint.h5") : fs::path();
@@ -508,6 +523,10 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
   // changes, written with a checkpoint so that a restart continues on the same reference.
   auto write_checkpoint = [&]() {
     if (output == nullptr) return;
+    if (run.remeshes > 0) {
+      if (out != nullptr) *out << "  (no checkpoint after a re-mesh: restarts resume from the original nodes only)\n";
+      return;
+    }
     const std::vector<double> y = to_original(*ref->space.disc, ref->u, bs);
     if (rank != 0) return;
     OutputAttributes attributes{{"step", static_cast<std::int64_t>(step)},
@@ -641,6 +660,98 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     run.seconds_reset += MPI_Wtime() - t0;
   };
 
+  // A full re-mesh (the cases resets cannot help: nodes accumulated or spread too thin): new nodes
+  // by CVT for the density 1 + f |∇φ| of the current field, every scalar nodal field interpolated
+  // onto them (a projection: it changes E, and the change is reported), the motion restarted from
+  // the identity on a new triangulation and quadrature.
+  auto remesh = [&]() {
+    const double t0 = MPI_Wtime();
+    const double energy_before = energy_of(ref->u);
+    const std::vector<double> y = to_original(*ref->space.disc, ref->u, bs);
+    std::vector<double> positions(n_nodes * std::size_t(dim));
+    for (std::size_t a = 0; a < n_nodes; ++a)
+      for (int i = 0; i < dim; ++i) positions[a * std::size_t(dim) + std::size_t(i)] = y[a * std::size_t(bs) + std::size_t(offset + i)];
+    const NodeSet current(dim, positions);
+    LmeOptions lme;
+    lme.spacing_smoothing = scene.nodes.spacing_smoothing;
+    if (scene.axisymmetric()) {  // scalar fields are even in r
+      lme.mirror_axis = 0;
+      lme.mirror_position = 0.0;
+    }
+    const auto field = std::find_if(scalar_fields.begin(), scalar_fields.end(),
+                                    [&](const auto& f) { return f.first == settings.remesh_field; });
+    std::vector<double> grad_norm(n_nodes, 0.0);
+    {
+      const LmeBasis basis(current, std::vector<double>(n_nodes, scene.nodes.gamma), lme);
+      const Box& box = scene.domain;
+      for (std::size_t a = 0; a < n_nodes; ++a) {
+        const auto x = current.point(a);
+        // On the walls (fixed, the field is at its far value there) derivatives at hull vertices are undefined.
+        bool on_wall = false;
+        for (int i = 0; i < dim; ++i) {
+          const double tol = 1e-9 * (box.hi[std::size_t(i)] - box.lo[std::size_t(i)]);
+          on_wall = on_wall || x[std::size_t(i)] <= box.lo[std::size_t(i)] + tol || x[std::size_t(i)] >= box.hi[std::size_t(i)] - tol;
+        }
+        if (on_wall) continue;
+        const auto list = basis.neighbours(x);
+        const auto jet = basis.evaluate(x, list, 1);
+        double g2 = 0;
+        for (int i = 0; i < dim; ++i) {
+          double g = 0;
+          for (std::size_t m = 0; m < list.size(); ++m) g += jet[std::size_t(1 + i) * list.size() + m] * field->second[std::size_t(list[m])];
+          g2 += g * g;
+        }
+        grad_norm[a] = std::sqrt(g2);
+      }
+    }
+    CvtOptions cvt;
+    cvt.iterations = settings.remesh_iterations;
+    const NodeSet nodes = cvt_relocate(current, scene.domain, phase_field_density(settings.remesh_factor, current, grad_norm), cvt);
+    // The new nodal values make the new LME field take the old field's values at the new nodes:
+    // LME is not interpolating (Σ_a p_a(x_b) φ_a ≠ φ_b), so copying the old field's values would
+    // smooth it a second time and widen the interface. Richardson iterations on the interpolation
+    // conditions P φ = g (P_ba = p_a(x_b), an averaging operator, eigenvalues in (0, 1]).
+    const LmeBasis new_basis(nodes, std::vector<double>(nodes.size(), scene.nodes.gamma), lme);
+    std::vector<std::vector<int>> rows(nodes.size());
+    std::vector<std::vector<double>> weights(nodes.size());
+    for (std::size_t b = 0; b < nodes.size(); ++b) {
+      rows[b] = new_basis.neighbours(nodes.point(b));
+      weights[b] = new_basis.evaluate(nodes.point(b), rows[b], 0);
+    }
+    std::map<std::string, std::vector<double>, std::less<>> projected;
+    for (auto& [name, values] : scalar_fields) {
+      const std::vector<double> target = interpolate_nodal_field(current, values, scene.nodes.gamma, lme, nodes);
+      std::vector<double> phi = target;
+      for (int it = 0; it < settings.remesh_fit_iterations; ++it) {
+        std::vector<double> next = phi;
+        for (std::size_t b = 0; b < nodes.size(); ++b) {
+          double v = 0;
+          for (std::size_t m = 0; m < rows[b].size(); ++m) v += weights[b][m] * phi[std::size_t(rows[b][m])];
+          next[b] += target[b] - v;
+        }
+        phi.swap(next);
+      }
+      values = phi;
+      projected[name] = values;
+    }
+    material_nodes = nodes;
+    n_nodes = nodes.size();
+    run.cells = delaunay(nodes);
+    velocity.assign(n_nodes * std::size_t(bs), 0.0);
+    std::vector<double> identity(n_nodes * std::size_t(bs), 0.0);
+    for (std::size_t a = 0; a < n_nodes; ++a)
+      for (int i = 0; i < dim; ++i) identity[a * std::size_t(bs) + std::size_t(offset + i)] = nodes.point(a)[std::size_t(i)];
+    ref = build(nodes, identity, std::nullopt, {}, true, std::move(projected));
+    ++run.remeshes;
+    steps_since_remesh = steps_since_reset = 0;
+    const double energy_after = energy_of(ref->u);
+    run.remesh_changes.push_back((energy_after - energy_before) / std::abs(energy_before));
+    if (out != nullptr)
+      *out << fmt::format("  re-mesh {} at step {}: {} nodes, the projection changed E by {:+.2e} (relative)\n", run.remeshes, step,
+                          n_nodes, run.remesh_changes.back());
+    run.seconds_reset += MPI_Wtime() - t0;
+  };
+
   bool resumed = false;
   if (output != nullptr && output->restart) {
     if (!fs::exists(checkpoint_path) || !fs::exists(history_path))
@@ -741,6 +852,10 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
       run.failure = fmt::format("stopped after max_steps = {} steps at t* = {:.6e}", settings.max_steps, t);
       break;
     }
+    if (settings.remesh_every > 0 && steps_since_remesh >= settings.remesh_every) {
+      remesh();
+      apply_schedule(t);
+    }
     // A reset every N steps, or when F is too distorted.
     if (resets && ((settings.reset_every > 0 && steps_since_reset >= settings.reset_every) ||
                    (settings.reset_distortion > 0 && run.history.back().distortion > settings.reset_distortion))) {
@@ -830,6 +945,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
         t += dt_step;
         ++step;
         ++steps_since_reset;
+        ++steps_since_remesh;
         ++run.accepted;
         while (next_report < settings.report_times.size() && settings.report_times[next_report] <= t + t_tolerance) {
           run.energy_at[settings.report_times[next_report]] = last.energy;

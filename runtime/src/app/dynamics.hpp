@@ -63,6 +63,11 @@ struct DynamicsSettings {
   bool hessian_every_iteration = false;   ///< VTI: else the Hessian of E once per step (seed)
   double min_jacobian = 0;                ///< det F below this at a quadrature point rejects a step
   bool require_decrease = false;          ///< a step that raises the energy is rejected (forward Euler's instability)
+  int remesh_every = 0;                   ///< a full re-mesh with projection every N steps (0: never)
+  std::string remesh_field = "phi";       ///< the scalar [coefficients] field whose gradient the new nodes follow
+  double remesh_factor = 100;             ///< f of the CVT density 1 + f |∇φ|
+  int remesh_iterations = 20;             ///< Lloyd iterations of a re-mesh
+  int remesh_fit_iterations = 20;         ///< iterations fitting the new nodal values to the old field (0: copy)
   int reset_every = 0;                    ///< reset the reference configuration every N steps (0: never)
   double reset_distortion = 0;            ///< ... or when σ_max/σ_min of F exceeds this (0: never)
   int output_every = 10;                  ///< time-series files every N steps (0: start and end only)
@@ -108,6 +113,8 @@ struct DynamicsRun {
   double wall_s = 0;
   std::map<double, double> energy_at;     ///< report time -> E
   std::vector<ResetChange> reset_changes; ///< one per reset
+  int remeshes = 0;
+  std::vector<double> remesh_changes;     ///< relative change of E by each re-mesh's projection
   NodeSet reference_nodes;                ///< original order
   BackgroundCells cells;
   std::vector<double> final_state;        ///< original order

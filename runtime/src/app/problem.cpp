@@ -535,6 +535,22 @@ std::vector<double> nodal_values(const BoundScene& b, const std::vector<SceneIni
 
 }  // namespace
 
+std::vector<double> interpolate_nodal_field(const NodeSet& old_nodes, std::span<const double> phi, double gamma, const LmeOptions& lme,
+                                 const NodeSet& new_nodes) {
+  const std::vector<double> gammas(old_nodes.size(), gamma);
+  const LmeBasis basis(old_nodes, gammas, lme);
+  std::vector<double> out(new_nodes.size());
+  for (std::size_t a = 0; a < new_nodes.size(); ++a) {
+    const auto x = new_nodes.point(a);
+    const auto list = basis.neighbours(x);
+    const auto p = basis.evaluate(x, list, 0);
+    double v = 0;
+    for (std::size_t m = 0; m < list.size(); ++m) v += p[m] * phi[static_cast<std::size_t>(list[m])];
+    out[a] = v;
+  }
+  return out;
+}
+
 std::vector<double> coefficient_values(const BoundScene& b, const std::string& name, int components, const NodeSet& nodes) {
   if (std::none_of(b.scene->coefficients.begin(), b.scene->coefficients.end(),
                    [&](const SceneInitialField& f) { return f.unknown == name; }))
@@ -720,7 +736,12 @@ ProblemSpace build_problem_space(MPI_Comm comm, const BoundScene& b, const Probl
         layout.push_back({k->coefficients[i].name, k->coefficients[i].components, per_node});
         per_node += k->coefficients[i].components;
       }
-      const std::vector<double> values = nodal_values(b, scene.coefficients, b.coefficient_expression, layout, per_node, nodes);
+      std::vector<double> values = nodal_values(b, scene.coefficients, b.coefficient_expression, layout, per_node, nodes);
+      for (const auto& field : layout) {
+        const auto given = input.coefficient_values.find(field.name);
+        if (given == input.coefficient_values.end() || field.components != 1) continue;
+        for (std::size_t n = 0; n < nodes.size(); ++n) values[n * std::size_t(per_node) + std::size_t(field.offset)] = given->second.at(n);
+      }
       space.coefficient_vectors.push_back(a->create_coefficient_vector());
       set_from_original(disc, values, per_node, space.coefficient_vectors.back());
       a->set_coefficients(space.coefficient_vectors.back());
@@ -770,8 +791,11 @@ ProblemSpace build_problem_space(MPI_Comm comm, const BoundScene& b, const Probl
         if (provider != scene.qdata.end() && provider->provider == "field") {
           auto& values = interpolated[{provider->field, provider->derivative}];
           if (values.empty()) {
+            const auto given = input.coefficient_values.find(provider->field);
             const std::vector<double> field =
-                nodal_values(b, scene.coefficients, b.coefficient_expression, {{provider->field, 1, 0}}, 1, nodes);
+                given != input.coefficient_values.end()
+                    ? given->second
+                    : nodal_values(b, scene.coefficients, b.coefficient_expression, {{provider->field, 1, 0}}, 1, nodes);
             if (mirror_fields && !field_basis) {
               LmeOptions lme = input.lme;
               lme.mirror_axis = 0;

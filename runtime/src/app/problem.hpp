@@ -104,6 +104,9 @@ struct ProblemInput {
   /// Quadrature data given by value, by name (every global point, the datum's size each): they
   /// replace the scene's provider (a reset's pushed-forward reference field).
   std::map<std::string, std::vector<double>, std::less<>> qdata_values;
+  /// Nodal values of scalar [coefficients] fields, by name (input.nodes order): they replace the
+  /// scene's (a re-mesh's projected reference field).
+  std::map<std::string, std::vector<double>, std::less<>> coefficient_values;
 };
 
 /// Error of one unknown against the scene's exact solution.
@@ -209,6 +212,11 @@ struct SceneRun {
 };
 
 
+
+/// A scalar nodal field (values at old_nodes) evaluated at new points with the LME basis of the old
+/// nodes (values only): a field carried to another node set (an adapted grid, a re-mesh).
+[[nodiscard]] std::vector<double> interpolate_nodal_field(const NodeSet& old_nodes, std::span<const double> phi, double gamma,
+                                                          const LmeOptions& lme, const NodeSet& new_nodes);
 
 /// "; did you mean 'x'?" for the candidate closest to a misspelt name, else "".
 [[nodiscard]] std::string did_you_mean(std::string_view name, const std::vector<std::string>& candidates);

@@ -207,21 +207,6 @@ LmeOptions vesicle_lme_options(const Scene& scene) {
   return o;
 }
 
-std::vector<double> transfer_phi(const NodeSet& old_nodes, std::span<const double> phi, double gamma, const LmeOptions& lme,
-                                 const NodeSet& new_nodes) {
-  const std::vector<double> gammas(old_nodes.size(), gamma);
-  const LmeBasis basis(old_nodes, gammas, lme);
-  std::vector<double> out(new_nodes.size());
-  for (std::size_t a = 0; a < new_nodes.size(); ++a) {
-    const auto x = new_nodes.point(a);
-    const auto list = basis.neighbours(x);
-    const auto p = basis.evaluate(x, list, 0);
-    double v = 0;
-    for (std::size_t m = 0; m < list.size(); ++m) v += p[m] * phi[static_cast<std::size_t>(list[m])];
-    out[a] = v;
-  }
-  return out;
-}
 
 namespace {
 
@@ -286,7 +271,7 @@ StageRecord run_vesicle_stage(MPI_Comm comm, const BoundScene& bound, const Vesi
     const auto& st = model.adaptivity->stages[static_cast<std::size_t>(stage - 1)];
     input.initial = st.lloyd_iterations == 0
                         ? stages[from].result.state
-                        : transfer_phi(stages[from].result.nodes, stages[from].result.state, scene.nodes.gamma, lme, nodes);
+                        : interpolate_nodal_field(stages[from].result.nodes, stages[from].result.state, scene.nodes.gamma, lme, nodes);
     // A narrower interface: start from the same level sets with the new width.
     if (rec.parameter < stages[from].parameter) input.initial = rescale_interface(input.initial, stages[from].parameter, rec.parameter);
     // The multipliers (tension, pressure) change little between stages: start from the last ones.

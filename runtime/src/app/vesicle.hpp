@@ -82,10 +82,6 @@ void check_feasible(double A0, double V0, int dim = 3);
 /// and `spacing_smoothing` passes on the nodal spacing.
 [[nodiscard]] LmeOptions vesicle_lme_options(const Scene& scene);
 
-/// φ_h of a finished solve evaluated at new points (values only): the starting field on an adapted grid.
-[[nodiscard]] std::vector<double> transfer_phi(const NodeSet& old_nodes, std::span<const double> phi, double gamma,
-                                               const LmeOptions& lme, const NodeSet& new_nodes);
-
 /// Runs a vesicle scene: binds it with the model's targets filled in, then solves the first stage
 /// and every adaptivity stage (relocation, resolution check, continuation in eps from the previous
 /// stage, multipliers warm-started). A stage that cannot run ends the schedule (SceneRun::failure).
