@@ -2,7 +2,7 @@
 # Regenerates the dynamics results of docs/dynamics.md: the oblate relaxation (VTI, adaptive dt) and
 # its static equilibrium on the same grid, the kinetics of deflation at three rates, seed Table 3.3
 # in form (bench_dynamics, full mode), and the plots. Run from the repository root after `make build`.
-#   demos/dynamics/run_study.sh [build-dir]        (about 45 minutes on one core)
+#   demos/dynamics/run_study.sh [build-dir]        (about 40 minutes on one core)
 set -euo pipefail
 build=${1:-build}
 lmeform=$build/lmeform
@@ -34,3 +34,4 @@ $python scripts/plot_dynamics.py "${histories[0]}" --out docs/figures/kinetics -
   --labels "${labels[@]}" --mirror --snapshots 4 --max-energy-shapes
 
 "$build"/tests/app/bench_dynamics --out "$build/bench"
+"$build"/tests/app/bench_dynamics --out "$build/bench" -window 0.3 0.4
