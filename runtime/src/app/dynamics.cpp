@@ -298,6 +298,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
   const int bs = b.dofs_per_node;
   std::size_t k = 0;
   std::vector<double> targets;  // the current constraint targets (schedules move them)
+  std::vector<double> scales;   // the constraint scales of the start (the multipliers nu are scaled by them)
 
   auto build = [&](const NodeSet& nodes, const std::vector<double>& state, std::optional<CarriedQuadrature> carried,
                    std::map<std::string, std::vector<double>, std::less<>> qdata, bool keep_targets,
@@ -312,7 +313,10 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     input.qdata_values = std::move(qdata);
     input.coefficient_values = std::move(coefficients);
     if (keep_targets)
-      for (std::size_t i = 0; i < b.constraints.size(); ++i) input.targets[b.constraints[i].name] = targets[i];
+      for (std::size_t i = 0; i < b.constraints.size(); ++i) {
+        input.targets[b.constraints[i].name] = targets[i];
+        input.scales[b.constraints[i].name] = scales[i];
+      }
     r->space = build_problem_space(comm, b, input);
     r->nodes = nodes;
     ConstrainedMinimizerOptions options;
@@ -352,6 +356,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
   for (const auto& c : ref->space.constraints) {
     run.constraint_names.push_back(c.name);
     targets.push_back(c.target);
+    scales.push_back(c.scale);
   }
   {
     const auto h = ref->space.disc->basis().spacing();
@@ -566,8 +571,15 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
   // Reset of the reference configuration (seed Fig. 3.8): the current positions become the nodes,
   // the quadrature points are carried (x̂ → y(x̂), w → w det F), the field values at the points are
   // kept, their gradients and Hessians pushed forward, the basis rebuilt; nothing is projected.
+  auto relative = [](double after, double before) { return (after - before) / std::max(std::abs(before), 1e-300); };
+  auto material_fields = [&]() {
+    std::map<std::string, std::vector<double>, std::less<>> values;
+    for (const auto& [name, v] : scalar_fields) values[name] = v;
+    return values;
+  };
   auto reset_reference = [&]() {
     const double t0 = MPI_Wtime();
+    apply_schedule(t);  // before and after at the same constants (a folding attempt set those of t + dt)
     const double energy_before = energy_of(ref->u);
     const std::vector<double> constraints_before = constraint_values(ref->u);
     const Discretization& disc = *ref->space.disc;
@@ -581,7 +593,16 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     carried.quadrature.points.assign(Q * std::size_t(dim), 0.0);
     carried.quadrature.weights.assign(Q, 0.0);
     std::map<std::string, std::vector<double>, std::less<>> pushed;
+    // Jets no assembler reads are not carried (a field's Hessian needs its gradient: checked at the start).
+    std::map<std::string, FieldJets> carried_jets;
     for (const auto& [field, j] : jets) {
+      FieldJets c;
+      if (ref->space.qdata.contains(j.value)) c.value = j.value;
+      if (ref->space.qdata.contains(j.gradient)) c.gradient = j.gradient;
+      if (ref->space.qdata.contains(j.hessian) && !c.gradient.empty()) c.hessian = j.hessian;
+      carried_jets[field] = c;
+    }
+    for (const auto& [field, j] : carried_jets) {
       if (!j.value.empty()) pushed[j.value] = ref->space.qdata.at(j.value);  // material: unchanged
       if (!j.gradient.empty()) pushed[j.gradient].assign(Q * std::size_t(dim), 0.0);
       if (!j.hessian.empty()) pushed[j.hessian].assign(Q * std::size_t(dim * dim), 0.0);
@@ -605,7 +626,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
             for (int I = 0; I < dim; ++I) Fm(i, I) = F[std::size_t(i * dim + I)];
           carried.quadrature.weights[p] = quad.weights[p] * Fm.determinant();
           const Eigen::MatrixXd Fi = Fm.inverse();  // Fi(I, i) = ∂X_I / ∂y_i
-          for (const auto& [field, j] : jets) {
+          for (const auto& [field, j] : carried_jets) {
             if (j.gradient.empty()) continue;
             const auto& g0 = ref->space.qdata.at(j.gradient);
             Eigen::VectorXd G0(dim), g(dim);
@@ -633,7 +654,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     };
     sum(carried.quadrature.points);
     sum(carried.quadrature.weights);
-    for (const auto& [field, j] : jets) {
+    for (const auto& [field, j] : carried_jets) {
       if (!j.gradient.empty()) sum(pushed[j.gradient]);
       if (!j.hessian.empty()) sum(pushed[j.hessian]);
     }
@@ -641,13 +662,14 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     for (std::size_t a = 0; a < n_nodes; ++a)
       for (int i = 0; i < dim; ++i) positions[a * std::size_t(dim) + std::size_t(i)] = y[a * std::size_t(bs) + std::size_t(offset + i)];
     NodeSet nodes(dim, positions);
-    ref = build(nodes, y, std::move(carried), std::move(pushed), true);
+    ref = build(nodes, y, std::move(carried), std::move(pushed), true, material_fields());
+    apply_schedule(t);
     // The same physical state: energy and constraints unchanged up to the basis' consistency error.
     ResetChange change;
-    change.energy = (energy_of(ref->u) - energy_before) / std::abs(energy_before);
+    change.energy = relative(energy_of(ref->u), energy_before);
     const std::vector<double> constraints_after = constraint_values(ref->u);
     for (std::size_t i = 0; i < k; ++i)
-      change.constraints.push_back((constraints_after[i] - constraints_before[i]) / std::abs(constraints_before[i]));
+      change.constraints.push_back(relative(constraints_after[i], constraints_before[i]));
     run.reset_changes.push_back(change);
     if (out != nullptr) {
       std::string c;
@@ -666,6 +688,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
   // the identity on a new triangulation and quadrature.
   auto remesh = [&]() {
     const double t0 = MPI_Wtime();
+    apply_schedule(t);
     const double energy_before = energy_of(ref->u);
     const std::vector<double> y = to_original(*ref->space.disc, ref->u, bs);
     std::vector<double> positions(n_nodes * std::size_t(dim));
@@ -742,10 +765,12 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     for (std::size_t a = 0; a < n_nodes; ++a)
       for (int i = 0; i < dim; ++i) identity[a * std::size_t(bs) + std::size_t(offset + i)] = nodes.point(a)[std::size_t(i)];
     ref = build(nodes, identity, std::nullopt, {}, true, std::move(projected));
+    apply_schedule(t);
+    run.reference_nodes = material_nodes;
     ++run.remeshes;
     steps_since_remesh = steps_since_reset = 0;
     const double energy_after = energy_of(ref->u);
-    run.remesh_changes.push_back((energy_after - energy_before) / std::abs(energy_before));
+    run.remesh_changes.push_back(relative(energy_after, energy_before));
     if (out != nullptr)
       *out << fmt::format("  re-mesh {} at step {}: {} nodes, the projection changed E by {:+.2e} (relative)\n", run.remeshes, step,
                           n_nodes, run.remesh_changes.back());
@@ -786,7 +811,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
       for (const auto& [name, f] : qf.fields)
         if (name.starts_with("qdata_")) qdata[name.substr(6)] = f.values;
       for (std::size_t i = 0; i < k; ++i) targets[i] = std::get<double>(attr(cp, checkpoint_path, fmt::format("target_{}", i)));
-      ref = build(cp.nodes, field("state"), std::move(carried), std::move(qdata), true);
+      ref = build(cp.nodes, field("state"), std::move(carried), std::move(qdata), true, material_fields());
     } else {
       for (std::size_t i = 0; i < k; ++i) targets[i] = std::get<double>(attr(cp, checkpoint_path, fmt::format("target_{}", i)));
       set_from_original(*ref->space.disc, field("state"), bs, ref->u);
@@ -798,6 +823,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     run.accepted = static_cast<int>(std::get<std::int64_t>(attr(cp, checkpoint_path, "accepted")));
     run.rejected = static_cast<int>(std::get<std::int64_t>(attr(cp, checkpoint_path, "rejected")));
     steps_since_reset = static_cast<int>(std::get<std::int64_t>(attr(cp, checkpoint_path, "steps_since_reset")));
+    steps_since_remesh = step;  // no checkpoint is written after a re-mesh
     for (std::size_t i = 0; i < k; ++i) nu[i] = std::get<double>(attr(cp, checkpoint_path, fmt::format("multiplier_{}", i)));
     std::ifstream in(history_path);
     const nlohmann::json js = nlohmann::json::parse(in);
@@ -845,31 +871,39 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
   const double real_time = settings.time_unit;  // Δt = Δt* · time_unit
   const double dt_min = settings.dt_min > 0 ? settings.dt_min : settings.dt * std::pow(2.0, -20);
   std::size_t next_report = 0;
-  while (next_report < settings.report_times.size() && settings.report_times[next_report] <= t * (1 + 1e-12)) ++next_report;
   const double t_tolerance = 1e-12 * std::max(std::abs(settings.t_end), 1.0);
+  while (next_report < settings.report_times.size() && settings.report_times[next_report] <= t + t_tolerance) {
+    // Report times already passed (a restart): their energies from the history.
+    for (const auto& h : run.history)
+      if (std::abs(h.t_star - settings.report_times[next_report]) <= t_tolerance) run.energy_at[settings.report_times[next_report]] = h.energy;
+    ++next_report;
+  }
   while (t < settings.t_end - t_tolerance) {
     if (step >= settings.max_steps) {
       run.failure = fmt::format("stopped after max_steps = {} steps at t* = {:.6e}", settings.max_steps, t);
       break;
     }
+    double energy_before = run.history.back().energy;
+    bool new_reference = false;  // the recorded distortion belongs to the previous reference
     if (settings.remesh_every > 0 && steps_since_remesh >= settings.remesh_every) {
       remesh();
-      apply_schedule(t);
+      energy_before = energy_of(ref->u);  // a projection changes E: the next decrement is measured from here
+      new_reference = true;
     }
     // A reset every N steps, or when F is too distorted.
     if (resets && ((settings.reset_every > 0 && steps_since_reset >= settings.reset_every) ||
-                   (settings.reset_distortion > 0 && run.history.back().distortion > settings.reset_distortion))) {
+                   (!new_reference && settings.reset_distortion > 0 && run.history.back().distortion > settings.reset_distortion))) {
       reset_reference();
-      apply_schedule(t);
     }
-    const double energy_before = run.history.back().energy;
     double dt_try = dt;
     int rejected = 0;
     bool accepted = false, reset_for_this_step = false;
     ConstrainedResult last;
     std::string why;
+    double dt_attempted = dt_try;
     while (!accepted) {
       double dt_step = std::min(dt_try, settings.t_end - t);
+      dt_attempted = dt_step;
       if (next_report < settings.report_times.size()) dt_step = std::min(dt_step, settings.report_times[next_report] - t);
       apply_schedule(t + dt_step);
       Reference& r = *ref;
@@ -983,7 +1017,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
       if (rejected > settings.max_retries || dt_try < dt_min) break;
     }
     if (!accepted) {
-      run.failure = fmt::format("step {} failed {} times down to dt* = {:.3e}: {}", step + 1, rejected, dt_try, why);
+      run.failure = fmt::format("step {} failed {} times down to dt* = {:.3e}: {}", step + 1, rejected, dt_attempted, why);
       apply_schedule(t);
       break;
     }
