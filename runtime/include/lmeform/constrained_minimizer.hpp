@@ -96,7 +96,6 @@ class ConstrainedMinimizer {
   void set_fixed_dofs(std::vector<PetscInt> dofs) { fixed_ = std::move(dofs); }
   /// Changes the target c_i of constraint i (a prescribed history such as a deflation).
   void set_target(std::size_t i, double target) { constraints_.at(i).target = target; }
-  [[nodiscard]] const std::vector<ScalarConstraint>& constraints() const noexcept { return constraints_; }
   /// Adds (s/2) (u − c)ᵀ K (u − c) to the objective (see ProximalTerm); {} removes it.
   void set_proximal_term(ProximalTerm term) { proximal_ = term; }
 

@@ -435,7 +435,9 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
   const fs::path quadrature_path = output != nullptr ? output->directory / (output->name + "_checkpoint_quadrature.h5") : fs::path();
   const fs::path history_path = output != nullptr ? output->directory / (output->name + "_history.json") : fs::path();
 
-  auto record = [&](Vec state, double energy, int newton, int rejected, double dt_taken) {
+  // `measures`: those of `state` when the caller has them (an accepted step was just checked).
+  auto record = [&](Vec state, double energy, int newton, int rejected, double dt_taken,
+                    std::optional<DeformationMeasures> measures = std::nullopt) {
     DynamicsStep s;
     s.step = step;
     s.t_star = t;
@@ -445,7 +447,8 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     for (std::size_t i = 0; i < k; ++i) s.multipliers.push_back(nu[i] / ref->space.constraints[i].scale);
     s.newton_iterations = newton;
     s.rejected = rejected;
-    const DeformationMeasures m = deformation_measures(*ref->space.disc, to_original(*ref->space.disc, state, bs), bs, offset);
+    const DeformationMeasures m =
+        measures ? *measures : deformation_measures(*ref->space.disc, to_original(*ref->space.disc, state, bs), bs, offset);
     s.min_jacobian = m.min_jacobian;
     s.distortion = m.max_distortion;
     s.resets = run.resets;
@@ -901,6 +904,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     ConstrainedResult last;
     std::string why;
     double dt_attempted = dt_try;
+    DeformationMeasures accepted_measures;
     while (!accepted) {
       double dt_step = std::min(dt_try, settings.t_end - t);
       dt_attempted = dt_step;
@@ -960,6 +964,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
       }
       if (ok) {
         const DeformationMeasures m = deformation_measures(*r.space.disc, to_original(*r.space.disc, r.trial, bs), bs, offset);
+        accepted_measures = m;
         if (!(m.min_jacobian > settings.min_jacobian)) {
           ok = false;
           folded = true;
@@ -1021,7 +1026,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
       apply_schedule(t);
       break;
     }
-    record(ref->u, last.energy, euler ? 0 : last.newton_iterations, rejected, dt_try);
+    record(ref->u, last.energy, euler ? 0 : last.newton_iterations, rejected, dt_try, accepted_measures);
     const bool finished = t >= settings.t_end - t_tolerance;
     if ((settings.output_every > 0 && step % settings.output_every == 0) || finished) write_series(ref->u);
     if (settings.checkpoint_every > 0 && step % settings.checkpoint_every == 0) write_checkpoint();
