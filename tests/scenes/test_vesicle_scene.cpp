@@ -259,8 +259,8 @@ TEST(VesicleScene, InitialShape) {
   t = edit(kPlanar, "center = [0.0, 0.0]\nradius = 0.5\n", "center = [0.0, 0.0]\nradius = 0.5\nsemi_axes = [0.5, 0.5]\n");
   expect_error(t, {"key 'vesicle.initial.semi_axes' belongs to shape 'ellipsoid'; a sphere takes 'radius'"});
   t = edit(kVesicle, "shape = \"ellipsoid\"", "shape = \"elipsoid\"");
-  expect_error(t, {at_line(t, "shape ="), "key 'vesicle.initial.shape' must be one of 'ellipsoid', 'sphere', got 'elipsoid'; did "
-                                          "you mean 'ellipsoid'?"});
+  expect_error(t, {at_line(t, "shape ="), "key 'vesicle.initial.shape' must be one of 'ellipsoid', 'sphere', 'oblate', "
+                                          "'prolate', got 'elipsoid'; did you mean 'ellipsoid'?"});
   t = edit(kVesicle, "semi_axes = [0.4987, 0.2059]", "semi_axes = [0.4987, 0.2059, 0.3]");
   expect_error(t, {"key 'vesicle.initial.semi_axes' must be an array of 2 numbers, found 3 entries"});
   t = kVesicle.substr(0, kVesicle.find("[vesicle.initial]"));
@@ -274,6 +274,47 @@ TEST(VesicleScene, InitialShape) {
   EXPECT_NEAR(app::initial_profile(m, on, 2), 0.0, 1e-14);
   EXPECT_LT(app::initial_profile(m, out, 2), -0.99);
   EXPECT_NEAR(app::initial_profile(m, near, 2), std::tanh(0.01 / (std::numbers::sqrt2 * 0.02)), 1e-12);
+}
+
+TEST(VesicleScene, BranchSpheroids) {
+  // Surface measures by quadrature of the parametrization (r, z) = (a sin t, c cos t), independent
+  // of the closed forms used by spheroid_semi_axes.
+  auto measured = [](double a, double c, int dim) {
+    const int n = 20000;
+    double area = 0;
+    for (int i = 0; i < n; ++i) {
+      const double t = (i + 0.5) * (dim == 2 ? 2 * pi : pi) / n;
+      const double speed = std::sqrt(a * a * std::cos(t) * std::cos(t) + c * c * std::sin(t) * std::sin(t));
+      area += (dim == 2 ? 1.0 : 2 * pi * a * std::sin(t)) * speed * (dim == 2 ? 2 * pi : pi) / n;
+    }
+    const double volume = dim == 2 ? pi * a * c : 4.0 / 3.0 * pi * a * a * c;
+    return std::array<double, 2>{area, volume};
+  };
+  for (const int dim : {2, 3})
+    for (const bool oblate : {true, false})
+      for (const double v : {0.6, 0.7, 0.8, 0.9, 0.95, 0.999}) {
+        const double A0 = 2.0;
+        const auto [a, c] = app::spheroid_semi_axes(A0, v, dim, oblate);
+        EXPECT_EQ(c < a, oblate) << "dim " << dim << " v " << v;
+        const auto [area, volume] = measured(a, c, dim);
+        EXPECT_NEAR(area / A0, 1.0, 1e-8) << "dim " << dim << " v " << v << (oblate ? " oblate" : " prolate");
+        EXPECT_NEAR(volume / app::max_volume_for_area(area, dim), v, 1e-8) << "dim " << dim << " v " << v;
+      }
+  EXPECT_THROW((void)app::spheroid_semi_axes(2.0, 1.2, 3, true), std::invalid_argument);
+  // In a scene: the demos' hand-computed oblate start (0.4987, 0.2059) for R = 0.4, v = 0.8.
+  const std::string oblate = edit(kVesicle, "shape = \"ellipsoid\"\ncenter = [0.0, 1.0]\nsemi_axes = [0.4987, 0.2059]",
+                                  "shape = \"oblate\"\ncenter = [0.0, 1.0]");
+  const VesicleModel m = vesicle_of(oblate);
+  EXPECT_NEAR(m.semi_axes[0], 0.4987, 1e-4);
+  EXPECT_NEAR(m.semi_axes[1], 0.2059, 1e-4);
+  const VesicleModel p = vesicle_of(edit(oblate, "\"oblate\"", "\"prolate\""));
+  EXPECT_GT(p.semi_axes[1], p.semi_axes[0]);
+  // Errors: explicit semi-axes, no reduced volume.
+  std::string t = oblate + "semi_axes = [0.4, 0.3]\n";
+  expect_error(t, {"key 'vesicle.initial.semi_axes' does not apply to shape 'oblate': its semi-axes follow from vesicle.radius "
+                   "and vesicle.reduced_volume"});
+  t = edit(oblate, "reduced_volume = 0.8\n", "");
+  expect_error(t, {at_line(t, "shape ="), "key 'vesicle.initial.shape' = 'oblate' needs the area and volume it encloses"});
 }
 
 TEST(VesicleScene, AdaptivityStages) {

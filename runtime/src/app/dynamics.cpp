@@ -670,6 +670,18 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     // The same physical state: energy and constraints unchanged up to the basis' consistency error.
     ResetChange change;
     change.energy = relative(energy_of(ref->u), energy_before);
+    for_each_point_kinematics(*ref->space.disc, y, bs, offset, 2,
+                              [&](int, int, int, const std::vector<double>&, std::size_t, const std::array<double, 9>& F,
+                                  const std::array<double, 27>& H) {
+                                for (int i = 0; i < dim; ++i)
+                                  for (int I = 0; I < dim; ++I)
+                                    change.gradient_consistency =
+                                        std::max(change.gradient_consistency, std::abs(F[std::size_t(i * dim + I)] - (i == I ? 1.0 : 0.0)));
+                                for (int s = 0; s < dim * dim * dim; ++s)
+                                  change.hessian_consistency = std::max(change.hessian_consistency, std::abs(H[std::size_t(s)]));
+                              });
+    MPI_Allreduce(MPI_IN_PLACE, &change.gradient_consistency, 1, MPI_DOUBLE, MPI_MAX, comm);
+    MPI_Allreduce(MPI_IN_PLACE, &change.hessian_consistency, 1, MPI_DOUBLE, MPI_MAX, comm);
     const std::vector<double> constraints_after = constraint_values(ref->u);
     for (std::size_t i = 0; i < k; ++i)
       change.constraints.push_back(relative(constraints_after[i], constraints_before[i]));
@@ -677,8 +689,9 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     if (out != nullptr) {
       std::string c;
       for (std::size_t i = 0; i < k; ++i) c += fmt::format(", {} {:+.1e}", run.constraint_names[i], change.constraints[i]);
-      *out << fmt::format("  reset {} of the reference configuration at step {}: relative change of E {:+.1e}{}\n", run.resets + 1,
-                          step, change.energy, c);
+      *out << fmt::format("  reset {} of the reference configuration at step {}: relative change of E {:+.1e}{}; "
+                          "identity reproduced to |F - I| {:.1e}, |D2 y| {:.1e}\n",
+                          run.resets + 1, step, change.energy, c, change.gradient_consistency, change.hessian_consistency);
     }
     ++run.resets;
     steps_since_reset = 0;

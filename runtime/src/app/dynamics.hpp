@@ -101,6 +101,10 @@ struct DynamicsStep {
 struct ResetChange {
   double energy = 0;
   std::vector<double> constraints;
+  /// How well the new basis reproduces the identity at the carried points (max |F − I|, max |∂²y/∂X∂X|):
+  /// the part of a change that the basis' consistency error explains.
+  double gradient_consistency = 0;
+  double hessian_consistency = 0;
 };
 
 struct DynamicsRun {

@@ -19,10 +19,25 @@ namespace {
 using scene_detail::format_number;
 
 void read_initial_shape(const Scene& s, const SceneTable& t, VesicleModel& m) {
-  const std::string shape = t.choice_of("shape", t.string("shape"), {"ellipsoid", "sphere"});
+  const std::string shape = t.choice_of("shape", t.string("shape"), {"ellipsoid", "sphere", "oblate", "prolate"});
   const std::vector<double> c = t.numbers("center", s.dim());
   for (std::size_t i = 0; i < c.size(); ++i) m.center[i] = c[i];
-  if (shape == "ellipsoid") {
+  if (shape == "oblate" || shape == "prolate") {
+    // The spheroid of the model's own area and volume: a start on the branch with no residual in
+    // the constraints of the sharp shape.
+    m.shape = VesicleModel::Shape::ellipsoid;
+    for (const char* key : {"semi_axes", "radius"})
+      if (t.has(key))
+        t.fail_key(key, fmt::format("does not apply to shape '{}': its semi-axes follow from vesicle.radius and "
+                                    "vesicle.reduced_volume",
+                                    shape));
+    if (!m.area || !m.reduced_volume)
+      t.fail_key("shape", fmt::format("= '{}' needs the area and volume it encloses: give vesicle.radius and vesicle.reduced_volume",
+                                      shape));
+    const int measure_dim = s.axisymmetric() ? 3 : s.dim();
+    const auto [equatorial, polar] = spheroid_semi_axes(*m.area, *m.reduced_volume, measure_dim, shape == "oblate");
+    for (int i = 0; i < s.dim(); ++i) m.semi_axes[std::size_t(i)] = i == s.dim() - 1 ? polar : equatorial;
+  } else if (shape == "ellipsoid") {
     m.shape = VesicleModel::Shape::ellipsoid;
     if (t.has("radius")) t.fail_key("radius", "belongs to shape 'sphere'; an ellipsoid takes 'semi_axes'");
     const std::vector<double> a = t.numbers("semi_axes", s.dim());
@@ -154,6 +169,42 @@ std::optional<VesicleModel> read_vesicle(const Scene& s) {
     }
   }
   return m;
+}
+
+std::array<double, 2> spheroid_semi_axes(double A0, double v, int dim, bool oblate) {
+  if (!(A0 > 0) || !(v > 0) || v > 1) throw std::invalid_argument(fmt::format("spheroid_semi_axes: A0 = {}, v = {}", A0, v));
+  const double pi = std::numbers::pi;
+  // Area (perimeter in 2D) and volume (area in 2D) of the spheroid with equatorial semi-axis 1 and
+  // polar semi-axis rho; the reduced volume does not depend on the scale.
+  auto measures = [&](double rho) -> std::array<double, 2> {
+    if (dim == 2) {
+      const double major = std::max(1.0, rho), minor = std::min(1.0, rho);
+      const double e = std::sqrt(1 - (minor / major) * (minor / major));
+      return {4 * major * std::comp_ellint_2(e), pi * rho};
+    }
+    double area = 4 * pi;
+    if (rho < 1) {
+      const double e = std::sqrt(1 - rho * rho);
+      area = e > 1e-8 ? 2 * pi * (1 + (1 - e * e) / e * std::atanh(e)) : area;
+    } else if (rho > 1) {
+      const double e = std::sqrt(1 - 1 / (rho * rho));
+      area = e > 1e-8 ? 2 * pi * (1 + rho / e * std::asin(e)) : area;
+    }
+    return {area, 4.0 / 3.0 * pi * rho};
+  };
+  auto reduced = [&](double rho) {
+    const auto [area, volume] = measures(rho);
+    return volume / max_volume_for_area(area, dim);
+  };
+  // v(rho) rises to 1 at rho = 1 on the oblate side and falls from 1 on the prolate side.
+  double lo = oblate ? 1e-6 : 1.0, hi = oblate ? 1.0 : 1e6;
+  for (int it = 0; it < 200; ++it) {
+    const double mid = oblate ? 0.5 * (lo + hi) : std::sqrt(lo * hi);
+    if ((reduced(mid) < v) == oblate) lo = mid; else hi = mid;
+  }
+  const double rho = 0.5 * (lo + hi);
+  const double scale = dim == 2 ? A0 / measures(rho)[0] : std::sqrt(A0 / measures(rho)[0]);
+  return {scale, scale * rho};
 }
 
 double max_volume_for_area(double A0, int dim) {

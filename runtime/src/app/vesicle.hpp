@@ -68,6 +68,10 @@ inline constexpr std::string_view kVesicleExtension = "vesicle";
 /// largest area bounded by a curve of length A0, A0^2 / (4 pi).
 [[nodiscard]] double max_volume_for_area(double A0, int dim = 3);
 
+/// The semi-axes (equatorial, polar) of the spheroid with area A0 and reduced volume v, oblate
+/// (polar < equatorial) or prolate; dim = 2: the ellipse with perimeter A0 and reduced area v.
+[[nodiscard]] std::array<double, 2> spheroid_semi_axes(double A0, double v, int dim, bool oblate);
+
 /// Throws SceneError unless 0 < V0 <= max_volume_for_area(A0, dim).
 void check_feasible(double A0, double V0, int dim = 3);
 
