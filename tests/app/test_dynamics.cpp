@@ -12,6 +12,7 @@
 #include <string>
 
 #include "dynamics.hpp"
+#include "problem.hpp"
 #include "lmeform/petsc.hpp"
 #include "lmeform/scene.hpp"
 
@@ -186,6 +187,39 @@ TEST(Dynamics, AResetOfTheReferenceChangesNothingAndTheRunContinuesTheSame) {
   EXPECT_LT(std::abs(ea - eb), 1e-4 * ea) << ea << " vs " << eb;
   EXPECT_LT(relative_drift(b, 0), 1e-10);
   EXPECT_LT(relative_drift(b, 1), 1e-10);
+}
+
+TEST(Dynamics, AResetKeepsTheMaterialBoundaryWhereACoefficientLeavesTheBox) {
+  // LME is not interpolating: after a large motion the coefficient y_a of a free node can lie
+  // outside the box while the map stays inside (measured: a node near the axis at r = -0.11). The
+  // reset's new node set then has that node outside Ω; found by position it would join a boundary
+  // part and be held (on the axis, with y_r = 0: the state changed). The Dirichlet node sets of the
+  // material nodes are carried instead. Here a free node of the top row is moved onto z_max.
+  const Case r = make("t_end = 0.01\ndt = 0.01\n");
+  const app::BoundScene b = app::bind_scene(r.scene, PETSC_COMM_WORLD, nullptr, {}, {}, {r.settings.dissipation});
+  const NodeSet material = app::initial_nodes(r.scene);
+  const std::vector<std::vector<int>> sets = app::dirichlet_nodes(r.scene, material);
+  ASSERT_EQ(sets.size(), 2u);
+  std::vector<double> coords = material.coords;
+  int moved = -1;
+  for (std::size_t a = 0; a < material.size(); ++a)
+    if (std::abs(material.point(a)[0] - 0.5) < 1e-12 && std::abs(material.point(a)[1] - 1.4375) < 1e-12) moved = int(a);
+  ASSERT_GE(moved, 0);
+  coords[std::size_t(moved) * 2] = 0.53125;  // between two wall nodes
+  coords[std::size_t(moved) * 2 + 1] = 1.5;
+  app::ProblemInput input;
+  input.nodes = NodeSet(2, coords);
+  input.initial = coords;  // y = the new node positions, as after a reset
+  auto held = [&](const app::ProblemSpace& space) {
+    return std::count(space.fixed_pairs.begin(), space.fixed_pairs.end(), std::pair<int, int>{moved, 1}) > 0;
+  };
+  EXPECT_TRUE(held(app::build_problem_space(PETSC_COMM_WORLD, b, input)));  // the failure mode
+  input.dirichlet_nodes = sets;
+  const app::ProblemSpace carried = app::build_problem_space(PETSC_COMM_WORLD, b, input);
+  EXPECT_FALSE(held(carried));
+  EXPECT_EQ(carried.fixed_pairs.size(), 2 * sets[0].size() + sets[1].size());  // walls: both components; axis: y_r
+  input.dirichlet_nodes.pop_back();
+  EXPECT_THROW((void)app::build_problem_space(PETSC_COMM_WORLD, b, input), std::invalid_argument);
 }
 
 TEST(Dynamics, AFoldingStepResetsTheReferenceWhenResetsAreOn) {

@@ -120,15 +120,18 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 
 nlohmann::json number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); }
 
-/// Measures of the deformation gradient F = ∂y/∂X over the quadrature points: the smallest det F
-/// (and where), and the largest distortion, the ratio of F's extreme singular values.
+/// Measures of the deformation over the quadrature points: the smallest det F (and where), and
+/// the largest distortion, the ratio of F's extreme singular values. Axisymmetric: F of the body
+/// of revolution, whose hoop stretch y_r / R joins the (r, z) block, so that a map carrying points
+/// across the axis counts as folded.
 struct DeformationMeasures {
   double min_jacobian = std::numeric_limits<double>::infinity();
   int point = -1;
   double max_distortion = 1;
 };
 
-/// F and ∂²y/∂X∂X at the quadrature points of element e (`tab` its tabulation at order 2 or 1).
+/// The current position y(X), F and ∂²y/∂X∂X at each quadrature point of this rank's owned
+/// elements (`tab` the element's tabulation at `order`, 1 or 2).
 template <class PerPoint>
 void for_each_point_kinematics(const Discretization& disc, const std::vector<double>& y_original, int bs, int offset,
                                int order, PerPoint&& per_point) {
@@ -137,6 +140,7 @@ void for_each_point_kinematics(const Discretization& disc, const std::vector<dou
   std::vector<double> tab(static_cast<std::size_t>(disc.max_element_points() * J * disc.max_element_nodes()));
   LmeWorkspace ws;
   const auto original = disc.original_index();
+  std::array<double, 3> position{};
   std::array<double, 9> F{};
   std::array<double, 27> H{};  // H[(k*dim + I)*dim + J] = ∂²y_k / ∂X_I ∂X_J
   for (int e = 0; e < disc.n_elements(); ++e) {
@@ -148,7 +152,10 @@ void for_each_point_kinematics(const Discretization& disc, const std::vector<dou
       auto y = [&](std::size_t a, int k) {
         return y_original[std::size_t(original[std::size_t(nodes[a])]) * std::size_t(bs) + std::size_t(offset + k)];
       };
-      for (int k = 0; k < dim; ++k)
+      for (int k = 0; k < dim; ++k) {
+        double x = 0;
+        for (std::size_t a = 0; a < n; ++a) x += tab[std::size_t(q * J) * n + a] * y(a, k);
+        position[std::size_t(k)] = x;
         for (int I = 0; I < dim; ++I) {
           double f = 0;
           for (std::size_t a = 0; a < n; ++a) f += tab[std::size_t(q * J + 1 + I) * n + a] * y(a, k);
@@ -161,27 +168,38 @@ void for_each_point_kinematics(const Discretization& disc, const std::vector<dou
             H[std::size_t((k * dim + I) * dim + K)] = H[std::size_t((k * dim + K) * dim + I)] = h;
           }
         }
-      per_point(disc.element_first_point(e) + q, e, q, tab, n, F, H);
+      }
+      per_point(disc.element_first_point(e) + q, position, F, H);
     }
   }
 }
 
-DeformationMeasures deformation_measures(const Discretization& disc, const std::vector<double>& y_original, int bs, int offset) {
+DeformationMeasures deformation_measures(const Discretization& disc, const std::vector<double>& y_original, int bs, int offset,
+                                         bool axisymmetric) {
   const int dim = disc.dim();
   DeformationMeasures local;
+  const CellQuadrature& quad = disc.quadrature();
   for_each_point_kinematics(disc, y_original, bs, offset, 1,
-                            [&](int point, int, int, const std::vector<double>&, std::size_t, const std::array<double, 9>& F,
+                            [&](int point, const std::array<double, 3>& y, const std::array<double, 9>& F,
                                 const std::array<double, 27>&) {
                               Eigen::MatrixXd M(dim, dim);
                               for (int i = 0; i < dim; ++i)
                                 for (int j = 0; j < dim; ++j) M(i, j) = F[std::size_t(i * dim + j)];
-                              const double det = M.determinant();
+                              double det = M.determinant();
+                              const Eigen::VectorXd sv = Eigen::JacobiSVD<Eigen::MatrixXd>(M).singularValues();
+                              double largest = sv.maxCoeff(), smallest = sv.minCoeff();
+                              const double R = quad.point(std::size_t(point))[0];
+                              if (axisymmetric && R > 0) {
+                                const double hoop = y[0] / R;
+                                det *= hoop;
+                                largest = std::max(largest, std::abs(hoop));
+                                smallest = std::min(smallest, std::abs(hoop));
+                              }
                               if (det < local.min_jacobian) {
                                 local.min_jacobian = det;
                                 local.point = point;
                               }
-                              const Eigen::VectorXd sv = Eigen::JacobiSVD<Eigen::MatrixXd>(M).singularValues();
-                              if (sv[dim - 1] > 0) local.max_distortion = std::max(local.max_distortion, sv[0] / sv[dim - 1]);
+                              if (smallest > 0) local.max_distortion = std::max(local.max_distortion, largest / smallest);
                             });
   struct {
     double value;
@@ -294,6 +312,9 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
   const bool euler = settings.method == DynamicsSettings::Method::forward_euler;
   NodeSet material_nodes = initial_nodes(scene, log);  // the nodes' identities (a re-mesh makes new ones)
   run.cells = delaunay(material_nodes);
+  // The material boundary: found once on the material nodes and kept by resets (a node's
+  // coefficient may leave the box, LME not being interpolating; it stays free).
+  std::vector<std::vector<int>> dirichlet_sets = dirichlet_nodes(scene, material_nodes);
   std::size_t n_nodes = material_nodes.size();
   const int bs = b.dofs_per_node;
   std::size_t k = 0;
@@ -312,6 +333,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     input.carried = std::move(carried);
     input.qdata_values = std::move(qdata);
     input.coefficient_values = std::move(coefficients);
+    input.dirichlet_nodes = dirichlet_sets;
     if (keep_targets)
       for (std::size_t i = 0; i < b.constraints.size(); ++i) {
         input.targets[b.constraints[i].name] = targets[i];
@@ -448,7 +470,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     s.newton_iterations = newton;
     s.rejected = rejected;
     const DeformationMeasures m =
-        measures ? *measures : deformation_measures(*ref->space.disc, to_original(*ref->space.disc, state, bs), bs, offset);
+        measures ? *measures : deformation_measures(*ref->space.disc, to_original(*ref->space.disc, state, bs), bs, offset, scene.axisymmetric());
     s.min_jacobian = m.min_jacobian;
     s.distortion = m.max_distortion;
     s.resets = run.resets;
@@ -610,20 +632,11 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
       if (!j.gradient.empty()) pushed[j.gradient].assign(Q * std::size_t(dim), 0.0);
       if (!j.hessian.empty()) pushed[j.hessian].assign(Q * std::size_t(dim * dim), 0.0);
     }
-    const auto original = disc.original_index();
     for_each_point_kinematics(
         disc, y, bs, offset, 2,
-        [&](int point, int e, int q, const std::vector<double>& tab, std::size_t n, const std::array<double, 9>& F,
-            const std::array<double, 27>& H) {
+        [&](int point, const std::array<double, 3>& position, const std::array<double, 9>& F, const std::array<double, 27>& H) {
           const auto p = std::size_t(point);
-          const int J = kernel::jet_size(dim, 2);
-          const auto nodes = disc.element_nodes(e);
-          for (int i = 0; i < dim; ++i) {
-            double x = 0;
-            for (std::size_t a = 0; a < n; ++a)
-              x += tab[std::size_t(q * J) * n + a] * y[std::size_t(original[std::size_t(nodes[a])]) * std::size_t(bs) + std::size_t(offset + i)];
-            carried.quadrature.points[p * std::size_t(dim) + std::size_t(i)] = x;
-          }
+          for (int i = 0; i < dim; ++i) carried.quadrature.points[p * std::size_t(dim) + std::size_t(i)] = position[std::size_t(i)];
           Eigen::MatrixXd Fm(dim, dim);
           for (int i = 0; i < dim; ++i)
             for (int I = 0; I < dim; ++I) Fm(i, I) = F[std::size_t(i * dim + I)];
@@ -671,8 +684,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     ResetChange change;
     change.energy = relative(energy_of(ref->u), energy_before);
     for_each_point_kinematics(*ref->space.disc, y, bs, offset, 2,
-                              [&](int, int, int, const std::vector<double>&, std::size_t, const std::array<double, 9>& F,
-                                  const std::array<double, 27>& H) {
+                              [&](int, const std::array<double, 3>&, const std::array<double, 9>& F, const std::array<double, 27>& H) {
                                 for (int i = 0; i < dim; ++i)
                                   for (int I = 0; I < dim; ++I)
                                     change.gradient_consistency =
@@ -691,7 +703,8 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
       for (std::size_t i = 0; i < k; ++i) c += fmt::format(", {} {:+.1e}", run.constraint_names[i], change.constraints[i]);
       *out << fmt::format("  reset {} of the reference configuration at step {}: relative change of E {:+.1e}{}; "
                           "identity reproduced to |F - I| {:.1e}, |D2 y| {:.1e}\n",
-                          run.resets + 1, step, change.energy, c, change.gradient_consistency, change.hessian_consistency);
+                          run.resets + 1, step, change.energy, c, change.gradient_consistency, change.hessian_consistency)
+           << std::flush;
     }
     ++run.resets;
     steps_since_reset = 0;
@@ -753,9 +766,9 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     const LmeBasis new_basis(nodes, std::vector<double>(nodes.size(), scene.nodes.gamma), lme);
     std::vector<std::vector<int>> rows(nodes.size());
     std::vector<std::vector<double>> weights(nodes.size());
-    for (std::size_t b = 0; b < nodes.size(); ++b) {
-      rows[b] = new_basis.neighbours(nodes.point(b));
-      weights[b] = new_basis.evaluate(nodes.point(b), rows[b], 0);
+    for (std::size_t node = 0; node < nodes.size(); ++node) {
+      rows[node] = new_basis.neighbours(nodes.point(node));
+      weights[node] = new_basis.evaluate(nodes.point(node), rows[node], 0);
     }
     std::map<std::string, std::vector<double>, std::less<>> projected;
     for (auto& [name, values] : scalar_fields) {
@@ -763,10 +776,10 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
       std::vector<double> phi = target;
       for (int it = 0; it < settings.remesh_fit_iterations; ++it) {
         std::vector<double> next = phi;
-        for (std::size_t b = 0; b < nodes.size(); ++b) {
+        for (std::size_t node = 0; node < nodes.size(); ++node) {
           double v = 0;
-          for (std::size_t m = 0; m < rows[b].size(); ++m) v += weights[b][m] * phi[std::size_t(rows[b][m])];
-          next[b] += target[b] - v;
+          for (std::size_t m = 0; m < rows[node].size(); ++m) v += weights[node][m] * phi[std::size_t(rows[node][m])];
+          next[node] += target[node] - v;
         }
         phi.swap(next);
       }
@@ -774,6 +787,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
       projected[name] = values;
     }
     material_nodes = nodes;
+    dirichlet_sets = dirichlet_nodes(scene, material_nodes);
     n_nodes = nodes.size();
     run.cells = delaunay(nodes);
     velocity.assign(n_nodes * std::size_t(bs), 0.0);
@@ -976,7 +990,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
         why = fmt::format("the energy rose from {:.10g} to {:.10g}", energy_before, last.energy);
       }
       if (ok) {
-        const DeformationMeasures m = deformation_measures(*r.space.disc, to_original(*r.space.disc, r.trial, bs), bs, offset);
+        const DeformationMeasures m = deformation_measures(*r.space.disc, to_original(*r.space.disc, r.trial, bs), bs, offset, scene.axisymmetric());
         accepted_measures = m;
         if (!(m.min_jacobian > settings.min_jacobian)) {
           ok = false;

@@ -490,6 +490,18 @@ std::vector<int> boundary_nodes(const Scene& scene, const NodeSet& nodes, const 
   return out;
 }
 
+std::vector<std::vector<int>> dirichlet_nodes(const Scene& scene, const NodeSet& nodes) {
+  std::vector<std::vector<int>> out;
+  for (const SceneDirichlet& d : scene.dirichlet) {
+    std::set<int> on;
+    for (const auto& part : d.boundary)
+      for (const int n : boundary_nodes(scene, nodes, part)) on.insert(n);
+    if (on.empty()) throw SceneError(fmt::format("{}: no node lies on the boundary parts given in key 'boundary'", d.where));
+    out.emplace_back(on.begin(), on.end());
+  }
+  return out;
+}
+
 namespace {
 
 /// Values at the nodes (original order, dofs interleaved as in `layout`, `per_node` per node) of
@@ -824,18 +836,17 @@ ProblemSpace build_problem_space(MPI_Comm comm, const BoundScene& b, const Probl
                                             state.size(), nodes.size(), bs));
   space.first_scalar_fixed.assign(nodes.size(), 0);
   std::vector<double> value(3);
+  const std::vector<std::vector<int>> on_boundary = input.dirichlet_nodes.empty() ? dirichlet_nodes(scene, nodes) : input.dirichlet_nodes;
+  if (on_boundary.size() != scene.dirichlet.size())
+    throw std::invalid_argument(fmt::format("build_problem_space: node sets for {} Dirichlet entries, the scene has {}",
+                                            on_boundary.size(), scene.dirichlet.size()));
   for (std::size_t i = 0; i < scene.dirichlet.size(); ++i) {
     const SceneDirichlet& d = scene.dirichlet[i];
     const UnknownField& u = b.unknown(d.unknown);
     std::vector<int> comps = d.components;
     if (comps.empty())
       for (int c = 0; c < u.components; ++c) comps.push_back(c);
-    std::set<int> on;
-    for (const auto& part : d.boundary)
-      for (const int n : boundary_nodes(scene, nodes, part)) on.insert(n);
-    if (on.empty())
-      throw SceneError(fmt::format("{}: no node lies on the boundary parts given in key 'boundary'", d.where));
-    for (const int n : on) {
+    for (const int n : on_boundary.at(i)) {
       const int handle = b.dirichlet_expression[i];
       if (handle >= 0) b.expressions->evaluate(handle, nodes.point(std::size_t(n)), value);
       else std::fill(value.begin(), value.end(), d.value.number());

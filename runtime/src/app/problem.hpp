@@ -107,7 +107,15 @@ struct ProblemInput {
   /// Nodal values of scalar [coefficients] fields, by name (input.nodes order): they replace the
   /// scene's (a re-mesh's projected reference field).
   std::map<std::string, std::vector<double>, std::less<>> coefficient_values;
+  /// The nodes (original numbering) of each [[dirichlet]] entry, in scene order, in place of the
+  /// nodes found on its boundary parts: a moving node set keeps its material boundary (after a reset,
+  /// a node that was free stays free wherever its coefficient lies).
+  std::vector<std::vector<int>> dirichlet_nodes;
 };
+
+/// The nodes (original numbering) on the boundary parts of each [[dirichlet]] entry, in scene order;
+/// throws SceneError for an entry whose parts hold no node.
+[[nodiscard]] std::vector<std::vector<int>> dirichlet_nodes(const Scene& scene, const NodeSet& nodes);
 
 /// Error of one unknown against the scene's exact solution.
 struct FieldError {
