@@ -38,6 +38,9 @@ struct ConstrainedMinimizerOptions {
   double constraint_tolerance = 1e-10;  ///< stage 2: relative constraint residuals
   int max_newton_iterations = 25;
   bool skip_augmented_stage = false;
+  /// When KKT Newton diverges or stalls, resume the augmented Lagrangian (up to twice, 100x tighter
+  /// each time). false: stop and report (a time step is cheaper to retry with a shorter step).
+  bool augmented_fallback = true;
   /// KKT Newton: false assembles and factors the Hessian once per minimize() and reuses it (a
   /// chord method: cheaper iterations, linear convergence), refreshing it only when a step fails.
   bool refresh_hessian_every_iteration = true;

@@ -428,6 +428,10 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
   }
   sigma = nu;
   evaluate(u, nu, false, ev);
+  if (!options_.augmented_fallback) {
+    result.message = "KKT Newton diverged or stalled";
+    break;
+  }
   al_tolerance *= 0.01;
   result.message = "KKT Newton diverged or stalled from the augmented Lagrangian's state";
   if (options_.log != nullptr && energy_->discretization().rank() == 0) {
