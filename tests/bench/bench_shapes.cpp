@@ -1,0 +1,161 @@
+// The shape family: oblate and prolate starts at several reduced volumes, each through the adapted
+// schedule of seed Table 3 (CVT relocations with f = 10, 100, 1000, eps lowered in between) with
+// default solver settings. Per stage: the energy, the grid, the Newton and augmented-Lagrangian
+// iterations, how far the constraint residual rose above its best value during the stage, and the
+// wall time. Runs the scenes through the stage loop of `lmeform run` (app::run_scene); under mpirun
+// every scene runs on all ranks. Writes DIR/shapes.json and DIR/shapes.png (energy against eps).
+//   bench_shapes [--quick] [--out DIR] [--nodes N] [--shape oblate:0.8 ...]
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "lmeform/output.hpp"
+#include "lmeform/petsc.hpp"
+#include "lmeform/scene.hpp"
+#include "run_scene.hpp"
+
+namespace {
+
+using namespace lmeform;
+
+struct Shape {
+  std::string branch;  // "oblate" or "prolate"
+  double v = 0;
+};
+
+// The sharp-interface references of the seed (Paper A Sec. 4) where it gives them.
+double sharp_reference(const Shape& s) {
+  if (s.v == 0.8) return s.branch == "oblate" ? 9.12657 : 8.71756;
+  return std::nan("");
+}
+
+// A uniform CVT of n nodes on [0, 1.5] x [0, 2] has the hexagonal spacing sqrt(2 |Omega| / (sqrt 3 n)).
+double hex_spacing(int n) { return std::sqrt(2.0 * 1.5 * 2.0 / (std::sqrt(3.0) * n)); }
+
+// The vesicle of demos/discocyte.toml with the start of `shape`, the Table 3 schedule scaled to
+// the node count (eps_k = c_k h with the seed's c_k for 6124 nodes) down to `last_eps` (seed's units).
+std::string shape_scene(const Shape& shape, int nodes, double last_eps) {
+  const double scale = hex_spacing(nodes) / hex_spacing(6124);
+  auto e = [&](double seed_eps) { return std::round(10000.0 * seed_eps * scale) / 10000.0; };
+  std::ostringstream s;
+  s << "[scene]\nname = \"" << shape.branch << "_" << shape.v << "\"\ncoordinates = \"axisymmetric\"\n"
+    << "[domain]\nlower = [0.0, 0.0]\nupper = [1.5, 2.0]\n"
+    << "[nodes]\ncount = " << nodes << "\ngamma = 0.5\nquadrature_points = 6\n"
+    << "[model]\nforms = [\"helfrich_axisymmetric\", \"area_axisymmetric\", \"volume_axisymmetric\", \"moment_axisymmetric\"]\n"
+    << "energy = \"bending\"\n"
+    << "[constants]\nk = 1.0\neps = " << e(0.04) << "\nC0 = 0.0\nzc = 1.0\n"
+    << "[constraints]\narea = {}\nvolume = {}\nmoment = 0.0\n"
+    << "[[dirichlet]]\nboundary = [\"r_max\", \"z_min\", \"z_max\"]\nunknown = \"phi\"\nvalue = -1.0\n"
+    << "[vesicle]\nradius = 0.4\nreduced_volume = " << shape.v << "\nresolution_factor = 1.6\n"
+    << "[vesicle.initial]\nshape = \"" << shape.branch << "\"\ncenter = [0.0, 1.0]\n"
+    << "[vesicle.adaptivity]\nlloyd_iterations = 40\nstart = \"density\"\nstages = [\n"
+    << "  { eps = " << e(0.04) << ", f = 10.0 },\n  { eps = " << e(0.03) << ", lloyd_iterations = 0 },\n"
+    << "  { eps = " << e(0.03) << ", f = 100.0 },\n  { eps = " << e(0.025) << ", lloyd_iterations = 0 },\n"
+    << "  { eps = " << e(0.025) << ", f = 1000.0 },\n  { eps = " << e(0.02) << ", lloyd_iterations = 0 },\n"
+    << "  { eps = " << e(0.015) << ", lloyd_iterations = 0 },\n";
+  if (last_eps < 0.015) s << "  { eps = " << e(last_eps) << ", lloyd_iterations = 0 },\n";
+  s << "]\n";
+  return s.str();
+}
+
+// The largest rise of the constraint residual over its best value so far (1: it never rose).
+double constraint_rise(const ConstrainedResult& r) {
+  double best = std::numeric_limits<double>::infinity(), rise = 1;
+  for (const auto& it : r.history) {
+    if (best > 0 && std::isfinite(best)) rise = std::max(rise, it.constraint_norm / best);
+    best = std::min(best, it.constraint_norm);
+  }
+  return rise;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  bool quick = false;
+  std::filesystem::path out = "build/bench";
+  int nodes = 0;
+  std::vector<Shape> shapes;
+  for (int i = 1; i < argc; ++i) {
+    if (std::strcmp(argv[i], "--quick") == 0) {
+      quick = true;
+    } else if (std::strcmp(argv[i], "--out") == 0 && i + 1 < argc) {
+      out = argv[++i];
+    } else if (std::strcmp(argv[i], "--nodes") == 0 && i + 1 < argc) {
+      nodes = std::atoi(argv[++i]);
+    } else if (std::strcmp(argv[i], "--shape") == 0 && i + 1 < argc) {
+      const std::string s = argv[++i];
+      const auto colon = s.find(':');
+      const std::string branch = s.substr(0, colon);
+      if (colon == std::string::npos || (branch != "oblate" && branch != "prolate")) {
+        std::fprintf(stderr, "bench_shapes: --shape takes oblate:V or prolate:V, got '%s'\n", s.c_str());
+        return 2;
+      }
+      shapes.push_back({branch, std::atof(s.c_str() + colon + 1)});
+    } else {
+      std::fprintf(stderr, "usage: bench_shapes [--quick] [--out DIR] [--nodes N] [--shape oblate:0.8 ...]\n");
+      return 2;
+    }
+  }
+  PetscSession session(&argc, &argv);
+  std::setvbuf(stdout, nullptr, _IOLBF, 0);
+  std::filesystem::create_directories(out);
+  if (shapes.empty())
+    for (const char* branch : {"oblate", "prolate"})
+      for (const double v : {0.7, 0.8, 0.9}) shapes.push_back({branch, v});
+  if (nodes == 0) nodes = quick ? 1500 : 6124;
+  const double last_eps = quick ? 0.015 : 0.01;  // quick: the grid of 1500 nodes resolves 0.015 * scale
+
+  nlohmann::json records = nlohmann::json::array();
+  for (const Shape& shape : shapes) {
+    std::printf("== %s start, v = %.2f, %d nodes\n", shape.branch.c_str(), shape.v, nodes);
+    const Scene scene = parse_scene(shape_scene(shape, nodes, last_eps), "bench_shapes " + shape.branch, app::model_extensions());
+    const app::SceneRun run = app::run_scene(PETSC_COMM_WORLD, scene, nullptr);
+    double cumulative = run.wall_s;
+    for (const auto& st : run.stages) cumulative -= st.wall_s;  // the uniform CVT of the start
+    const double reference = sharp_reference(shape);
+    for (const auto& st : run.stages) {
+      cumulative += st.wall_s;
+      const ConstrainedResult& m = st.result.minimization;
+      nlohmann::json r{{"branch", shape.branch},
+                       {"v", shape.v},
+                       {"stage", st.stage},
+                       {"grid", st.grid},
+                       {"eps", st.parameter},
+                       {"nodes", st.nodes},
+                       {"h_min", st.h_min},
+                       {"energy", st.result.energy},
+                       {"converged", st.result.converged},
+                       {"newton_iterations", m.newton_iterations},
+                       {"augmented_iterations", m.augmented_iterations},
+                       {"multiplier_updates", m.outer_iterations},
+                       {"constraint_rise", constraint_rise(m)},
+                       {"wall_s", st.wall_s},
+                       {"cumulative_wall_s", cumulative}};
+      if (std::isfinite(reference)) r["relative_error_sharp"] = (st.result.energy - reference) / reference;
+      std::printf("%-7s v %.2f  stage %2d %-6s %5d nodes  h_min %.4f  eps %.4f  E %.5f  AL %3d  KKT %2d  rise %.2f  %6.1f s%s\n",
+                  shape.branch.c_str(), shape.v, st.stage, st.grid.c_str(), st.nodes, st.h_min, st.parameter, st.result.energy,
+                  m.augmented_iterations, m.newton_iterations, constraint_rise(m), st.wall_s,
+                  st.result.converged ? "" : "  NOT CONVERGED");
+      records.push_back(std::move(r));
+    }
+    if (!run.failure.empty()) std::printf("%s v %.2f stopped: %s\n", shape.branch.c_str(), shape.v, run.failure.c_str());
+  }
+
+  if (PetscSession::rank() == 0) {
+    write_text_atomically(out / "shapes.json", records.dump(1) + "\n");
+    const std::string command = "/usr/bin/python3 " LMEFORM_SOURCE_DIR "/scripts/plot_shapes.py '" + (out / "shapes.json").string() +
+                                "' '" + (out / "shapes.png").string() + "'";
+    if (std::system(command.c_str()) != 0) std::fprintf(stderr, "bench_shapes: the plot script failed\n");
+    std::printf("wrote %s and shapes.png\n", (out / "shapes.json").c_str());
+  }
+  return 0;
+}
