@@ -632,7 +632,7 @@ TEST(SceneSolver, PetscOptionsAndRanges) {
                    "'newton_tolerance', 'constraint_tolerance'?"});
   // Nothing close: the valid keys are listed.
   t = kMinimal + "[solver]\nspeed = 1e-2\n";
-  expect_error(t, {"unknown key 'solver.speed'", "the keys of [solver] are 'penalty', 'augmented_tolerance'", "'petsc_options'"});
+  expect_error(t, {"unknown key 'solver.speed'", "the keys of [solver] are 'start', 'penalty', 'augmented_tolerance'", "'petsc_options'"});
   t = kMinimal + "[solver]\nmax_outer_iterations = 30.5\n";
   expect_error(t, {"key 'solver.max_outer_iterations' must be an integer, found a floating-point number"});
   t = kMinimal + "[solver]\nmax_outer_iterations = 0\n";

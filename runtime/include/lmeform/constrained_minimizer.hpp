@@ -1,5 +1,5 @@
 // Minimize an energy E(u) subject to scalar constraints C_i(u) = c_i and Dirichlet values
-// (seed 3.9–3.12): first an augmented Lagrangian
+// (seed 3.9–3.12): Newton on the KKT system from the start (kkt_first), or first an augmented Lagrangian
 //     L_A(u; ν) = E − Σ ν_i (C_i − c_i) + 1/(2μ) Σ (C_i − c_i)²
 // minimized in u by Newton with a backtracking line search for frozen ν, with explicit
 // multiplier updates ν_i ← ν_i − (C_i − c_i)/μ, to a coarse tolerance; then Newton on the KKT
@@ -37,9 +37,15 @@ struct ConstrainedMinimizerOptions {
   double newton_tolerance = 1e-9;       ///< stage 2: |∇L| / max(1, |∇E|)
   double constraint_tolerance = 1e-10;  ///< stage 2: relative constraint residuals
   int max_newton_iterations = 25;
-  bool skip_augmented_stage = false;
-  /// When KKT Newton diverges or stalls, resume the augmented Lagrangian (up to twice, 100x tighter
-  /// each time). false: stop and report (a time step is cheaper to retry with a shorter step).
+  /// Newton on the KKT system from the first step, damped by the KKT-residual merit line search;
+  /// the augmented Lagrangian only when that diverges, stalls or runs out of iterations. false:
+  /// the augmented Lagrangian first, to augmented_tolerance, then KKT Newton. From an ellipsoid
+  /// start (1500 nodes, v = 0.7, ε = 0.081) KKT-first took 14 Newton steps with a constraint
+  /// residual falling at every step, against 24 + 2 with the residual rising from 8e-3 to 2.6e-2.
+  bool kkt_first = true;
+  /// When KKT Newton diverges or stalls (or, started first, runs out of iterations), resume the
+  /// augmented Lagrangian (up to twice, 100x tighter each time). false: stop and report (a time
+  /// step is cheaper to retry with a shorter step).
   bool augmented_fallback = true;
   /// KKT Newton: false assembles and factors the Hessian once per minimize() and reuses it (a
   /// chord method: cheaper iterations, linear convergence), refreshing it only when a step fails.

@@ -137,6 +137,7 @@ struct SceneQdata {
 
 /// [solver]: the constrained minimizer, the Newton iteration and PETSc options.
 struct SceneSolver {
+  bool kkt_first = true;               ///< start = "kkt" (default) or "augmented" (ConstrainedMinimizerOptions::kkt_first)
   double penalty = 1e-3;
   double augmented_tolerance = 1e-4;
   double inner_tolerance = 1e-6;

@@ -342,7 +342,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     r->space = build_problem_space(comm, b, input);
     r->nodes = nodes;
     ConstrainedMinimizerOptions options;
-    options.skip_augmented_stage = true;  // yⁿ satisfies the constraints: Newton on the KKT system from there
+    options.kkt_first = true;             // yⁿ satisfies the constraints: Newton on the KKT system from there
     options.augmented_fallback = false;   // a step Newton cannot take is retried shorter, not minimized at length
     options.refresh_hessian_every_iteration = settings.hessian_every_iteration;
     options.newton_tolerance = scene.solver.newton_tolerance;

@@ -948,6 +948,7 @@ ProblemResult solve_problem(MPI_Comm comm, const BoundScene& b, const ProblemInp
   switch (b.kind) {
     case ProblemKind::minimization: {
       ConstrainedMinimizerOptions o;
+      o.kkt_first = scene.solver.kkt_first;
       o.penalty = scene.solver.penalty;
       o.augmented_tolerance = scene.solver.augmented_tolerance;
       o.inner_tolerance = scene.solver.inner_tolerance;

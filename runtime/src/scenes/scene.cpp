@@ -392,10 +392,11 @@ void read_output(const Section& root, Scene& s) {
 
 void read_solver(const Section& root, Scene& s) {
   const auto t = root.optional_table(
-      "solver", {"penalty", "augmented_tolerance", "inner_tolerance", "max_outer_iterations", "max_inner_iterations",
+      "solver", {"start", "penalty", "augmented_tolerance", "inner_tolerance", "max_outer_iterations", "max_inner_iterations",
                  "newton_tolerance", "constraint_tolerance", "max_newton_iterations", "petsc_options"});
   if (!t) return;
   SceneSolver& o = s.solver;
+  o.kkt_first = t->choice_of("start", t->optional_string("start").value_or("kkt"), {"kkt", "augmented"}) == "kkt";
   o.penalty = t->positive("penalty", t->number("penalty", o.penalty));
   o.augmented_tolerance = t->positive("augmented_tolerance", t->number("augmented_tolerance", o.augmented_tolerance));
   o.inner_tolerance = t->positive("inner_tolerance", t->number("inner_tolerance", o.inner_tolerance));
