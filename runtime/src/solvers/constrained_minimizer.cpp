@@ -432,7 +432,11 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
         }
         continue;
       }
-      if (!accepted || damped_steps >= 3) {
+      // Started first from a poor start, Newton is damped for many steps while the merit falls
+      // (measured: 6124 nodes, an ellipsoid start, the augmented Lagrangian took over after three
+      // damped steps and needed 17 more): there only a failed line search ends it.
+      const bool patient = attempt == 0 && options_.kkt_first && options_.augmented_fallback;
+      if (!accepted || (damped_steps >= 3 && !patient)) {
         // No step along the Newton direction reduces the residual, or only short ones, three times
         // in a row: far from the quadratic regime. Back to the augmented Lagrangian (below).
         diverged = true;
