@@ -196,6 +196,39 @@ TEST(Vesicle, WarmStartedMultipliersSaveIterations) {
   EXPECT_THROW((void)app::solve_problem(PETSC_COMM_SELF, p.bound, in), std::invalid_argument);
 }
 
+TEST(Vesicle, AContinuationStageReusesTheDiscretization) {
+  // A stage that only lowers eps keeps the nodes: the previous solve's discretization is reused
+  // (the same object), and the solve gives what a rebuilt one gives.
+  SphereBox s;
+  s.eps = 0.1;
+  s.spacing = 0.045;
+  s.semi_axes = {1.1 * kR, 0.85 * kR};
+  const double V0 = 0.95 * 4.0 / 3 * pi * kR * kR * kR;
+  s.constraints = "area = " + num(4 * pi * kR * kR) + "\nvolume = " + num(V0) + "\nmoment = { target = 0.0, scale = " + num(V0) + " }\n";
+  const Problem p(s);
+  app::ProblemInput in = p.input(s);
+  const auto first = app::solve_problem(PETSC_COMM_SELF, p.bound, in);
+  ASSERT_TRUE(first.converged) << first.message;
+  ASSERT_TRUE(first.discretization);
+  in.constants["eps"] = 0.09;
+  in.nodes = first.nodes;
+  in.initial = app::rescale_interface(first.state, 0.1, 0.09);
+  in.initial_multipliers = first.minimization.multipliers;
+  const auto rebuilt = app::solve_problem(PETSC_COMM_SELF, p.bound, in);
+  in.discretization = first.discretization;
+  const auto reused = app::solve_problem(PETSC_COMM_SELF, p.bound, in);
+  ASSERT_TRUE(rebuilt.converged && reused.converged);
+  EXPECT_EQ(reused.discretization.get(), first.discretization.get());
+  EXPECT_NE(rebuilt.discretization.get(), first.discretization.get());
+  EXPECT_NEAR(reused.energy, rebuilt.energy, 1e-12 * rebuilt.energy);
+  EXPECT_EQ(reused.minimization.newton_iterations, rebuilt.minimization.newton_iterations);
+  // Another node set is refused.
+  const NodeSet fewer(2, std::vector<double>(first.nodes.coords.begin(), first.nodes.coords.end() - 2));
+  in.nodes = fewer;
+  in.initial.resize(fewer.size());
+  EXPECT_THROW((void)app::solve_problem(PETSC_COMM_SELF, p.bound, in), std::invalid_argument);
+}
+
 TEST(Vesicle, KktFirstFromAnEllipsoidStartNeverRaisesTheConstraintResidual) {
   // The default start: Newton on the KKT system from the tanh profile of an ellipsoid whose sharp
   // area and volume are not the targets. Its merit line search makes the constraint residual fall

@@ -715,7 +715,15 @@ ProblemSpace build_problem_space(MPI_Comm comm, const BoundScene& b, const Probl
   options.quadrature_points = scene.nodes.quadrature_points;
   options.basis_order = std::max(b.basis_order, 1);  // |∇u| at the nodes and H1 errors need gradients
   options.carried = input.carried;
-  space.disc = std::make_unique<Discretization>(comm, nodes, options);
+  if (input.discretization) {
+    if (input.carried || input.discretization->n_nodes() != static_cast<int>(nodes.size()))
+      throw std::invalid_argument(fmt::format("build_problem_space: a reused discretization of {} nodes for {} nodes{}",
+                                              input.discretization->n_nodes(), nodes.size(),
+                                              input.carried ? " with carried quadrature" : ""));
+    space.disc = input.discretization;
+  } else {
+    space.disc = std::make_shared<Discretization>(comm, nodes, options);
+  }
   const Discretization& disc = *space.disc;
 
   // Constants: the bound values, the input's overrides, the constraint targets.
@@ -912,6 +920,7 @@ ProblemResult solve_problem(MPI_Comm comm, const BoundScene& b, const ProblemInp
   const int bs = b.dofs_per_node;
   ProblemSpace space = build_problem_space(comm, b, input);
   const Discretization& disc = *space.disc;
+  result.discretization = space.disc;
   {
     const auto h = disc.basis().spacing();
     result.h_min = *std::min_element(h.begin(), h.end());

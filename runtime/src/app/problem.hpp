@@ -111,6 +111,9 @@ struct ProblemInput {
   /// nodes found on its boundary parts: a moving node set keeps its material boundary (after a reset,
   /// a node that was free stays free wherever its coefficient lies).
   std::vector<std::vector<int>> dirichlet_nodes;
+  /// A discretization of these nodes built by an earlier solve of the same scene (ProblemResult::
+  /// discretization): reused, not rebuilt (a continuation stage that changes a constant only).
+  std::shared_ptr<Discretization> discretization;
 };
 
 /// The nodes (original numbering) on the boundary parts of each [[dirichlet]] entry, in scene order;
@@ -146,13 +149,15 @@ struct ProblemResult {
   /// Linear problems with zero-mean unknowns: how the level was fixed ("constraint": a bordered
   /// system, "null space": the Krylov method's null space + the mean removed afterwards).
   std::string zero_mean_method;
+  /// The solve's discretization, for a later solve on the same nodes (ProblemInput::discretization).
+  std::shared_ptr<Discretization> discretization;
 };
 
 /// The assembly side of one problem on one node set: the discretization, one Assembler per output
 /// with its constants, coefficients and quadrature data set, the Dirichlet dofs and the start.
 /// What solve_problem solves once, and what a time integrator steps.
 struct ProblemSpace {
-  std::unique_ptr<Discretization> disc;
+  std::shared_ptr<Discretization> disc;
   std::map<std::string, double, std::less<>> constants;  ///< every constant, resolved (targets included)
   std::vector<std::unique_ptr<Assembler>> assemblers;    ///< owners of the pointers below
   std::vector<PetscVector> coefficient_vectors;          ///< alive as long as the assemblers reading them

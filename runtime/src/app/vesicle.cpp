@@ -327,6 +327,8 @@ StageRecord run_vesicle_stage(MPI_Comm comm, const BoundScene& bound, const Vesi
     if (rec.parameter < stages[from].parameter) input.initial = rescale_interface(input.initial, stages[from].parameter, rec.parameter);
     // The multipliers (tension, pressure) change little between stages: start from the last ones.
     if (stages[from].result.converged) input.initial_multipliers = stages[from].result.minimization.multipliers;
+    // Only eps changes: the nodes, cells, quadrature and basis are those of the stage before.
+    if (st.lloyd_iterations == 0) input.discretization = stages[from].result.discretization;
   }
   if (log != nullptr) {
     *log << "== stage " << stage << " (" << rec.grid << rec.label << "): " << nodes.size() << " nodes, eps " << rec.parameter
@@ -375,6 +377,9 @@ SceneRun run_vesicle(MPI_Comm comm, const Scene& scene, const VesicleModel& mode
     }
     const bool branch = stage > 0 && model.adaptivity->stages[static_cast<std::size_t>(stage - 1)].branch;
     if (!branch) main_stage = run.stages.size() - 1;
+    // Later stages continue from the last stage or the main one: only their discretizations are kept.
+    for (std::size_t i = 0; i + 1 < run.stages.size(); ++i)
+      if (i != main_stage) run.stages[i].result.discretization.reset();
     if (!run.stages.back().result.converged) break;
   }
   run.wall_s = seconds_since(t_start);
