@@ -4,15 +4,15 @@
 # (the default) and "augmented" (the augmented Lagrangian first, round 1's only choice).
 # Prints one line per run: branch, v, start, iterations, energy, wall time; JSON per run in OUT.
 #   demos/shapes/first_stage.sh [BUILD_DIR] [OUT_DIR]
+# CASES="oblate:0.7 prolate:0.7" and STARTS="augmented" select a subset.
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 build=${1:-build}
 out=${2:-$build/demo/first_stage}
 mkdir -p "$out"
-for case in "oblate 0.8" "oblate 0.9" "prolate 0.9" "oblate 0.7" "prolate 0.7"; do
-  set -- $case
-  branch=$1 v=$2
-  for start in kkt augmented; do
+for case in ${CASES:-oblate:0.8 oblate:0.9 prolate:0.9 oblate:0.7 prolate:0.7}; do
+  branch=${case%%:*} v=${case##*:}
+  for start in ${STARTS:-kkt augmented}; do
     scene="$out/${branch}_${v}_${start}.toml"
     sed -e "s/^reduced_volume = 0.8/reduced_volume = $v/" -e "s/^shape = \"ellipsoid\"/shape = \"$branch\"/" \
         -e '/^semi_axes/d' -e '/^\[vesicle.adaptivity\]/,/^\]/d' -e '/^\[reference\]/,/^energy/d' \
