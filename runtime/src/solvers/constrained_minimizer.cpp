@@ -169,12 +169,10 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
   Evaluation ev;
   const bool cold_start = nu.empty();
   if (nu.empty()) {
-    // No estimate given: the least-squares multipliers of the start, argmin |∇E − Σ ν_i ∇C_i|. With
-    // ν = 0 the first inner minimizations trade the constraints for energy (measured: the residual
-    // rose from 8e-3 to 2.6e-2 over 13 Newton steps from an ellipsoid start) until the multiplier
-    // updates catch up.
-    // Only for KKT-first: an augmented-Lagrangian start keeps ν = 0 (measured: with the
-    // least-squares estimate it took 37 steps on the 6124-node discocyte start, with zero 17).
+    // No estimate given. KKT-first starts from the least-squares multipliers of the start,
+    // argmin |∇E − Σ ν_i ∇C_i|, which enter its first Hessian ∇²E − Σ ν_i ∇²C_i. The augmented
+    // Lagrangian keeps ν = 0: its inner minimizations at a poor fixed estimate took 37 steps on the
+    // 6124-node discocyte start (round 1, from zero: 17).
     nu.assign(k, 0.0);
     if (k > 0 && options_.kkt_first) {
       evaluate(u, nu, false, ev);
