@@ -13,6 +13,8 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "lmeform/output.hpp"
 #include "lmeform/petsc.hpp"
 #include "lmeform/scene.hpp"
@@ -111,16 +113,16 @@ int main(int argc, char** argv) {
   }
 
   if (PetscSession::rank() == 0) {
-    std::ostringstream js;
-    js << "[\n";
-    for (std::size_t i = 0; i < records.size(); ++i) {
-      const auto& r = records[i];
-      js << "  {\"eps\": " << r.eps << ", \"grid\": \"" << r.grid << "\", \"nodes\": " << r.nodes << ", \"h_min\": " << r.h_min
-         << ", \"energy\": " << r.energy << ", \"relative_error_sharp\": " << r.relative_error_sharp
-         << ", \"wall_s\": " << r.wall_s << "}" << (i + 1 < records.size() ? "," : "") << "\n";
-    }
-    js << "]\n";
-    write_text_atomically(out / "statics.json", js.str());
+    nlohmann::json js = nlohmann::json::array();
+    for (const auto& r : records)
+      js.push_back({{"eps", r.eps},
+                    {"grid", r.grid},
+                    {"nodes", r.nodes},
+                    {"h_min", r.h_min},
+                    {"energy", r.energy},
+                    {"relative_error_sharp", r.relative_error_sharp},
+                    {"wall_s", r.wall_s}});
+    write_text_atomically(out / "statics.json", js.dump(1) + "\n");
     const std::string command = "/usr/bin/python3 " LMEFORM_SOURCE_DIR "/scripts/plot_statics.py '" +
                                 (out / "statics.json").string() + "' '" + (out / "statics.png").string() + "'";
     if (std::system(command.c_str()) != 0) std::fprintf(stderr, "bench_statics: the plot script failed\n");
