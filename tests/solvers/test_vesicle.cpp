@@ -52,6 +52,19 @@ struct SphereBox {
   }
 };
 
+/// An ellipsoid start with semi-axes (a, c)·R in the box, eps 0.1, h 0.045, constrained to the
+/// sphere's area, v times its volume, and zero moment.
+SphereBox constrained_ellipsoid(double a, double c, double v) {
+  SphereBox s;
+  s.eps = 0.1;
+  s.spacing = 0.045;
+  s.semi_axes = {a * kR, c * kR};
+  const double V0 = v * 4.0 / 3 * pi * kR * kR * kR;
+  s.constraints = "area = " + num(4 * pi * kR * kR) + "\nvolume = " + num(V0) + "\nmoment = { target = 0.0, scale = " + num(V0) +
+                  " }\n";
+  return s;
+}
+
 /// The bound scene and the vesicle's initial profile for it.
 struct Problem {
   Scene scene;
@@ -166,15 +179,8 @@ TEST(Vesicle, WarmStartedMultipliersSaveIterations) {
   // A continuation (eps 0.1 -> 0.09 on the same grid) from the previous solution, augmented
   // Lagrangian first: starting from the previous multipliers converges in fewer augmented-Lagrangian
   // steps than starting from zero.
-  SphereBox s;
+  SphereBox s = constrained_ellipsoid(1.1, 0.85, 0.95);
   s.start = "augmented";
-  s.eps = 0.1;
-  s.spacing = 0.045;
-  const double R = kR;
-  s.semi_axes = {1.1 * R, 0.85 * R};
-  const double V0 = 0.95 * 4.0 / 3 * pi * R * R * R;
-  s.constraints = "area = " + num(4 * pi * R * R) + "\nvolume = " + num(V0) +
-                  "\nmoment = { target = 0.0, scale = " + num(V0) + " }\n";
   const Problem p(s);
   app::ProblemInput in = p.input(s);
   const auto first = app::solve_problem(PETSC_COMM_SELF, p.bound, in);
@@ -199,12 +205,7 @@ TEST(Vesicle, WarmStartedMultipliersSaveIterations) {
 TEST(Vesicle, AContinuationStageReusesTheDiscretization) {
   // A stage that only lowers eps keeps the nodes: the previous solve's discretization is reused
   // (the same object), and the solve gives what a rebuilt one gives.
-  SphereBox s;
-  s.eps = 0.1;
-  s.spacing = 0.045;
-  s.semi_axes = {1.1 * kR, 0.85 * kR};
-  const double V0 = 0.95 * 4.0 / 3 * pi * kR * kR * kR;
-  s.constraints = "area = " + num(4 * pi * kR * kR) + "\nvolume = " + num(V0) + "\nmoment = { target = 0.0, scale = " + num(V0) + " }\n";
+  const SphereBox s = constrained_ellipsoid(1.1, 0.85, 0.95);
   const Problem p(s);
   app::ProblemInput in = p.input(s);
   const auto first = app::solve_problem(PETSC_COMM_SELF, p.bound, in);
@@ -234,14 +235,7 @@ TEST(Vesicle, KktFirstFromAnEllipsoidStartNeverRaisesTheConstraintResidual) {
   // area and volume are not the targets. Its merit line search makes the constraint residual fall
   // (or hold) at every step, it needs no augmented-Lagrangian step, and it reaches the minimizer the
   // augmented-Lagrangian start reaches.
-  SphereBox s;
-  s.eps = 0.1;
-  s.spacing = 0.045;
-  const double R = kR;
-  s.semi_axes = {1.2 * R, 0.7 * R};
-  const double V0 = 0.85 * 4.0 / 3 * pi * R * R * R;
-  s.constraints = "area = " + num(4 * pi * R * R) + "\nvolume = " + num(V0) +
-                  "\nmoment = { target = 0.0, scale = " + num(V0) + " }\n";
+  SphereBox s = constrained_ellipsoid(1.2, 0.7, 0.85);
   const Problem kkt(s);
   const auto a = app::solve_problem(PETSC_COMM_SELF, kkt.bound, kkt.input(s));
   s.start = "augmented";
