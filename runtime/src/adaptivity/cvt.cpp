@@ -573,6 +573,122 @@ NodeSet uniform_cvt(const Box& box, std::size_t count, const CvtOptions& options
 }
 
 // ---------------------------------------------------------------------------------------------
+// Node sets for a spacing field
+
+namespace {
+double checked_spacing(const SpacingField& spacing, std::span<const double> x, const char* who) {
+  const double h = spacing.h(x);
+  if (!(h > 0.0) || !std::isfinite(h)) {
+    throw std::invalid_argument(std::string(who) + ": the spacing must be positive and finite, got " + fmt(h) + " at (" +
+                                fmt(x[0]) + ", " + fmt(x[1]) + ")");
+  }
+  return h;
+}
+
+// The k-th point of the Halton sequence in bases 2 and 3: distinct points strictly inside (0, 1)^2.
+std::array<double, 2> halton(std::size_t k) {
+  std::array<double, 2> out{};
+  const std::array<std::size_t, 2> bases{2, 3};
+  for (std::size_t i = 0; i < 2; ++i) {
+    double f = 1.0, r = 0.0;
+    for (std::size_t m = k; m > 0; m /= bases[i]) {
+      f /= static_cast<double>(bases[i]);
+      r += f * static_cast<double>(m % bases[i]);
+    }
+    out[i] = r;
+  }
+  return out;
+}
+}  // namespace
+
+SpacingNodeCount count_nodes_for_spacing(const Box& box, const SpacingField& spacing) {
+  const char* who = "count_nodes_for_spacing";
+  box.validate(who);
+  if (box.dim != 2) throw std::invalid_argument(std::string(who) + ": 2D boxes only, got dimension " + std::to_string(box.dim));
+  if (!spacing.h) throw std::invalid_argument(std::string(who) + ": no spacing given");
+  if (!(spacing.h_min > 0.0) || !std::isfinite(spacing.h_min))
+    throw std::invalid_argument(std::string(who) + ": h_min must be positive and finite, got " + fmt(spacing.h_min));
+  const double lx = box.hi[0] - box.lo[0], ly = box.hi[1] - box.lo[1];
+  // Midpoint rule on cells of h_min / 2: the spacing field varies by at most its grading across one.
+  const double step = 0.5 * spacing.h_min;
+  const double cells = std::ceil(lx / step) * std::ceil(ly / step);
+  if (cells > 1e8) throw std::invalid_argument(std::string(who) + ": h_min " + fmt(spacing.h_min) + " is too small for the box");
+  const auto nx = static_cast<std::size_t>(std::ceil(lx / step)), ny = static_cast<std::size_t>(std::ceil(ly / step));
+  const double dx = lx / static_cast<double>(nx), dy = ly / static_cast<double>(ny);
+  double nodes = 0.0;
+  std::array<double, 2> x{};
+  for (std::size_t j = 0; j < ny; ++j) {
+    x[1] = box.lo[1] + (static_cast<double>(j) + 0.5) * dy;
+    for (std::size_t i = 0; i < nx; ++i) {
+      x[0] = box.lo[0] + (static_cast<double>(i) + 0.5) * dx;
+      const double h = checked_spacing(spacing, x, who);
+      nodes += dx * dy * 2.0 / (std::sqrt(3.0) * h * h);
+    }
+  }
+  // Edges in the order bottom, right, top, left: start point, direction, length.
+  SpacingNodeCount count;
+  const std::array<std::array<double, 5>, 4> edges{{{box.lo[0], box.lo[1], 1, 0, lx},
+                                                    {box.hi[0], box.lo[1], 0, 1, ly},
+                                                    {box.lo[0], box.hi[1], 1, 0, lx},
+                                                    {box.lo[0], box.lo[1], 0, 1, ly}}};
+  std::size_t on_edges = 4;
+  for (std::size_t e = 0; e < 4; ++e) {
+    const auto& [x0, y0, tx, ty, length] = edges[e];
+    const auto n = static_cast<std::size_t>(std::ceil(length / step));
+    double segments = 0.0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const double t = (static_cast<double>(i) + 0.5) * length / static_cast<double>(n);
+      x = {x0 + t * tx, y0 + t * ty};
+      segments += length / static_cast<double>(n) / checked_spacing(spacing, x, who);
+    }
+    count.edges[e] = static_cast<std::size_t>(std::max(1.0, std::round(segments))) - 1;
+    on_edges += count.edges[e];
+  }
+  // The area integral counts the boundary nodes about half (their cells are half outside).
+  count.interior = static_cast<std::size_t>(std::max(1.0, std::round(nodes - 0.5 * static_cast<double>(on_edges))));
+  count.total = count.interior + on_edges;
+  return count;
+}
+
+NodeSet cvt_for_spacing(const Box& box, const SpacingField& spacing, std::size_t max_nodes, const CvtOptions& options,
+                        CvtReport* report) {
+  const char* who = "cvt_for_spacing";
+  const SpacingNodeCount count = count_nodes_for_spacing(box, spacing);
+  if (count.total > max_nodes) {
+    throw std::invalid_argument(std::string(who) + ": the spacing needs " + std::to_string(count.total) +
+                                " nodes, more than the limit of " + std::to_string(max_nodes));
+  }
+  const double lx = box.hi[0] - box.lo[0], ly = box.hi[1] - box.lo[1];
+  std::vector<double> xy;
+  xy.reserve(2 * count.total);
+  xy.insert(xy.end(), {box.lo[0], box.lo[1], box.hi[0], box.lo[1], box.hi[0], box.hi[1], box.lo[0], box.hi[1]});
+  // Edge nodes evenly spaced and interior nodes anywhere distinct: the density placement of
+  // cvt_relocate re-places both, keeping only the counts.
+  for (std::size_t e = 0; e < 4; ++e) {
+    for (std::size_t i = 1; i <= count.edges[e]; ++i) {
+      const double t = static_cast<double>(i) / static_cast<double>(count.edges[e] + 1);
+      switch (e) {
+        case 0: xy.insert(xy.end(), {box.lo[0] + t * lx, box.lo[1]}); break;
+        case 1: xy.insert(xy.end(), {box.hi[0], box.lo[1] + t * ly}); break;
+        case 2: xy.insert(xy.end(), {box.lo[0] + t * lx, box.hi[1]}); break;
+        default: xy.insert(xy.end(), {box.lo[0], box.lo[1] + t * ly}); break;
+      }
+    }
+  }
+  for (std::size_t k = 1; k <= count.interior; ++k) {
+    const auto u = halton(k);
+    xy.insert(xy.end(), {box.lo[0] + u[0] * lx, box.lo[1] + u[1] * ly});
+  }
+  CvtOptions placed = options;
+  placed.start = CvtStart::density;
+  const Density density = [spacing, who](std::span<const double> x) {
+    const double h = checked_spacing(spacing, x, who);
+    return 1.0 / (h * h * h * h);
+  };
+  return cvt_relocate(NodeSet(2, std::move(xy)), box, density, placed, report);
+}
+
+// ---------------------------------------------------------------------------------------------
 // Densities
 
 Density phase_field_density(double f, std::function<double(std::span<const double>)> grad_norm) {

@@ -3,12 +3,16 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <memory>
 #include <numbers>
+#include <set>
 #include <stdexcept>
 
 #include <fmt/format.h>
 
 #include "lmeform/cvt.hpp"
+#include "lmeform/delaunay.hpp"
+#include "lmeform/neighbour_search.hpp"
 #include "lmeform/node_sets.hpp"
 #include "lmeform/scene_table.hpp"
 
@@ -70,6 +74,12 @@ void read_adaptivity(const SceneTable& t, VesicleModel& m) {
   a.start_from_density = t.choice_of("start", t.optional_string("start").value_or("nodes"), {"nodes", "density"}) == "density";
   a.samples_per_node = t.positive("samples_per_node", t.number("samples_per_node", a.samples_per_node));
   if (a.samples_per_node < 1) t.fail_key("samples_per_node", "must be at least 1, got " + format_number(a.samples_per_node));
+  InterfaceResolution& r = a.interface;
+  r.band = t.non_negative("band", t.number("band", r.band));
+  r.grading = t.positive("grading", t.number("grading", r.grading));
+  r.coarsening = t.positive("coarsening", t.number("coarsening", r.coarsening));
+  if (r.coarsening < 1) t.fail_key("coarsening", "must be at least 1 (the far spacing over the interface spacing), got " + format_number(r.coarsening));
+  r.max_nodes = static_cast<std::size_t>(t.at_least("max_nodes", t.integer("max_nodes", static_cast<int>(r.max_nodes)), 4));
   const toml::node& n = t.require("stages");
   const auto* arr = n.as_array();
   if (arr == nullptr) t.wrong_type("stages", n, "an array of tables");
@@ -77,11 +87,19 @@ void read_adaptivity(const SceneTable& t, VesicleModel& m) {
   double previous = m.eps, main_eps = m.eps;
   for (std::size_t i = 0; i < arr->size(); ++i) {
     const std::string key = "stages[" + std::to_string(i) + "]";
-    const SceneTable st = t.table_of(key, (*arr)[i], {"eps", "f", "lloyd_iterations", "branch"});
+    const SceneTable st = t.table_of(key, (*arr)[i], {"eps", "f", "lloyd_iterations", "branch", "resolve"});
     AdaptivityStage stage;
     stage.eps = st.positive("eps", st.number("eps"));
     stage.lloyd_iterations = st.at_least("lloyd_iterations", st.integer("lloyd_iterations", lloyd), 0);
-    stage.f = stage.lloyd_iterations == 0 && !st.has("f") ? 0.0 : st.non_negative("f", st.number("f"));
+    if (st.has("resolve")) {
+      if (st.has("f")) st.fail_key("f", "does not apply to a stage with 'resolve': its grid follows the interface, not 1 + f |grad phi|");
+      stage.resolve = st.positive("resolve", st.number("resolve"));
+      if (*stage.resolve > stage.eps)
+        st.fail_key("resolve", fmt::format("= {} exceeds the stage's eps ({}): the grid must resolve the stage itself", *stage.resolve,
+                                           stage.eps));
+    } else {
+      stage.f = stage.lloyd_iterations == 0 && !st.has("f") ? 0.0 : st.non_negative("f", st.number("f"));
+    }
     stage.branch = st.boolean("branch", false);
     // Each stage lowers eps from the stage it continues from.
     const bool after_branch = !a.stages.empty() && a.stages.back().branch;
@@ -147,7 +165,7 @@ std::optional<VesicleModel> read_vesicle(const Scene& s) {
   } else {
     t->fail_key("initial", "is missing: the vesicle model starts from [vesicle.initial] (shape, center, semi_axes or radius)");
   }
-  if (const auto adapt = t->optional_table("adaptivity", {"stages", "lloyd_iterations", "start", "samples_per_node"})) {
+  if (const auto adapt = t->optional_table("adaptivity", {"stages", "lloyd_iterations", "start", "samples_per_node", "band", "grading", "coarsening", "max_nodes"})) {
     if (s.dim() != 2) adapt->fail_key("stages", "CVT adaptivity is available in 2D and axisymmetric scenes only");
     read_adaptivity(*adapt, m);
   }
@@ -280,10 +298,16 @@ StageRecord run_vesicle_stage(MPI_Comm comm, const BoundScene& bound, const Vesi
     const auto& st = model.adaptivity->stages[static_cast<std::size_t>(stage - 1)];
     from = st.branch ? stages.size() - 1 : main_stage;
     nodes = stages[from].result.nodes;
-    rec.generation = stages[from].generation + (st.lloyd_iterations > 0 ? 1 : 0);
+    rec.generation = stages[from].generation + (st.new_grid() ? 1 : 0);
     rec.grid = rec.generation == 0 ? stages[from].grid : "cvt-" + std::to_string(rec.generation);
     if (st.branch) rec.label = " (branch)";
-    if (st.lloyd_iterations > 0) {
+    if (st.resolve) {
+      CvtOptions cvt;
+      cvt.iterations = st.lloyd_iterations;
+      cvt.samples_per_node = model.adaptivity->samples_per_node;
+      nodes = resolve_interface(stages[from].result, scene.domain, *st.resolve, model.resolution_factor,
+                                model.adaptivity->interface, cvt, log);
+    } else if (st.lloyd_iterations > 0) {
       CvtOptions cvt;
       cvt.iterations = st.lloyd_iterations;
       cvt.start = model.adaptivity->start_from_density ? CvtStart::density : CvtStart::given;
@@ -320,7 +344,7 @@ StageRecord run_vesicle_stage(MPI_Comm comm, const BoundScene& bound, const Vesi
     // The previous field: as it is on the same grid (LME is not interpolating, so evaluating it at
     // its own nodes would smooth it), evaluated at the new nodes after a relocation.
     const auto& st = model.adaptivity->stages[static_cast<std::size_t>(stage - 1)];
-    input.initial = st.lloyd_iterations == 0
+    input.initial = !st.new_grid()
                         ? stages[from].result.state
                         : interpolate_nodal_field(stages[from].result.nodes, stages[from].result.state, scene.nodes.gamma, lme, nodes);
     // A narrower interface: start from the same level sets with the new width.
@@ -328,7 +352,7 @@ StageRecord run_vesicle_stage(MPI_Comm comm, const BoundScene& bound, const Vesi
     // The multipliers (tension, pressure) change little between stages: start from the last ones.
     if (stages[from].result.converged) input.initial_multipliers = stages[from].result.minimization.multipliers;
     // Only eps changes: the nodes, cells, quadrature and basis are those of the stage before.
-    if (st.lloyd_iterations == 0) input.discretization = stages[from].result.discretization;
+    if (!st.new_grid()) input.discretization = stages[from].result.discretization;
   }
   if (log != nullptr) {
     *log << "== stage " << stage << " (" << rec.grid << rec.label << "): " << nodes.size() << " nodes, eps " << rec.parameter
@@ -386,6 +410,74 @@ SceneRun run_vesicle(MPI_Comm comm, const Scene& scene, const VesicleModel& mode
   return run;
 }
 
+
+SpacingField interface_spacing(const NodeSet& nodes, std::span<const double> phi, double eps_resolve, double h_interface,
+                               const InterfaceResolution& resolution) {
+  if (phi.size() != nodes.size())
+    throw std::invalid_argument(fmt::format("interface_spacing: {} values for {} nodes", phi.size(), nodes.size()));
+  if (!(h_interface > 0) || !(eps_resolve > 0))
+    throw std::invalid_argument(fmt::format("interface_spacing: h_interface = {} and eps = {} must be positive", h_interface, eps_resolve));
+  // The zero level set, sampled where it crosses the edges of the Delaunay cells (linear between
+  // the two nodal values): points about one old spacing apart, far closer than the band.
+  const BackgroundCells cells = delaunay(nodes);
+  const auto du = static_cast<std::size_t>(nodes.dim);
+  std::vector<double> crossings;
+  std::set<std::pair<int, int>> seen;
+  for (std::size_t c = 0; c < cells.size(); ++c) {
+    const auto v = cells.cell(c);
+    for (std::size_t i = 0; i < v.size(); ++i) {
+      for (std::size_t j = i + 1; j < v.size(); ++j) {
+        const auto a = static_cast<std::size_t>(std::min(v[i], v[j])), b = static_cast<std::size_t>(std::max(v[i], v[j]));
+        if (!((phi[a] < 0) != (phi[b] < 0)) || !seen.emplace(int(a), int(b)).second) continue;
+        const double t = phi[a] / (phi[a] - phi[b]);
+        for (std::size_t k = 0; k < du; ++k) crossings.push_back(nodes.coords[a * du + k] + t * (nodes.coords[b * du + k] - nodes.coords[a * du + k]));
+      }
+    }
+  }
+  if (crossings.empty()) throw std::invalid_argument("interface_spacing: the phase field has no interface (no sign change)");
+  struct Interface {
+    NodeSet points;
+    KdTree tree;
+    explicit Interface(NodeSet p) : points(std::move(p)), tree(points) {}
+  };
+  auto interface = std::make_shared<const Interface>(NodeSet(nodes.dim, std::move(crossings)));
+  const double band = resolution.band * eps_resolve, grading = resolution.grading, h_far = resolution.coarsening * h_interface;
+  SpacingField field;
+  field.h_min = h_interface;
+  field.h = [interface, band, grading, h_interface, h_far](std::span<const double> x) {
+    thread_local std::vector<int> nearest;
+    thread_local std::vector<double> distance;
+    interface->tree.knn(x, 1, nearest, &distance);
+    return std::min(h_far, h_interface + grading * std::max(0.0, distance[0] - band));
+  };
+  return field;
+}
+
+NodeSet resolve_interface(const ProblemResult& solved, const Box& box, double eps_resolve, double resolution_factor,
+                          const InterfaceResolution& resolution, const CvtOptions& cvt, std::ostream* log) {
+  const auto t0 = std::chrono::steady_clock::now();
+  double h_interface = eps_resolve / resolution_factor;
+  for (int attempt = 0;; ++attempt) {
+    const SpacingField field = interface_spacing(solved.nodes, solved.state, eps_resolve, h_interface, resolution);
+    CvtReport report;
+    NodeSet nodes = cvt_for_spacing(box, field, resolution.max_nodes, cvt, &report);
+    const SpacingSummary spacing = spacing_summary(nodes);
+    const double needed = resolution_factor * spacing.h_min;
+    if (log != nullptr) {
+      *log << fmt::format("interface grid for eps >= {}: h {:.4g} within {:.4g} of the interface, grading {}, {} nodes, "
+                          "{} Lloyd iterations, h_min {:.4g} ({:.1f} s)\n",
+                          eps_resolve, h_interface, resolution.band * eps_resolve, resolution.grading, nodes.size(),
+                          report.iterations.size(), spacing.h_min, seconds_since(t0));
+    }
+    // The measured h_min (a low quantile of the Voronoi-ring spacing) lies a little below the
+    // target spacing of a CVT: refine by the ratio until the resolution rule holds.
+    if (eps_resolve >= needed * (1 - 1e-12)) return nodes;
+    if (attempt == 3)
+      throw std::invalid_argument(fmt::format("resolve_interface: after 4 grids h_min = {} still exceeds eps / {} = {}", spacing.h_min,
+                                              resolution_factor, eps_resolve / resolution_factor));
+    h_interface *= 0.99 * eps_resolve / needed;
+  }
+}
 
 NodeSet adapt_nodes(const ProblemResult& solved, const Box& box, double f, const CvtOptions& cvt, CvtReport* report) {
   const auto density = phase_field_density(f, solved.nodes, solved.gradient_norm);

@@ -5,13 +5,15 @@
 //     (reduced_volume), with the feasibility check V0 <= V_max(A0);
 //   * the initial phase field tanh(d / (√2 ε)) of an ellipsoid or sphere;
 //   * the resolution rule ε ≥ resolution_factor · h_min, checked before each solve;
-//   * the adaptivity schedule (seed Table B.6): CVT relocations with the density ρ = 1 + f |∇φ| and
-//     continuation in ε (interface re-profiled, multipliers warm-started);
+//   * the adaptivity schedule (seed Table B.6): CVT relocations with the density ρ = 1 + f |∇φ|, or
+//     new grids graded from the interface (resolve), and continuation in ε (interface re-profiled,
+//     multipliers warm-started);
 //   * the axisymmetric basis mirrored across the axis.
 #pragma once
 
 #include <array>
 #include <optional>
+#include <ostream>
 #include <span>
 #include <string>
 #include <vector>
@@ -31,15 +33,32 @@ struct AdaptivityStage {
   double eps = 0;
   double f = 0;
   int lloyd_iterations = 20;
+  /// Instead of relocating with ρ = 1 + f |∇φ|: a new grid that resolves the interface of the
+  /// current solution for every ε down to this one (interface_spacing), its node count following
+  /// the interface length.
+  std::optional<double> resolve;
   /// A side solve: later stages that are not branches continue from the last stage that is not one
   /// (seed Table 3 reports O12 at ε = 0.02 while O13 is adapted from O12 at ε = 0.025).
   bool branch = false;
+  /// The stage builds a new grid (else it only lowers ε on the grid of the stage it continues from).
+  [[nodiscard]] bool new_grid() const { return resolve.has_value() || lloyd_iterations > 0; }
+};
+
+/// How an interface-resolving grid is graded: spacing h_interface = ε_resolve / resolution_factor
+/// within `band` · ε_resolve of the interface φ = 0, growing by `grading` per unit distance (|∇h|
+/// bounded: steep grading costs LME accuracy) up to `coarsening` · h_interface.
+struct InterfaceResolution {
+  double band = 3.0;
+  double grading = 0.2;
+  double coarsening = 8.0;
+  std::size_t max_nodes = 60000;
 };
 
 struct VesicleAdaptivity {
   std::vector<AdaptivityStage> stages;
   bool start_from_density = false;     ///< Lloyd from the density's node placement, else from the current nodes
   double samples_per_node = 64;
+  InterfaceResolution interface;
 };
 
 /// The [vesicle] table of a scene.
@@ -90,6 +109,20 @@ void check_feasible(double A0, double V0, int dim = 3);
 /// and every adaptivity stage (relocation, resolution check, continuation in eps from the previous
 /// stage, multipliers warm-started). A stage that cannot run ends the schedule (SceneRun::failure).
 [[nodiscard]] SceneRun run_vesicle(MPI_Comm comm, const Scene& scene, const VesicleModel& model, std::ostream* log);
+
+/// The spacing field of an interface-resolving grid: h(x) = min(coarsening · h_interface,
+/// h_interface + grading · max(0, d(x) − band · eps_resolve)), d the distance to the zero level set
+/// of the nodal values phi (found on the Delaunay edges of `nodes`). Throws std::invalid_argument
+/// when phi has no sign change.
+[[nodiscard]] SpacingField interface_spacing(const NodeSet& nodes, std::span<const double> phi, double eps_resolve,
+                                             double h_interface, const InterfaceResolution& resolution);
+
+/// A grid that resolves the interface of `solved` for every ε ≥ eps_resolve: cvt_for_spacing of
+/// interface_spacing with h_interface = eps_resolve / resolution_factor, made finer and rebuilt
+/// (at most three times) until eps_resolve ≥ resolution_factor · h_min holds as measured.
+[[nodiscard]] NodeSet resolve_interface(const ProblemResult& solved, const Box& box, double eps_resolve,
+                                        double resolution_factor, const InterfaceResolution& resolution,
+                                        const CvtOptions& cvt, std::ostream* log = nullptr);
 
 /// One CVT adaptation of a solved state: Lloyd iterations with density ρ = 1 + f·|∇φ| on the box.
 [[nodiscard]] NodeSet adapt_nodes(const ProblemResult& solved, const Box& box, double f, const CvtOptions& cvt,
