@@ -314,6 +314,166 @@ TEST(Spacing, CheckResolutionWithAFactor) {
   EXPECT_THROW(check_resolution(0.05, 0.024, -1.0), std::invalid_argument);
 }
 
+// ---------------------------------------------------------------------------------------------
+// Node sets for a spacing field: count_nodes_for_spacing and cvt_for_spacing.
+
+Box box_2d(double lx, double ly) {
+  Box box;
+  box.dim = 2;
+  box.lo = {0.0, 0.0, 0.0};
+  box.hi = {lx, ly, 0.0};
+  return box;
+}
+
+SpacingField constant_spacing(double h) {
+  return {[h](std::span<const double>) { return h; }, h};
+}
+
+// h = h0 on the line x = c, growing by `slope` per unit distance from it, up to 8 h0.
+SpacingField graded_spacing(double h0, double c, double slope) {
+  return {[=](std::span<const double> x) { return std::min(8.0 * h0, h0 + slope * std::abs(x[0] - c)); }, h0};
+}
+
+std::size_t corner_count(const NodeSet& nodes, const Box& box) {
+  std::size_t k = 0;
+  for (std::size_t a = 0; a < nodes.size(); ++a) {
+    if (on_boundary(nodes.point(a), box, 0) && on_boundary(nodes.point(a), box, 1)) ++k;
+  }
+  return k;
+}
+
+void expect_inside(const NodeSet& nodes, const Box& box) {
+  for (std::size_t a = 0; a < nodes.size(); ++a) {
+    for (std::size_t i = 0; i < 2; ++i) {
+      EXPECT_GE(nodes.point(a)[i], box.lo[i]) << "node " << a;
+      EXPECT_LE(nodes.point(a)[i], box.hi[i]) << "node " << a;
+    }
+  }
+}
+
+// Mean Voronoi-ring spacing of the nodes whose distance |x - c| lies in [lo, hi).
+double mean_spacing_in(const NodeSet& nodes, const std::vector<double>& h, double c, double lo, double hi,
+                       std::size_t* count = nullptr) {
+  double sum = 0.0;
+  std::size_t k = 0;
+  for (std::size_t a = 0; a < nodes.size(); ++a) {
+    const double d = std::abs(nodes.point(a)[0] - c);
+    if (d >= lo && d < hi) {
+      sum += h[a];
+      ++k;
+    }
+  }
+  if (count != nullptr) *count = k;
+  return k == 0 ? std::numeric_limits<double>::quiet_NaN() : sum / static_cast<double>(k);
+}
+
+TEST(CvtForSpacing, UniformSpacingCountsAndGrid) {
+  const Box box = box_2d(1.5, 2.0);
+  const double h = 0.05;
+  const SpacingField field = constant_spacing(h);
+  const SpacingNodeCount count = count_nodes_for_spacing(box, field);
+  const double area_nodes = 1.5 * 2.0 * 2.0 / (std::sqrt(3.0) * h * h);  // 1385.6
+  std::size_t on_edges = 4;
+  for (const std::size_t e : count.edges) on_edges += e;
+  std::printf("uniform spacing: total %zu, interior %zu, edges %zu %zu %zu %zu, area formula %.1f\n", count.total,
+              count.interior, count.edges[0], count.edges[1], count.edges[2], count.edges[3], area_nodes);
+  // Edges without the corners: length / h - 1 (bottom, right, top, left).
+  EXPECT_EQ(count.edges[0], 29u);
+  EXPECT_EQ(count.edges[1], 39u);
+  EXPECT_EQ(count.edges[2], 29u);
+  EXPECT_EQ(count.edges[3], 39u);
+  EXPECT_EQ(count.total, count.interior + on_edges);
+  // The area integral counts a boundary node about half: total = area formula + on_edges / 2.
+  EXPECT_NEAR(static_cast<double>(count.total), area_nodes + 0.5 * static_cast<double>(on_edges), 1.0);
+  EXPECT_NEAR(static_cast<double>(count.total) / area_nodes, 1.0, 0.06);
+
+  CvtReport report;
+  const NodeSet nodes = cvt_for_spacing(box, field, count.total, {}, &report);
+  ASSERT_EQ(nodes.size(), count.total);
+  expect_inside(nodes, box);
+  EXPECT_EQ(corner_count(nodes, box), 4u);
+  EXPECT_GT(min_distance(nodes), 0.5 * h);
+  const SpacingSummary s = spacing_summary(nodes);
+  std::printf("uniform spacing CVT: %zu iterations, replaced %zu, h_mean %.4g, h_min %.4g, h_max %.4g\n",
+              report.iterations.size(), report.replaced, s.h_mean, s.h_min, s.h_max);
+  EXPECT_EQ(report.replaced, count.total - 4);  // CvtStart::density is implied: all but the corners re-placed
+  EXPECT_NEAR(s.h_mean, h, 0.1 * h);
+}
+
+TEST(CvtForSpacing, GradedSpacingFollowsTheField) {
+  const Box box = box_2d(2.0, 1.0);
+  const double h0 = 0.02, c = 0.6, slope = 0.2;
+  const SpacingField field = graded_spacing(h0, c, slope);
+  const SpacingNodeCount count = count_nodes_for_spacing(box, field);
+  const NodeSet nodes = cvt_for_spacing(box, field, count.total);
+  ASSERT_EQ(nodes.size(), count.total);
+  expect_inside(nodes, box);
+  EXPECT_EQ(corner_count(nodes, box), 4u);
+  const std::vector<double> h = voronoi_ring_spacing(nodes);
+  // The same node count uniformly: what the spacing would be if the grading were ignored.
+  const NodeSet uniform = uniform_cvt(box, count.total);
+  const std::vector<double> hu = voronoi_ring_spacing(uniform);
+  std::size_t near_count = 0, far_count = 0;
+  const double near = mean_spacing_in(nodes, h, c, 0.0, 0.02, &near_count);
+  const double far = mean_spacing_in(nodes, h, c, 0.8, 10.0, &far_count);
+  const double near_u = mean_spacing_in(uniform, hu, c, 0.0, 0.02);
+  std::printf("graded: %zu nodes; near %.4g (%zu nodes), far %.4g (%zu nodes); uniform CVT of the same count: near %.4g\n",
+              nodes.size(), near, near_count, far, far_count, near_u);
+  // Near the line the spacing is h0 (the ring averages neighbours a little farther out, up to
+  // h0 + 0.2 h0); a uniform CVT of the same count is 3x coarser there.
+  EXPECT_GE(near_count, 40u);
+  EXPECT_NEAR(near, h0, 0.25 * h0);
+  EXPECT_GT(near_u, 1.25 * h0);
+  // Far from the line (|x - c| >= 0.8 > 0.7, where h reaches 8 h0): the coarse spacing.
+  EXPECT_GE(far_count, 10u);
+  EXPECT_NEAR(far, 8.0 * h0, 0.15 * 8.0 * h0);
+  EXPECT_GT(far, 5.0 * near);
+  // In between, the spacing follows the linear grading (measured ratios 0.92 to 0.99).
+  for (int k = 0; k < 7; ++k) {
+    const double lo = 0.1 * k;
+    std::size_t n = 0;
+    const double m = mean_spacing_in(nodes, h, c, lo, lo + 0.1, &n);
+    const double target = std::min(8.0 * h0, h0 + slope * (lo + 0.05));
+    std::printf("  |x - c| in [%.1f, %.1f): %zu nodes, mean h %.4g, target %.4g, ratio %.3f\n", lo, lo + 0.1, n, m,
+                target, m / target);
+    EXPECT_GE(n, 5u);
+    EXPECT_NEAR(m / target, 1.0, 0.2) << "|x - c| in [" << lo << ", " << lo + 0.1 << ")";
+  }
+}
+
+TEST(CvtForSpacing, RefusesBadInput) {
+  const Box box = box_2d(1.5, 2.0);
+  const SpacingField field = constant_spacing(0.05);
+  const std::size_t budget = count_nodes_for_spacing(box, field).total;  // 1456
+  EXPECT_NO_THROW((void)count_nodes_for_spacing(box, field));
+  try {
+    (void)cvt_for_spacing(box, field, budget - 1);
+    ADD_FAILURE() << "a limit below the budget should be refused";
+  } catch (const std::invalid_argument& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("needs " + std::to_string(budget) + " nodes"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("limit of " + std::to_string(budget - 1)), std::string::npos) << msg;
+  }
+  // A spacing that is not positive and finite somewhere.
+  const SpacingField zero{[](std::span<const double> x) { return x[0] > 0.75 ? 0.0 : 0.05; }, 0.05};
+  const SpacingField nan{[](std::span<const double> x) { return x[1] > 1.0 ? std::nan("") : 0.05; }, 0.05};
+  const SpacingField negative{[](std::span<const double>) { return -0.05; }, 0.05};
+  for (const SpacingField* bad : {&zero, &nan, &negative}) {
+    EXPECT_THROW((void)count_nodes_for_spacing(box, *bad), std::invalid_argument);
+    EXPECT_THROW((void)cvt_for_spacing(box, *bad, 100000), std::invalid_argument);
+  }
+  try {
+    (void)cvt_for_spacing(box, zero, 100000);
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("the spacing must be positive and finite, got 0"), std::string::npos) << e.what();
+  }
+  // No spacing function, a bad h_min, a 3D box.
+  EXPECT_THROW((void)count_nodes_for_spacing(box, SpacingField{}), std::invalid_argument);
+  EXPECT_THROW((void)count_nodes_for_spacing(box, SpacingField{field.h, 0.0}), std::invalid_argument);
+  EXPECT_THROW((void)count_nodes_for_spacing(Box::unit(3), constant_spacing(0.2)), std::invalid_argument);
+  EXPECT_THROW((void)cvt_for_spacing(Box::unit(3), constant_spacing(0.2), 100000), std::invalid_argument);
+}
+
 TEST(Density, NodalValuesInterpolateLinearly) {
   const NodeSet grid = uniform_grid(Box::unit(2), {6, 6, 1});
   std::vector<double> g(grid.size());

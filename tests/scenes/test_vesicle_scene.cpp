@@ -8,14 +8,18 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <initializer_list>
+#include <stdexcept>
 #include <numbers>
 #include <span>
 #include <string>
 #include <string_view>
 #include <vector>
 
+#include "lmeform/cvt.hpp"
+#include "lmeform/node_sets.hpp"
 #include "lmeform/scene.hpp"
 #include "run_scene.hpp"
 #include "vesicle.hpp"
@@ -404,6 +408,185 @@ radius = 0.5
   EXPECT_EQ(vesicle_of(ball).semi_axes[2], 0.5);
   t = ball + "[vesicle.adaptivity]\nstages = [ { eps = 0.2, f = 1.0 } ]\n";
   expect_error(t, {"CVT adaptivity is available in 2D and axisymmetric scenes only"});
+}
+
+TEST(VesicleScene, InterfaceResolutionKeys) {
+  const std::string adapt = "[vesicle.adaptivity]\nband = 2.5\ngrading = 0.3\ncoarsening = 6.0\nmax_nodes = 20000\nstages = [\n"
+                            "  { eps = 0.04, resolve = 0.03 },\n"
+                            "  { eps = 0.03, lloyd_iterations = 0 },\n"
+                            "  { eps = 0.02, resolve = 0.02, lloyd_iterations = 0 },\n"
+                            "]\n";
+  const VesicleModel m = vesicle_of(kVesicle + adapt);
+  ASSERT_TRUE(m.adaptivity);
+  const auto& a = *m.adaptivity;
+  EXPECT_EQ(a.interface.band, 2.5);
+  EXPECT_EQ(a.interface.grading, 0.3);
+  EXPECT_EQ(a.interface.coarsening, 6.0);
+  EXPECT_EQ(a.interface.max_nodes, 20000u);
+  ASSERT_EQ(a.stages.size(), 3u);
+  ASSERT_TRUE(a.stages[0].resolve);
+  EXPECT_EQ(*a.stages[0].resolve, 0.03);
+  EXPECT_EQ(a.stages[0].f, 0.0);
+  EXPECT_EQ(a.stages[0].lloyd_iterations, 20);
+  EXPECT_TRUE(a.stages[0].new_grid());
+  // Only eps lowered: no resolve, no new grid.
+  EXPECT_FALSE(a.stages[1].resolve);
+  EXPECT_FALSE(a.stages[1].new_grid());
+  // resolve with no Lloyd iterations still builds a new grid (the density placement alone).
+  ASSERT_TRUE(a.stages[2].resolve);
+  EXPECT_EQ(*a.stages[2].resolve, 0.02);  // equal to the stage's eps: allowed
+  EXPECT_EQ(a.stages[2].lloyd_iterations, 0);
+  EXPECT_TRUE(a.stages[2].new_grid());
+  // The defaults of InterfaceResolution when the keys are left out.
+  const VesicleModel d = vesicle_of(kVesicle + "[vesicle.adaptivity]\nstages = [ { eps = 0.04, resolve = 0.04 } ]\n");
+  EXPECT_EQ(d.adaptivity->interface.band, 3.0);
+  EXPECT_EQ(d.adaptivity->interface.grading, 0.2);
+  EXPECT_EQ(d.adaptivity->interface.coarsening, 8.0);
+  EXPECT_EQ(d.adaptivity->interface.max_nodes, 60000u);
+  EXPECT_EQ(*d.adaptivity->stages[0].resolve, 0.04);
+
+  // resolve coarser than the stage's eps, resolve with f, and bad values.
+  std::string t = kVesicle + edit(adapt, "{ eps = 0.04, resolve = 0.03 }", "{ eps = 0.04, resolve = 0.045 }");
+  expect_error(t, {at_line(t, "{ eps = 0.04, resolve = 0.045"),
+                   "key 'vesicle.adaptivity.stages[0].resolve' = 0.045 exceeds the stage's eps (0.04): the grid must resolve "
+                   "the stage itself"});
+  t = kVesicle + edit(adapt, "{ eps = 0.04, resolve = 0.03 }", "{ eps = 0.04, resolve = 0.03, f = 10.0 }");
+  expect_error(t, {at_line(t, "{ eps = 0.04, resolve = 0.03, f"),
+                   "key 'vesicle.adaptivity.stages[0].f' does not apply to a stage with 'resolve'"});
+  t = kVesicle + edit(adapt, "{ eps = 0.04, resolve = 0.03 }", "{ eps = 0.04, resolve = 0.0 }");
+  expect_error(t, {"key 'vesicle.adaptivity.stages[0].resolve' must be positive, got 0"});
+  t = kVesicle + edit(adapt, "coarsening = 6.0", "coarsening = 0.5");
+  expect_error(t, {at_line(t, "coarsening ="), "key 'vesicle.adaptivity.coarsening' must be at least 1 (the far spacing over the "
+                                               "interface spacing), got 0.5"});
+  EXPECT_EQ(vesicle_of(kVesicle + edit(adapt, "coarsening = 6.0", "coarsening = 1.0")).adaptivity->interface.coarsening, 1.0);
+  t = kVesicle + edit(adapt, "grading = 0.3", "grading = 0.0");
+  expect_error(t, {at_line(t, "grading ="), "key 'vesicle.adaptivity.grading' must be positive, got 0"});
+  t = kVesicle + edit(adapt, "band = 2.5", "band = -1.0");
+  expect_error(t, {at_line(t, "band ="), "key 'vesicle.adaptivity.band' must be non-negative, got -1"});
+  t = kVesicle + edit(adapt, "max_nodes = 20000", "max_nodes = 3");
+  expect_error(t, {at_line(t, "max_nodes ="), "key 'vesicle.adaptivity.max_nodes' must be at least 4, got 3"});
+  t = kVesicle + edit(adapt, "{ eps = 0.04, resolve = 0.03 }", "{ eps = 0.04, resolv = 0.03 }");
+  expect_error(t, {"unknown key 'vesicle.adaptivity.stages[0].resolv'"});
+}
+
+namespace {
+
+// phi = tanh((R - |x - c|) / (sqrt2 eps)) of a circle on a uniform grid of [-1, 1]^2 with spacing 0.025.
+constexpr double kCx = 0.05, kCy = -0.03, kRadius = 0.5, kGridStep = 0.025;
+
+NodeSet circle_grid() {
+  Box box;
+  box.dim = 2;
+  box.lo = {-1.0, -1.0, 0.0};
+  box.hi = {1.0, 1.0, 0.0};
+  return uniform_grid(box, {81, 81, 1});
+}
+
+std::vector<double> circle_phi(const NodeSet& nodes, double eps) {
+  std::vector<double> phi(nodes.size());
+  for (std::size_t a = 0; a < nodes.size(); ++a) {
+    const auto x = nodes.point(a);
+    phi[a] = std::tanh((kRadius - std::hypot(x[0] - kCx, x[1] - kCy)) / (std::numbers::sqrt2 * eps));
+  }
+  return phi;
+}
+
+// The point at signed distance d outside the circle (d < 0: inside) in the direction angle.
+std::array<double, 2> from_circle(double d, double angle) {
+  return {kCx + (kRadius + d) * std::cos(angle), kCy + (kRadius + d) * std::sin(angle)};
+}
+
+}  // namespace
+
+TEST(VesicleScene, InterfaceSpacing) {
+  const NodeSet nodes = circle_grid();
+  const std::vector<double> phi = circle_phi(nodes, 0.04);
+  const double eps = 0.03, h_i = 0.015;
+  app::InterfaceResolution r;
+  r.band = 2.5;        // 0.075 from the interface at h_i,
+  r.grading = 0.3;     // then growing by 0.3 per unit distance,
+  r.coarsening = 5.0;  // up to 0.075 (reached at 0.075 + 0.06 / 0.3 = 0.275).
+  const SpacingField field = app::interface_spacing(nodes, phi, eps, h_i, r);
+  EXPECT_EQ(field.h_min, h_i);
+  ASSERT_TRUE(field.h);
+  // The crossings sample the circle at about the grid step: the distance to the nearest one
+  // exceeds the true distance by far less than a few % of the step.
+  const double tol = r.grading * 0.05 * kGridStep;
+  double worst = 0.0;
+  for (int k = 0; k < 24; ++k) {
+    const double angle = 2.0 * std::numbers::pi * (k + 0.37) / 24.0;
+    // On the circle and inside the band: h_interface exactly.
+    EXPECT_EQ(field.h(from_circle(0.0, angle)), h_i) << "angle " << angle;
+    EXPECT_EQ(field.h(from_circle(0.07, angle)), h_i) << "angle " << angle;
+    EXPECT_EQ(field.h(from_circle(-0.07, angle)), h_i) << "angle " << angle;
+    // band * eps + 0.1 from the circle, outside and inside: h_i + grading * 0.1.
+    for (const double d : {0.1, 0.05, 0.15}) {
+      for (const double side : {1.0, -1.0}) {
+        const double h = field.h(from_circle(side * (r.band * eps + d), angle));
+        EXPECT_NEAR(h, h_i + r.grading * d, tol) << "angle " << angle << ", distance " << side * (r.band * eps + d);
+        worst = std::max(worst, std::abs(h - (h_i + r.grading * d)));
+      }
+    }
+    // Far away (and at the centre, 0.5 from the circle): coarsening * h_interface.
+    EXPECT_EQ(field.h(from_circle(-kRadius, angle)), r.coarsening * h_i);
+    EXPECT_EQ(field.h(from_circle(0.3, angle)), r.coarsening * h_i);
+  }
+  std::printf("interface spacing: largest deviation from the linear grading %.3g (tolerance %.3g)\n", worst, tol);
+  const std::array<double, 2> corner{0.95, -0.95};
+  EXPECT_EQ(field.h(corner), r.coarsening * h_i);
+}
+
+TEST(VesicleScene, InterfaceSpacingRefusesBadInput) {
+  const NodeSet nodes = circle_grid();
+  const std::vector<double> phi = circle_phi(nodes, 0.04);
+  const app::InterfaceResolution r;
+  // No sign change: no interface.
+  std::vector<double> inside(nodes.size(), 0.7), outside(nodes.size(), -1.0);
+  for (const auto* p : {&inside, &outside}) {
+    try {
+      (void)app::interface_spacing(nodes, *p, 0.03, 0.015, r);
+      ADD_FAILURE() << "a phase field without an interface was accepted";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("no sign change"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_THROW((void)app::interface_spacing(nodes, std::span<const double>(phi).first(nodes.size() - 1), 0.03, 0.015, r),
+               std::invalid_argument);
+  EXPECT_THROW((void)app::interface_spacing(nodes, phi, 0.03, 0.0, r), std::invalid_argument);
+  EXPECT_THROW((void)app::interface_spacing(nodes, phi, 0.0, 0.015, r), std::invalid_argument);
+  EXPECT_NO_THROW((void)app::interface_spacing(nodes, phi, 0.03, 0.015, r));
+}
+
+TEST(VesicleScene, ResolveInterfaceMeetsTheResolutionRule) {
+  app::ProblemResult solved;
+  solved.nodes = circle_grid();
+  solved.state = circle_phi(solved.nodes, 0.08);
+  Box box;
+  box.dim = 2;
+  box.lo = {-1.0, -1.0, 0.0};
+  box.hi = {1.0, 1.0, 0.0};
+  const double eps = 0.05, factor = 2.0;
+  app::InterfaceResolution r;
+  CvtOptions cvt;
+  cvt.iterations = 20;
+  const NodeSet nodes = app::resolve_interface(solved, box, eps, factor, r, cvt);
+  const SpacingSummary s = spacing_summary(nodes);
+  // The resolution rule holds as measured, and the grid is graded: coarse far from the circle.
+  EXPECT_LE(factor * s.h_min, eps * (1 + 1e-12));
+  EXPECT_GT(s.h_max, 4.0 * s.h_min);
+  std::size_t near = 0;
+  for (std::size_t a = 0; a < nodes.size(); ++a) {
+    const auto x = nodes.point(a);
+    if (std::abs(std::hypot(x[0] - kCx, x[1] - kCy) - kRadius) < r.band * eps) ++near;
+  }
+  const std::size_t uniform_count = count_nodes_for_spacing(box, {[&](std::span<const double>) { return eps / factor; }, eps / factor}).total;
+  std::printf("resolve_interface: %zu nodes (%zu within the band), h_min %.4g, h_max %.4g; uniform at eps / 2: %zu nodes\n",
+              nodes.size(), near, s.h_min, s.h_max, uniform_count);
+  EXPECT_GT(2 * near, nodes.size());               // most nodes resolve the interface
+  EXPECT_LT(2 * nodes.size(), uniform_count);      // far fewer than a uniform grid of the same h_min
+  // A budget below the grid's node count is refused.
+  r.max_nodes = nodes.size() / 2;
+  EXPECT_THROW((void)app::resolve_interface(solved, box, eps, factor, r, cvt), std::invalid_argument);
 }
 
 TEST(VesicleScene, ResolutionAgainstTheUniformGrid) {
