@@ -791,31 +791,11 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     CvtOptions cvt;
     cvt.iterations = settings.remesh_iterations;
     const NodeSet nodes = cvt_relocate(current, scene.domain, phase_field_density(settings.remesh_factor, current, grad_norm), cvt);
-    // The new nodal values make the new LME field take the old field's values at the new nodes:
-    // LME is not interpolating (Σ_a p_a(x_b) φ_a ≠ φ_b), so copying the old field's values would
-    // smooth it a second time and widen the interface. Richardson iterations on the interpolation
-    // conditions P φ = g (P_ba = p_a(x_b), an averaging operator, eigenvalues in (0, 1]).
-    const LmeBasis new_basis(nodes, std::vector<double>(nodes.size(), scene.nodes.gamma), lme);
-    std::vector<std::vector<int>> rows(nodes.size());
-    std::vector<std::vector<double>> weights(nodes.size());
-    for (std::size_t node = 0; node < nodes.size(); ++node) {
-      rows[node] = new_basis.neighbours(nodes.point(node));
-      weights[node] = new_basis.evaluate(nodes.point(node), rows[node], 0);
-    }
+    // The new nodal values make the new LME field take the old field's values at the new nodes.
     std::map<std::string, std::vector<double>, std::less<>> projected;
     for (auto& [name, values] : scalar_fields) {
-      const std::vector<double> target = interpolate_nodal_field(current, values, scene.nodes.gamma, lme, nodes);
-      std::vector<double> phi = target;
-      for (int it = 0; it < settings.remesh_fit_iterations; ++it) {
-        std::vector<double> next = phi;
-        for (std::size_t node = 0; node < nodes.size(); ++node) {
-          double v = 0;
-          for (std::size_t m = 0; m < rows[node].size(); ++m) v += weights[node][m] * phi[std::size_t(rows[node][m])];
-          next[node] += target[node] - v;
-        }
-        phi.swap(next);
-      }
-      values = phi;
+      values = fit_nodal_values(nodes, interpolate_nodal_field(current, values, scene.nodes.gamma, lme, nodes), scene.nodes.gamma, lme,
+                                settings.remesh_fit_iterations);
       projected[name] = values;
     }
     material_nodes = nodes;

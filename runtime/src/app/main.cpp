@@ -240,7 +240,12 @@ int run(const std::string& scene_path, const std::string& json_path, const std::
                                 {"relative_error_sharp", number(rel_error(s.result.energy))},
                                 {"augmented_iterations", s.result.minimization.augmented_iterations},
                                 {"newton_iterations", s.result.minimization.newton_iterations},
+                                {"gradient_evaluations", s.result.minimization.gradient_evaluations},
+                                {"hessian_evaluations", s.result.minimization.hessian_evaluations},
                                 {"adapt_s", number(s.adapt_s)},
+                                {"setup_s", number(s.result.seconds_setup)},
+                                {"hessian_s", number(s.result.minimization.seconds_hessian)},
+                                {"factor_solve_s", number(s.result.minimization.seconds_factor)},
                                 {"wall_s", number(s.wall_s)}});
       }
       write_text_atomically(json_path, js.dump(2) + "\n");

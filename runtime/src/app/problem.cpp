@@ -563,6 +563,31 @@ std::vector<double> interpolate_nodal_field(const NodeSet& old_nodes, std::span<
   return out;
 }
 
+std::vector<double> fit_nodal_values(const NodeSet& nodes, std::span<const double> values, double gamma, const LmeOptions& lme,
+                                     int iterations) {
+  if (values.size() != nodes.size())
+    throw std::invalid_argument(fmt::format("fit_nodal_values: {} values for {} nodes", values.size(), nodes.size()));
+  std::vector<double> phi(values.begin(), values.end());
+  if (iterations <= 0) return phi;
+  const LmeBasis basis(nodes, std::vector<double>(nodes.size(), gamma), lme);
+  std::vector<std::vector<int>> rows(nodes.size());
+  std::vector<std::vector<double>> weights(nodes.size());
+  for (std::size_t node = 0; node < nodes.size(); ++node) {
+    rows[node] = basis.neighbours(nodes.point(node));
+    weights[node] = basis.evaluate(nodes.point(node), rows[node], 0);
+  }
+  std::vector<double> next(phi.size());
+  for (int it = 0; it < iterations; ++it) {
+    for (std::size_t node = 0; node < nodes.size(); ++node) {
+      double v = 0;
+      for (std::size_t m = 0; m < rows[node].size(); ++m) v += weights[node][m] * phi[std::size_t(rows[node][m])];
+      next[node] = phi[node] + values[node] - v;
+    }
+    phi.swap(next);
+  }
+  return phi;
+}
+
 std::vector<double> coefficient_values(const BoundScene& b, const std::string& name, int components, const NodeSet& nodes) {
   if (std::none_of(b.scene->coefficients.begin(), b.scene->coefficients.end(),
                    [&](const SceneInitialField& f) { return f.unknown == name; }))

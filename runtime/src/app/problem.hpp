@@ -231,6 +231,13 @@ struct SceneRun {
 [[nodiscard]] std::vector<double> interpolate_nodal_field(const NodeSet& old_nodes, std::span<const double> phi, double gamma,
                                                           const LmeOptions& lme, const NodeSet& new_nodes);
 
+/// Nodal coefficients whose LME field takes the given values at the nodes themselves: LME is not
+/// interpolating (Σ_a p_a(x_b) φ_a ≠ φ_b), so using values as coefficients smooths the field once
+/// more (an interface widens). Richardson iterations on P φ = g, P_ba = p_a(x_b), an averaging
+/// operator with eigenvalues in (0, 1]; 0 iterations returns the values.
+[[nodiscard]] std::vector<double> fit_nodal_values(const NodeSet& nodes, std::span<const double> values, double gamma,
+                                                   const LmeOptions& lme, int iterations);
+
 /// "; did you mean 'x'?" for the candidate closest to a misspelt name, else "".
 [[nodiscard]] std::string did_you_mean(std::string_view name, const std::vector<std::string>& candidates);
 

@@ -341,14 +341,19 @@ StageRecord run_vesicle_stage(MPI_Comm comm, const BoundScene& bound, const Vesi
     if (!given)
       for (std::size_t a = 0; a < nodes.size(); ++a) input.initial[a] = initial_profile(model, nodes.point(a), scene.dim());
   } else {
-    // The previous field: as it is on the same grid (LME is not interpolating, so evaluating it at
-    // its own nodes would smooth it), evaluated at the new nodes after a relocation.
+    // The previous field at the nodes of this stage; a narrower interface: the same level sets with
+    // the new width. Coefficients are fitted to those values: LME is not interpolating, and
+    // coefficients set to the values would smooth the re-profiled interface back towards the old
+    // width (measured on the discocyte at eps 0.015 -> 0.01: a start energy of 20.1 against ...).
     const auto& st = model.adaptivity->stages[static_cast<std::size_t>(stage - 1)];
-    input.initial = !st.new_grid()
-                        ? stages[from].result.state
-                        : interpolate_nodal_field(stages[from].result.nodes, stages[from].result.state, scene.nodes.gamma, lme, nodes);
-    // A narrower interface: start from the same level sets with the new width.
-    if (rec.parameter < stages[from].parameter) input.initial = rescale_interface(input.initial, stages[from].parameter, rec.parameter);
+    const auto& previous = stages[from].result;
+    if (!st.new_grid() && rec.parameter == stages[from].parameter) {
+      input.initial = previous.state;
+    } else {
+      std::vector<double> values = interpolate_nodal_field(previous.nodes, previous.state, scene.nodes.gamma, lme, nodes);
+      if (rec.parameter < stages[from].parameter) values = rescale_interface(values, stages[from].parameter, rec.parameter);
+      input.initial = fit_nodal_values(nodes, values, scene.nodes.gamma, lme, model.adaptivity->fit_iterations);
+    }
     // The multipliers (tension, pressure) change little between stages: start from the last ones.
     if (stages[from].result.converged) input.initial_multipliers = stages[from].result.minimization.multipliers;
     // Only eps changes: the nodes, cells, quadrature and basis are those of the stage before.

@@ -167,7 +167,6 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
   double mu = options_.penalty;
 
   Evaluation ev;
-  const bool cold_start = nu.empty();
   if (nu.empty()) {
     // No estimate given. KKT-first starts from the least-squares multipliers of the start,
     // argmin |∇E − Σ ν_i ∇C_i|, which enter its first Hessian ∇²E − Σ ν_i ∇²C_i. The augmented
@@ -433,12 +432,12 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
         }
         continue;
       }
-      // Started first from a cold start (no multipliers given: a profile, not a solution), Newton
-      // is damped for many steps while the merit falls (measured: 6124 nodes, an ellipsoid start,
-      // the augmented Lagrangian took over after three damped steps and needed 17 more): there only
-      // a failed line search ends it. A warm start keeps the three-damped-steps rule (measured on
-      // continuation stages: patience there cost 25 wandering steps before the hand-over).
-      const bool patient = attempt == 0 && options_.kkt_first && options_.augmented_fallback && cold_start;
+      // Newton first is damped for many steps while the merit falls (measured: 6124 nodes, an
+      // ellipsoid start, the augmented Lagrangian took over after three damped steps and needed 17
+      // more; a dumbbell continuation stage at eps = 0.015 handed over after three damped steps,
+      // and the augmented Lagrangian raised the constraint residual from 1e-4 to 4e-3 in 40 steps):
+      // only a failed line search or max_newton_iterations ends it.
+      const bool patient = attempt == 0 && options_.kkt_first && options_.augmented_fallback;
       if (!accepted || (damped_steps >= 3 && !patient)) {
         // No step along the Newton direction reduces the residual, or only short ones, three times
         // in a row: far from the quadratic regime. Back to the augmented Lagrangian (below).
