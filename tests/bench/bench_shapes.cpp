@@ -1,5 +1,5 @@
-// The shape family: oblate and prolate starts at several reduced volumes, each through the adapted
-// schedule of seed Table 3 (CVT relocations with f = 10, 100, 1000, eps lowered in between) with
+// The shape family: oblate and prolate starts at several reduced volumes, each through the
+// interface-resolving schedule (grids graded from the interface, eps lowered in between) with
 // default solver settings. Per stage: the energy, the grid, the Newton and augmented-Lagrangian
 // iterations, how far the constraint residual rose above its best value during the stage, and the
 // wall time. Runs the scenes through the stage loop of `lmeform run` (app::run_scene); under mpirun
@@ -41,28 +41,28 @@ double sharp_reference(const Shape& s) {
 // A uniform CVT of n nodes on [0, 1.5] x [0, 2] has the hexagonal spacing sqrt(2 |Omega| / (sqrt 3 n)).
 double hex_spacing(int n) { return std::sqrt(2.0 * 1.5 * 2.0 / (std::sqrt(3.0) * n)); }
 
-// The vesicle of demos/discocyte.toml with the start of `shape`, the Table 3 schedule scaled to
-// the node count (eps_k = c_k h with the seed's c_k for 6124 nodes) down to `last_eps` (seed's units).
+// The vesicle of demos/discocyte.toml with the start of `shape` and the interface-resolving
+// schedule of demos/shapes/: a uniform CVT of `nodes` at eps_0 = 2 h (the resolution rule), then a
+// grid that resolves eps >= 0.025 around the eps_0 solution (stages 0.04, 0.03, 0.025) and one that
+// resolves eps >= last_eps around the eps = 0.025 solution (stages 0.02, 0.015, ..., last_eps).
 std::string shape_scene(const Shape& shape, int nodes, double last_eps) {
-  const double scale = hex_spacing(nodes) / hex_spacing(6124);
-  auto e = [&](double seed_eps) { return std::round(10000.0 * seed_eps * scale) / 10000.0; };
+  const double eps0 = std::max(0.05, std::ceil(1000.0 * 2.05 * hex_spacing(nodes)) / 1000.0);
   std::ostringstream s;
   s << "[scene]\nname = \"" << shape.branch << "_" << shape.v << "\"\ncoordinates = \"axisymmetric\"\n"
     << "[domain]\nlower = [0.0, 0.0]\nupper = [1.5, 2.0]\n"
     << "[nodes]\ncount = " << nodes << "\ngamma = 0.5\nquadrature_points = 6\n"
     << "[model]\nforms = [\"helfrich_axisymmetric\", \"area_axisymmetric\", \"volume_axisymmetric\", \"moment_axisymmetric\"]\n"
     << "energy = \"bending\"\n"
-    << "[constants]\nk = 1.0\neps = " << e(0.04) << "\nC0 = 0.0\nzc = 1.0\n"
+    << "[constants]\nk = 1.0\neps = " << eps0 << "\nC0 = 0.0\nzc = 1.0\n"
     << "[constraints]\narea = {}\nvolume = {}\nmoment = 0.0\n"
     << "[[dirichlet]]\nboundary = [\"r_max\", \"z_min\", \"z_max\"]\nunknown = \"phi\"\nvalue = -1.0\n"
-    << "[vesicle]\nradius = 0.4\nreduced_volume = " << shape.v << "\nresolution_factor = 1.6\n"
+    << "[vesicle]\nradius = 0.4\nreduced_volume = " << shape.v << "\nresolution_factor = 2.0\n"
     << "[vesicle.initial]\nshape = \"" << shape.branch << "\"\ncenter = [0.0, 1.0]\n"
-    << "[vesicle.adaptivity]\nlloyd_iterations = 40\nstart = \"density\"\nstages = [\n"
-    << "  { eps = " << e(0.04) << ", f = 10.0 },\n  { eps = " << e(0.03) << ", lloyd_iterations = 0 },\n"
-    << "  { eps = " << e(0.03) << ", f = 100.0 },\n  { eps = " << e(0.025) << ", lloyd_iterations = 0 },\n"
-    << "  { eps = " << e(0.025) << ", f = 1000.0 },\n  { eps = " << e(0.02) << ", lloyd_iterations = 0 },\n"
-    << "  { eps = " << e(0.015) << ", lloyd_iterations = 0 },\n";
-  if (last_eps < 0.015) s << "  { eps = " << e(last_eps) << ", lloyd_iterations = 0 },\n";
+    << "[vesicle.adaptivity]\nlloyd_iterations = 20\nstages = [\n"
+    << "  { eps = 0.04, resolve = 0.025 },\n  { eps = 0.03, lloyd_iterations = 0 },\n"
+    << "  { eps = 0.025, lloyd_iterations = 0 },\n  { eps = 0.02, resolve = " << last_eps << " },\n";
+  for (const double eps : {0.015, 0.01})
+    if (eps >= last_eps - 1e-12) s << "  { eps = " << eps << ", lloyd_iterations = 0 },\n";
   s << "]\n";
   return s.str();
 }
@@ -111,8 +111,8 @@ int main(int argc, char** argv) {
   if (shapes.empty())
     for (const char* branch : {"oblate", "prolate"})
       for (const double v : {0.7, 0.8, 0.9}) shapes.push_back({branch, v});
-  if (nodes == 0) nodes = quick ? 1500 : 6124;
-  const double last_eps = quick ? 0.015 : 0.01;  // quick: the grid of 1500 nodes resolves 0.015 * scale
+  if (nodes == 0) nodes = quick ? 3000 : 6124;
+  const double last_eps = quick ? 0.015 : 0.01;  // quick: a coarser last grid, and a coarser start
 
   nlohmann::json records = nlohmann::json::array();
   for (const Shape& shape : shapes) {

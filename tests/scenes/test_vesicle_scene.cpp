@@ -656,3 +656,24 @@ TEST(VesicleScene, Demos) {
     EXPECT_EQ(relocations, 3);
   }
 }
+
+TEST(VesicleScene, InterfaceResolvingDemos) {
+  for (const char* name : {"discocyte_resolved", "dumbbell_resolved"}) {
+    SCOPED_TRACE(name);
+    const Scene s = load_scene(std::filesystem::path(LMEFORM_SOURCE_DIR) / "demos" / "shapes" / (std::string(name) + ".toml"),
+                               app::model_extensions());
+    const auto m = read_vesicle(s);
+    ASSERT_TRUE(m && m->adaptivity);
+    // The seed's rule eps >= 2 h_min at every stage; the first on the uniform 6124-node grid.
+    EXPECT_EQ(m->resolution_factor, 2.0);
+    EXPECT_EQ(m->eps, 0.05);
+    std::vector<double> resolves;
+    for (const auto& st : m->adaptivity->stages) {
+      if (st.resolve) resolves.push_back(*st.resolve);
+      EXPECT_EQ(st.new_grid(), st.resolve.has_value());
+      EXPECT_EQ(st.f, 0.0);
+    }
+    EXPECT_EQ(resolves, (std::vector<double>{0.025, 0.01}));
+    EXPECT_EQ(m->adaptivity->stages.back().eps, 0.01);
+  }
+}
