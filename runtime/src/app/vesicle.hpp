@@ -59,7 +59,7 @@ struct VesicleAdaptivity {
   bool start_from_density = false;     ///< Lloyd from the density's node placement, else from the current nodes
   double samples_per_node = 64;
   InterfaceResolution interface;
-  int fit_iterations = 20;             ///< fitting the nodal coefficients of a stage's start (fit_nodal_values)
+  int fit_iterations = 0;              ///< > 0: a stage's start coefficients fitted to its start values (fit_nodal_values)
 };
 
 /// The [vesicle] table of a scene.
