@@ -256,3 +256,47 @@ TEST(Vesicle, KktFirstFromAnEllipsoidStartNeverRaisesTheConstraintResidual) {
 
 }  // namespace
 }  // namespace lmeform
+
+namespace lmeform {
+namespace {
+
+TEST(Vesicle, InterfaceResolvingScheduleLowersTheEnergyAtEveryStage) {
+  // The whole vesicle schedule with `resolve` stages, small: a uniform start at eps = 0.1, then a
+  // grid resolving eps >= 0.07 around that solution, on which eps falls to 0.07. Every stage must
+  // converge, hold eps >= 2 h_min, and lower the energy (the phase-field energy falls towards the
+  // sharp one as eps falls when the grid resolves the interface).
+  const std::string text =
+      "[scene]\nname = \"resolved\"\ncoordinates = \"axisymmetric\"\n"
+      "[domain]\nlower = [0.0, 0.0]\nupper = [0.8, 1.2]\n"
+      "[nodes]\nspacing = 0.045\ngamma = 0.8\n"
+      "[model]\nforms = [\"helfrich_axisymmetric\", \"area_axisymmetric\", \"volume_axisymmetric\", \"moment_axisymmetric\"]\n"
+      "energy = \"bending\"\n"
+      "[constants]\neps = 0.1\nzc = 0.6\n"
+      "[constraints]\narea = {}\nvolume = {}\nmoment = 0.0\n"
+      "[[dirichlet]]\nboundary = [\"r_max\", \"z_min\", \"z_max\"]\nunknown = \"phi\"\nvalue = -1.0\n"
+      "[vesicle]\nradius = 0.3\nreduced_volume = 0.95\nresolution_factor = 2.0\n"
+      "[vesicle.initial]\nshape = \"oblate\"\ncenter = [0.0, 0.6]\n"
+      "[vesicle.adaptivity]\nlloyd_iterations = 10\nstages = [\n"
+      "  { eps = 0.09, resolve = 0.07 },\n  { eps = 0.08, lloyd_iterations = 0 },\n  { eps = 0.07, lloyd_iterations = 0 },\n]\n";
+  const Scene scene = parse_scene(text, "resolved.toml", app::model_extensions());
+  const app::SceneRun run = app::run_scene(PETSC_COMM_SELF, scene, nullptr);
+  ASSERT_TRUE(run.failure.empty()) << run.failure;
+  ASSERT_EQ(run.stages.size(), 4u);
+  for (std::size_t i = 0; i < run.stages.size(); ++i) {
+    const auto& st = run.stages[i];
+    SCOPED_TRACE("stage " + std::to_string(i));
+    EXPECT_TRUE(st.result.converged) << st.result.message;
+    EXPECT_GE(st.parameter, 2.0 * st.h_min);
+    if (i > 0) EXPECT_LT(st.result.energy, run.stages[i - 1].result.energy);
+  }
+  // The resolving grid is new (and graded: finer than the uniform start where it matters); the
+  // stages after it keep it.
+  EXPECT_EQ(run.stages[1].grid, "cvt-1");
+  EXPECT_LE(run.stages[1].h_min, 0.07 / 2.0);
+  EXPECT_LT(run.stages[1].h_min, 0.8 * run.stages[0].h_min);
+  EXPECT_EQ(run.stages[2].nodes, run.stages[1].nodes);
+  EXPECT_EQ(run.stages[3].result.nodes.coords, run.stages[1].result.nodes.coords);
+}
+
+}  // namespace
+}  // namespace lmeform
