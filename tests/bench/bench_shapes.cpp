@@ -4,7 +4,8 @@
 // iterations, how far the constraint residual rose above its best value during the stage, and the
 // wall time. Runs the scenes through the stage loop of `lmeform run` (app::run_scene); under mpirun
 // every scene runs on all ranks. Writes DIR/shapes.json and DIR/shapes.png (energy against eps).
-//   bench_shapes [--quick] [--out DIR] [--nodes N] [--shape oblate:0.8 ...]
+//   bench_shapes [--quick] [--log] [--out DIR] [--nodes N] [--shape oblate:0.8 ...]
+// --log prints the progress of every stage (the Newton iterates) as `lmeform run` does.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -80,13 +81,15 @@ double constraint_rise(const ConstrainedResult& r) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  bool quick = false;
+  bool quick = false, log = false;
   std::filesystem::path out = "build/bench";
   int nodes = 0;
   std::vector<Shape> shapes;
   for (int i = 1; i < argc; ++i) {
     if (std::strcmp(argv[i], "--quick") == 0) {
       quick = true;
+    } else if (std::strcmp(argv[i], "--log") == 0) {
+      log = true;
     } else if (std::strcmp(argv[i], "--out") == 0 && i + 1 < argc) {
       out = argv[++i];
     } else if (std::strcmp(argv[i], "--nodes") == 0 && i + 1 < argc) {
@@ -101,7 +104,7 @@ int main(int argc, char** argv) {
       }
       shapes.push_back({branch, std::atof(s.c_str() + colon + 1)});
     } else {
-      std::fprintf(stderr, "usage: bench_shapes [--quick] [--out DIR] [--nodes N] [--shape oblate:0.8 ...]\n");
+      std::fprintf(stderr, "usage: bench_shapes [--quick] [--log] [--out DIR] [--nodes N] [--shape oblate:0.8 ...]\n");
       return 2;
     }
   }
@@ -118,7 +121,7 @@ int main(int argc, char** argv) {
   for (const Shape& shape : shapes) {
     std::printf("== %s start, v = %.2f, %d nodes\n", shape.branch.c_str(), shape.v, nodes);
     const Scene scene = parse_scene(shape_scene(shape, nodes, last_eps), "bench_shapes " + shape.branch, app::model_extensions());
-    const app::SceneRun run = app::run_scene(PETSC_COMM_WORLD, scene, nullptr);
+    const app::SceneRun run = app::run_scene(PETSC_COMM_WORLD, scene, log ? &std::cout : nullptr);
     double cumulative = run.wall_s;
     for (const auto& st : run.stages) cumulative -= st.wall_s;  // the uniform CVT of the start
     const double reference = sharp_reference(shape);

@@ -8,6 +8,7 @@
 // multiplier block, both reusing one sparse LU factorization of ∇²E − Σ σ_i ∇²C_i per iteration.
 #pragma once
 
+#include <functional>
 #include <iosfwd>
 #include <string>
 #include <vector>
@@ -50,6 +51,12 @@ struct ConstrainedMinimizerOptions {
   /// KKT Newton: false assembles and factors the Hessian once per minimize() and reuses it (a
   /// chord method: cheaper iterations, linear convergence), refreshing it only when a step fails.
   bool refresh_hessian_every_iteration = true;
+  /// Inertia-controlled Newton: the Hessian is factored as LDLᵀ, whose inertia says whether the
+  /// Newton step heads for a minimum. When it does not (the KKT matrix must have exactly k negative
+  /// eigenvalues; L_A's Hessian none), H + δ·|diag H| is factored instead, δ raised tenfold until
+  /// the inertia is right, and the step is damped on the penalty merit E − νᵀc + ρ/2 |c|², for
+  /// which it is then a descent direction. false: Newton steps on H as it is (round 1's solver).
+  bool inertia_correction = true;
   std::ostream* log = nullptr;          ///< progress lines (rank 0); nullptr: silent
 };
 
@@ -86,6 +93,9 @@ struct ConstrainedResult {
   int newton_iterations = 0;            ///< KKT steps
   int gradient_evaluations = 0;         ///< value + gradient passes (line-search trials included)
   int hessian_evaluations = 0;          ///< Hessian assemblies (each followed by one factorization)
+  int inertia_corrections = 0;          ///< extra factorizations of H + δ·|diag H| (wrong inertia)
+  int corrected_steps = 0;              ///< Newton steps taken with a shifted Hessian
+  int constraint_corrections = 0;       ///< second-order corrections of steps that raised |c|
   double seconds_hessian = 0;           ///< of the total: Hessian assembly
   double seconds_factor = 0;            ///< of the total: factorizations and solves
   std::vector<ConstrainedIterate> history;
@@ -118,6 +128,7 @@ class ConstrainedMinimizer {
   void evaluate(Vec u, const std::vector<double>& sigma, bool with_matrix, Evaluation& ev);
   void assemble_hessian(Vec u, const std::vector<double>& sigma);
   void factor(Mat A);
+  double factor_with_inertia_correction(const std::function<bool()>& inertia_acceptable);
   void solve(Vec b, Vec x);
   void zero_fixed(Vec v);
   void log_iterate(const ConstrainedIterate& it);
@@ -132,6 +143,10 @@ class ConstrainedMinimizer {
   ConstrainedResult* counters_ = nullptr;  // the result being filled (evaluation counts and times)
   PetscMatrix hessian_;
   PetscLinearSolver ksp_;
+  bool factor_configured_ = false;
+  PetscInt negative_eigenvalues_ = -1;  // of the last factorization; -1: unknown (not an LDLᵀ by MUMPS)
+  double last_shift_ = 0;               // δ of the last corrected factorization in this minimize()
+  PetscVector shift_scale_;
   double start_time_ = 0;
 };
 

@@ -146,6 +146,7 @@ struct SceneSolver {
   double newton_tolerance = 1e-9;
   double constraint_tolerance = 1e-10;
   int max_newton_iterations = 25;
+  bool inertia_correction = true;      ///< ConstrainedMinimizerOptions::inertia_correction
   /// Appended to the PETSc options database before the solve ("-ksp_type gmres -pc_type ...").
   std::string petsc_options;
 };

@@ -991,6 +991,7 @@ ProblemResult solve_problem(MPI_Comm comm, const BoundScene& b, const ProblemInp
       o.newton_tolerance = scene.solver.newton_tolerance;
       o.constraint_tolerance = scene.solver.constraint_tolerance;
       o.max_newton_iterations = scene.solver.max_newton_iterations;
+      o.inertia_correction = scene.solver.inertia_correction;
       o.log = input.log;
       ConstrainedMinimizer minimizer(energy_terms, constraints, o);
       minimizer.set_fixed_dofs(fixed);

@@ -9,8 +9,20 @@
 #include <ostream>
 #include <sstream>
 #include <stdexcept>
+#include <string_view>
 
 namespace lmeform {
+
+namespace {
+
+// Negative eigenvalues of the symmetric part of a small dense matrix.
+PetscInt negative_count(const Eigen::MatrixXd& A) {
+  if (A.size() == 0) return 0;
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(0.5 * (A + A.transpose()), Eigen::EigenvaluesOnly);
+  return static_cast<PetscInt>((eig.eigenvalues().array() < 0).count());
+}
+
+}  // namespace
 
 struct ConstrainedMinimizer::Evaluation {
   double energy = 0;              // the objective
@@ -50,8 +62,9 @@ ConstrainedMinimizer::ConstrainedMinimizer(std::vector<Assembler*> energy_terms,
   LMEFORM_PETSC_CHECK(KSPSetType(ksp_, KSPPREONLY));
   PC pc = nullptr;
   LMEFORM_PETSC_CHECK(KSPGetPC(ksp_, &pc));
-  LMEFORM_PETSC_CHECK(PCSetType(pc, PCLU));
-  // MUMPS pivots, so indefinite Hessians (far from a minimum) factor too; PETSc's own LU does not.
+  // MUMPS's symmetric indefinite LDLᵀ: it pivots, so indefinite Hessians (far from a minimum)
+  // factor too, costs half an LU, and its inertia tells whether a Newton step heads for a minimum.
+  LMEFORM_PETSC_CHECK(PCSetType(pc, PCCHOLESKY));
   LMEFORM_PETSC_CHECK(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
   LMEFORM_PETSC_CHECK(KSPSetOptionsPrefix(ksp_, "constrained_"));
   LMEFORM_PETSC_CHECK(KSPSetFromOptions(ksp_));
@@ -127,8 +140,70 @@ void ConstrainedMinimizer::assemble_hessian(Vec u, const std::vector<double>& si
 void ConstrainedMinimizer::factor(Mat A) {
   const double t0 = MPI_Wtime();
   LMEFORM_PETSC_CHECK(KSPSetOperators(ksp_, A, A));
+  PC pc = nullptr;
+  LMEFORM_PETSC_CHECK(KSPGetPC(ksp_, &pc));
+  PCType pc_type = nullptr;
+  MatSolverType solver_type = nullptr;
+  LMEFORM_PETSC_CHECK(PCGetType(pc, &pc_type));
+  LMEFORM_PETSC_CHECK(PCFactorGetMatSolverType(pc, &solver_type));
+  const bool mumps_ldlt = pc_type != nullptr && solver_type != nullptr && std::string_view(pc_type) == PCCHOLESKY &&
+                          std::string_view(solver_type) == MATSOLVERMUMPS;
+  if (!factor_configured_ && mumps_ldlt) {
+    LMEFORM_PETSC_CHECK(PCFactorSetUpMatSolverType(pc));
+    Mat F = nullptr;
+    LMEFORM_PETSC_CHECK(PCFactorGetMatrix(pc, &F));
+    // Without ScaLAPACK on the root front MUMPS counts the negative pivots of every rank.
+    LMEFORM_PETSC_CHECK(MatMumpsSetIcntl(F, 13, 1));
+  }
+  factor_configured_ = true;
   LMEFORM_PETSC_CHECK(KSPSetUp(ksp_));
+  negative_eigenvalues_ = -1;
+  PCFailedReason failed = PC_NOERROR;
+  LMEFORM_PETSC_CHECK(PCGetFailedReason(pc, &failed));
+  if (mumps_ldlt && failed == PC_NOERROR) {
+    Mat F = nullptr;
+    LMEFORM_PETSC_CHECK(PCFactorGetMatrix(pc, &F));
+    PetscInt negative = 0;
+    LMEFORM_PETSC_CHECK(MatGetInertia(F, &negative, nullptr, nullptr));
+    negative_eigenvalues_ = negative;
+  }
   if (counters_ != nullptr) counters_->seconds_factor += MPI_Wtime() - t0;
+}
+
+double ConstrainedMinimizer::factor_with_inertia_correction(const std::function<bool()>& inertia_acceptable) {
+  factor(hessian_);
+  if (!options_.inertia_correction || negative_eigenvalues_ < 0 || inertia_acceptable()) return 0;
+  // The shift follows the diagonal (Marquardt's scaling): the Hessian's diagonal spans orders of
+  // magnitude (ε/h⁴ on fine cells, 1/r near the axis), so a multiple of the identity would either
+  // not reach the fine cells or swamp the coarse ones.
+  if (!shift_scale_) shift_scale_ = energy_->create_vector();
+  LMEFORM_PETSC_CHECK(MatGetDiagonal(hessian_, shift_scale_));
+  LMEFORM_PETSC_CHECK(VecAbs(shift_scale_));
+  PetscReal largest = 0;
+  LMEFORM_PETSC_CHECK(VecMax(shift_scale_, nullptr, &largest));
+  {
+    PetscInt n = 0;
+    PetscScalar* d = nullptr;
+    LMEFORM_PETSC_CHECK(VecGetLocalSize(shift_scale_, &n));
+    LMEFORM_PETSC_CHECK(VecGetArray(shift_scale_, &d));
+    for (PetscInt i = 0; i < n; ++i) d[i] = std::max(static_cast<double>(d[i]), 1e-8 * static_cast<double>(largest));
+    LMEFORM_PETSC_CHECK(VecRestoreArray(shift_scale_, &d));
+  }
+  PetscVector increment = energy_->create_vector();
+  double delta = last_shift_ > 0 ? std::max(1e-8, last_shift_ / 4) : 1e-4, applied = 0;
+  for (int attempt = 0; attempt < 16; ++attempt, delta *= 10) {
+    LMEFORM_PETSC_CHECK(VecCopy(shift_scale_, increment));
+    LMEFORM_PETSC_CHECK(VecScale(increment, delta - applied));
+    LMEFORM_PETSC_CHECK(MatDiagonalSet(hessian_, increment, ADD_VALUES));
+    applied = delta;
+    factor(hessian_);
+    if (counters_ != nullptr) ++counters_->inertia_corrections;
+    if (inertia_acceptable()) {
+      last_shift_ = delta;
+      return delta;
+    }
+  }
+  return -1;
 }
 
 void ConstrainedMinimizer::solve(Vec b, Vec x) {
@@ -157,6 +232,7 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
   if (!multipliers.empty() && multipliers.size() != k)
     throw std::invalid_argument("constrained minimizer: wrong number of starting multipliers");
   start_time_ = MPI_Wtime();
+  last_shift_ = 0;
   ConstrainedResult result;
   struct CountersScope {
     ConstrainedResult*& slot;
@@ -250,17 +326,26 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
       const double inner_target = std::max(options_.inner_tolerance, options_.inexact_inner * relative_residual(ev));
       if (gnorm <= inner_target * std::max(1.0, norm(ev.energy_gradient))) break;
       assemble_hessian(u, sigma);
-      factor(hessian_);
-      // Woodbury: (A + U Uᵀ)⁻¹ b with U_i = ∇C_i/√μ.
+      // Woodbury: (H + U Uᵀ)⁻¹ b with U_i = ∇C_i/√μ and the capacitance M = I + Uᵀ H⁻¹ U. By the
+      // Haynsworth inertia formula H + U Uᵀ has neg(H) − neg(M) negative eigenvalues: the Newton
+      // step minimizes L_A only when neg(M) = neg(H).
+      Eigen::MatrixXd M;
+      bool capacitance_current = false;
+      auto capacitance = [&] {
+        M = Eigen::MatrixXd::Identity(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k));
+        for (std::size_t i = 0; i < k; ++i) {
+          solve(ev.gradients[i], Z[i]);
+          for (std::size_t j = 0; j < k; ++j) M(static_cast<Eigen::Index>(j), static_cast<Eigen::Index>(i)) += dot(ev.gradients[j], Z[i]) / mu;
+        }
+        capacitance_current = true;
+        return negative_count(M) == negative_eigenvalues_;
+      };
+      if (factor_with_inertia_correction(capacitance) > 0) ++result.corrected_steps;
+      if (!capacitance_current) capacitance();
       LMEFORM_PETSC_CHECK(VecScale(rhs, -1.0));
       solve(rhs, step);
-      Eigen::MatrixXd M = Eigen::MatrixXd::Identity(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k));
       Eigen::VectorXd uty(static_cast<Eigen::Index>(k));
-      for (std::size_t i = 0; i < k; ++i) {
-        solve(ev.gradients[i], Z[i]);
-        uty[static_cast<Eigen::Index>(i)] = dot(ev.gradients[i], step) / mu;
-        for (std::size_t j = 0; j < k; ++j) M(static_cast<Eigen::Index>(j), static_cast<Eigen::Index>(i)) += dot(ev.gradients[j], Z[i]) / mu;
-      }
+      for (std::size_t i = 0; i < k; ++i) uty[static_cast<Eigen::Index>(i)] = dot(ev.gradients[i], step) / mu;
       const Eigen::VectorXd coeff = M.lu().solve(uty);
       for (std::size_t i = 0; i < k; ++i) LMEFORM_PETSC_CHECK(VecAXPY(step, -coeff[static_cast<Eigen::Index>(i)], Z[i]));
       double slope = -dot(rhs, step);  // rhs holds −∇L_A
@@ -324,6 +409,7 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
                        std::sqrt(static_cast<double>(n));
     }
     int damped_steps = 0;         // consecutive steps the line search shortened
+    double merit_penalty = 0;     // ρ of the penalty merit of shifted steps, raised as needed
     bool have_factor = false;     // a factorization of this minimize() exists
     bool hessian_current = false; // ... and it is the Hessian at u
     bool stale_failed = false;    // a step with a reused Hessian failed: refresh it
@@ -353,24 +439,39 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
         diverged = attempt == 0 && options_.kkt_first && options_.augmented_fallback;
         break;
       }
+      // Schur complement on the multipliers: dφ = H⁻¹(−r1 + G dν), (Gᵀ H⁻¹ G) dν = −r + Gᵀ H⁻¹ r1.
+      // By the Haynsworth inertia formula the KKT matrix has neg(H) + pos(S) negative eigenvalues,
+      // S = Gᵀ H⁻¹ G; the step heads for a minimum (a positive definite reduced Hessian) only when
+      // that is k.
+      Eigen::MatrixXd S(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k));
+      bool schur_current = false;
+      auto schur = [&] {
+        for (std::size_t i = 0; i < k; ++i) solve(ev.gradients[i], Z[i]);
+        for (std::size_t i = 0; i < k; ++i) {
+          for (std::size_t j = 0; j < k; ++j) S(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j)) = dot(ev.gradients[i], Z[j]);
+        }
+        schur_current = true;
+        return negative_eigenvalues_ + (static_cast<PetscInt>(k) - negative_count(S)) == static_cast<PetscInt>(k);
+      };
+      double shift = 0;
       if (!have_factor || stale_failed || options_.refresh_hessian_every_iteration) {
         assemble_hessian(u, nu);
-        factor(hessian_);
+        shift = factor_with_inertia_correction(schur);
         have_factor = hessian_current = true;
         stale_failed = false;
       } else {
         hessian_current = false;
       }
-      // Schur complement on the multipliers: dφ = H⁻¹(−r1 + G dν), (Gᵀ H⁻¹ G) dν = −r + Gᵀ H⁻¹ r1.
+      if (!schur_current) schur();
+      if (shift < 0) {
+        // No shift up to 1e11 |diag H| gave the right inertia: hand over to the augmented Lagrangian.
+        diverged = true;
+        break;
+      }
+      const auto S_lu = S.fullPivLu();
       // The Hessian is badly scaled (ε/h⁴, 1/r near the axis), so the step is refined against the
       // true residual of the KKT system with the same factorization: without it Newton stalls at
       // a linear rate set by the solve error.
-      for (std::size_t i = 0; i < k; ++i) solve(ev.gradients[i], Z[i]);
-      Eigen::MatrixXd S(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k));
-      for (std::size_t i = 0; i < k; ++i) {
-        for (std::size_t j = 0; j < k; ++j) S(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j)) = dot(ev.gradients[i], Z[j]);
-      }
-      const auto S_lu = S.fullPivLu();
       // Solves H dφ − G dν = −f1, Gᵀ dφ = −f2 for (dφ, dν), accumulating into (step, dnu).
       LMEFORM_PETSC_CHECK(VecZeroEntries(step));
       Eigen::VectorXd dnu = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(k));
@@ -409,17 +510,72 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
       std::vector<double> nu_trial(k);
       double alpha = 1.0;
       bool accepted = false;
-      for (int backtrack = 0; backtrack < 8; ++backtrack, alpha *= 0.5) {
-        LMEFORM_PETSC_CHECK(VecWAXPY(trial, alpha, step, u));
-        for (std::size_t i = 0; i < k; ++i) nu_trial[i] = nu[i] + alpha * dnu[static_cast<Eigen::Index>(i)];
-        evaluate(trial, nu_trial, false, trial_ev);
-        const double m = kkt_merit(trial_ev, nu_trial);
-        if (std::isfinite(trial_ev.energy) && std::isfinite(m) && m <= (1.0 - 1e-4 * alpha) * m0) {
-          accepted = true;
-          break;
+      // With the inertia checked, the Newton step is a descent direction of the penalty merit
+      // P = E − ν⁺ᵀc + ρ/2 |c|² (ν⁺ = ν + dν) for ρ large enough: dP = ∇Eᵀd − ν⁺ᵀGᵀd + ρ cᵀGᵀd,
+      // with Gᵀd = −c. The KKT residual merit, which accepts the full steps that restore the
+      // constraints at the energy's expense, can stall where the KKT matrix is nearly singular
+      // (measured: an oblate start at v = 0.7 stalled at |∇L| = 0.06, E = 11.45, a saddle above the
+      // minimum at 10.86); a shifted step need not reduce it at all. So the residual merit judges
+      // the full step, and P, when the step was shifted or the full step failed, the backtracking.
+      const bool inertia_checked = hessian_current && negative_eigenvalues_ >= 0 && options_.inertia_correction;
+      bool penalty_search = shift > 0;
+      if (!penalty_search) {
+        for (int backtrack = 0; backtrack < (inertia_checked ? 1 : 8); ++backtrack, alpha *= 0.5) {
+          LMEFORM_PETSC_CHECK(VecWAXPY(trial, alpha, step, u));
+          for (std::size_t i = 0; i < k; ++i) nu_trial[i] = nu[i] + alpha * dnu[static_cast<Eigen::Index>(i)];
+          evaluate(trial, nu_trial, false, trial_ev);
+          const double m = kkt_merit(trial_ev, nu_trial);
+          if (std::isfinite(trial_ev.energy) && std::isfinite(m) && m <= (1.0 - 1e-4 * alpha) * m0) {
+            accepted = true;
+            break;
+          }
+        }
+        penalty_search = !accepted && inertia_checked;
+      }
+      if (penalty_search) {
+        if (shift > 0) ++result.corrected_steps;
+        std::vector<double> nu_plus(k);
+        for (std::size_t i = 0; i < k; ++i) nu_plus[i] = nu[i] + dnu[static_cast<Eigen::Index>(i)];
+        double slope_energy = dot(ev.energy_gradient, step), slope_penalty = 0;
+        for (std::size_t i = 0; i < k; ++i) {
+          const double Gd = dot(ev.gradients[i], step);
+          slope_energy -= nu_plus[i] * Gd;
+          slope_penalty += ev.residuals[i] * Gd;
+        }
+        // ρ as in Nocedal & Wright (18.36): the merit must fall by at least half the step's
+        // curvature and half its penalty decrease, dP ≤ −dᵀHd/2 + ρ cᵀGᵀd/2, so that the
+        // constraints are not traded for energy.
+        LMEFORM_PETSC_CHECK(MatMult(hessian_, step, Hstep));
+        const double curvature = std::max(0.0, dot(step, Hstep));
+        if (slope_penalty < 0)
+          merit_penalty = std::max(merit_penalty, (slope_energy + 0.5 * curvature) / (-0.5 * slope_penalty));
+        const double slope = slope_energy + merit_penalty * slope_penalty;
+        auto penalty_merit = [&](const Evaluation& e) {
+          double value = e.energy;
+          for (std::size_t i = 0; i < k; ++i) value += -nu_plus[i] * e.residuals[i] + 0.5 * merit_penalty * e.residuals[i] * e.residuals[i];
+          return value;
+        };
+        const double p0 = penalty_merit(ev);
+        alpha = 1.0;
+        for (int backtrack = 0; slope < 0 && backtrack < 30; ++backtrack, alpha *= 0.5) {
+          LMEFORM_PETSC_CHECK(VecWAXPY(trial, alpha, step, u));
+          for (std::size_t i = 0; i < k; ++i) nu_trial[i] = nu[i] + alpha * dnu[static_cast<Eigen::Index>(i)];
+          evaluate(trial, nu_trial, false, trial_ev);
+          const double p = penalty_merit(trial_ev);
+          if (std::isfinite(p) && p <= p0 + 1e-4 * alpha * slope) {
+            accepted = true;
+            break;
+          }
+        }
+        if (options_.log != nullptr && energy_->discretization().rank() == 0) {
+          std::ostringstream line;
+          line << "           penalty merit (rho " << std::setprecision(3) << merit_penalty << "): step " << alpha;
+          if (shift > 0) line << ", Hessian shifted by " << shift << " |diag H| for the right inertia";
+          if (!accepted) line << ", no decrease";
+          *options_.log << line.str() << std::endl;
         }
       }
-      damped_steps = alpha < 1.0 ? damped_steps + 1 : 0;
+      damped_steps = accepted && alpha < 1.0 && shift == 0 ? damped_steps + 1 : 0;
       if ((!accepted || damped_steps >= 3) && !hessian_current) {
         // The reused Hessian is too far from the current one: refresh it and try again from here.
         stale_failed = true;
@@ -443,6 +599,24 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
         // in a row: far from the quadratic regime. Back to the augmented Lagrangian (below).
         diverged = true;
         break;
+      }
+      // A step that raised the constraint residual (the constraints curve away from their
+      // linearization) gets second-order corrections back onto them, d₂ = −H⁻¹G S⁻¹ c(u + αd),
+      // the least change in the metric of H with Gᵀd₂ = −c; the factorization is at hand.
+      for (int correction = 0; correction < 2 && k > 0; ++correction) {
+        const double before = relative_residual(ev), after = relative_residual(trial_ev);
+        if (after <= std::max(before, options_.constraint_tolerance)) break;
+        Eigen::VectorXd r(static_cast<Eigen::Index>(k));
+        for (std::size_t i = 0; i < k; ++i) r[static_cast<Eigen::Index>(i)] = trial_ev.residuals[i];
+        const Eigen::VectorXd y = S_lu.solve(r);
+        LMEFORM_PETSC_CHECK(VecCopy(trial, a));  // a as scratch: the corrected state
+        for (std::size_t j = 0; j < k; ++j) LMEFORM_PETSC_CHECK(VecAXPY(a, -y[static_cast<Eigen::Index>(j)], Z[j]));
+        Evaluation corrected;
+        evaluate(a, nu_trial, false, corrected);
+        if (!std::isfinite(corrected.energy) || relative_residual(corrected) >= after) break;
+        LMEFORM_PETSC_CHECK(VecCopy(a, trial));
+        std::swap(trial_ev, corrected);
+        ++result.constraint_corrections;
       }
       LMEFORM_PETSC_CHECK(VecCopy(trial, u));
       nu = nu_trial;
