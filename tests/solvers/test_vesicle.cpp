@@ -325,7 +325,9 @@ TEST(Vesicle, InterfaceResolvingScheduleLowersTheEnergyAtEveryStage) {
     SCOPED_TRACE("stage " + std::to_string(i));
     EXPECT_TRUE(st.result.converged) << st.result.message;
     EXPECT_GE(st.parameter, 2.0 * st.h_min);
-    if (i > 0) EXPECT_LT(st.result.energy, run.stages[i - 1].result.energy);
+    if (i > 0) {
+      EXPECT_LT(st.result.energy, run.stages[i - 1].result.energy);
+    }
   }
   // The resolving grid is new (and graded: finer than the uniform start where it matters); the
   // stages after it keep it.

@@ -144,6 +144,7 @@ class ConstrainedMinimizer {
   PetscMatrix hessian_;
   PetscLinearSolver ksp_;
   bool factor_configured_ = false;
+  bool factor_failed_ = false;           // the last factorization failed (a zero pivot)
   PetscInt negative_eigenvalues_ = -1;  // of the last factorization; -1: unknown (not an LDLᵀ by MUMPS)
   double last_shift_ = 0;               // δ of the last corrected factorization in this minimize()
   PetscVector shift_scale_;

@@ -160,7 +160,8 @@ void ConstrainedMinimizer::factor(Mat A) {
   negative_eigenvalues_ = -1;
   PCFailedReason failed = PC_NOERROR;
   LMEFORM_PETSC_CHECK(PCGetFailedReason(pc, &failed));
-  if (mumps_ldlt && failed == PC_NOERROR) {
+  factor_failed_ = failed != PC_NOERROR;
+  if (mumps_ldlt && !factor_failed_) {
     Mat F = nullptr;
     LMEFORM_PETSC_CHECK(PCFactorGetMatrix(pc, &F));
     PetscInt negative = 0;
@@ -171,8 +172,10 @@ void ConstrainedMinimizer::factor(Mat A) {
 }
 
 double ConstrainedMinimizer::factor_with_inertia_correction(const std::function<bool()>& inertia_acceptable) {
+  // A factorization that failed (an exactly singular H) is shifted like one of the wrong inertia.
+  auto acceptable = [&] { return !factor_failed_ && (negative_eigenvalues_ < 0 || inertia_acceptable()); };
   factor(hessian_);
-  if (!options_.inertia_correction || negative_eigenvalues_ < 0 || inertia_acceptable()) return 0;
+  if (!options_.inertia_correction || acceptable()) return 0;
   // The shift follows the diagonal (Marquardt's scaling): the Hessian's diagonal spans orders of
   // magnitude (ε/h⁴ on fine cells, 1/r near the axis), so a multiple of the identity would either
   // not reach the fine cells or swamp the coarse ones.
@@ -198,7 +201,7 @@ double ConstrainedMinimizer::factor_with_inertia_correction(const std::function<
     applied = delta;
     factor(hessian_);
     if (counters_ != nullptr) ++counters_->inertia_corrections;
-    if (inertia_acceptable()) {
+    if (acceptable()) {
       last_shift_ = delta;
       return delta;
     }
@@ -462,12 +465,12 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
       } else {
         hessian_current = false;
       }
-      if (!schur_current) schur();
       if (shift < 0) {
         // No shift up to 1e11 |diag H| gave the right inertia: hand over to the augmented Lagrangian.
         diverged = true;
         break;
       }
+      if (!schur_current) schur();
       const auto S_lu = S.fullPivLu();
       // The Hessian is badly scaled (ε/h⁴, 1/r near the axis), so the step is refined against the
       // true residual of the KKT system with the same factorization: without it Newton stalls at
