@@ -272,7 +272,6 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
   }
   PetscVector step = energy_->create_vector(), rhs = energy_->create_vector(), trial = energy_->create_vector();
   std::vector<PetscVector> Z, Zt;  // H⁻¹∇C_i at the iterate and (for corrections) at a trial point
-  for (std::size_t i = 0; i < k; ++i) Z.push_back(energy_->create_vector());
 
   auto relative_residual = [&](const Evaluation& e) {
     double m = 0;
@@ -292,6 +291,17 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
     PetscScalar d = 0;
     LMEFORM_PETSC_CHECK(VecDot(a, b, &d));
     return static_cast<double>(d);
+  };
+  // Z_i = H⁻¹ g_i with the current factorization, and the k×k matrix (g_i · Z_j): the Schur
+  // complement Gᵀ H⁻¹ G of the KKT system, and μ times the Woodbury capacitance less I.
+  auto inverse_gram = [&](const std::vector<PetscVector>& g, std::vector<PetscVector>& z) {
+    if (z.size() < k)
+      for (std::size_t i = z.size(); i < k; ++i) z.push_back(energy_->create_vector());
+    Eigen::MatrixXd S(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k));
+    for (std::size_t i = 0; i < k; ++i) solve(g[i], z[i]);
+    for (std::size_t i = 0; i < k; ++i)
+      for (std::size_t j = 0; j < k; ++j) S(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j)) = dot(g[i], z[j]);
+    return S;
   };
   // L_A at an evaluated state (its residuals are already scaled).
   auto augmented_value = [&](const Evaluation& e) {
@@ -335,11 +345,7 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
       Eigen::MatrixXd M;
       bool capacitance_current = false;
       auto capacitance = [&] {
-        M = Eigen::MatrixXd::Identity(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k));
-        for (std::size_t i = 0; i < k; ++i) {
-          solve(ev.gradients[i], Z[i]);
-          for (std::size_t j = 0; j < k; ++j) M(static_cast<Eigen::Index>(j), static_cast<Eigen::Index>(i)) += dot(ev.gradients[j], Z[i]) / mu;
-        }
+        M = Eigen::MatrixXd::Identity(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k)) + inverse_gram(ev.gradients, Z) / mu;
         capacitance_current = true;
         return negative_count(M) == negative_eigenvalues_;
       };
@@ -449,10 +455,7 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
       Eigen::MatrixXd S(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k));
       bool schur_current = false;
       auto schur = [&] {
-        for (std::size_t i = 0; i < k; ++i) solve(ev.gradients[i], Z[i]);
-        for (std::size_t i = 0; i < k; ++i) {
-          for (std::size_t j = 0; j < k; ++j) S(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j)) = dot(ev.gradients[i], Z[j]);
-        }
+        S = inverse_gram(ev.gradients, Z);
         schur_current = true;
         return negative_eigenvalues_ + (static_cast<PetscInt>(k) - negative_count(S)) == static_cast<PetscInt>(k);
       };
@@ -610,12 +613,7 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
       for (int correction = 0; correction < 3 && k > 0; ++correction) {
         const double before = relative_residual(ev), after = relative_residual(trial_ev);
         if (after <= std::max(before, options_.constraint_tolerance)) break;
-        if (Zt.empty())
-          for (std::size_t i = 0; i < k; ++i) Zt.push_back(energy_->create_vector());
-        Eigen::MatrixXd St(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k));
-        for (std::size_t i = 0; i < k; ++i) solve(trial_ev.gradients[i], Zt[i]);
-        for (std::size_t i = 0; i < k; ++i)
-          for (std::size_t j = 0; j < k; ++j) St(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j)) = dot(trial_ev.gradients[i], Zt[j]);
+        const Eigen::MatrixXd St = inverse_gram(trial_ev.gradients, Zt);
         Eigen::VectorXd r(static_cast<Eigen::Index>(k));
         for (std::size_t i = 0; i < k; ++i) r[static_cast<Eigen::Index>(i)] = trial_ev.residuals[i];
         const Eigen::VectorXd y = St.fullPivLu().solve(r);
