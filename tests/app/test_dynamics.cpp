@@ -289,6 +289,31 @@ TEST(Dynamics, AScheduledDeflationMovesTheVolumeTarget) {
   EXPECT_LT(relative_drift(run, 0), 1e-10);
 }
 
+TEST(Dynamics, AScheduleHistoryDeflatesThenReinflatesAndAPulseOfCurvatureEnds) {
+  // V0 falls by 2 %/t* over [0, 0.005] and rises back over [0.005, 0.01]; C0 = 3 on [0.001, 0.003).
+  const Case r = make("t_end = 0.01\ndt = 1e-3\nadaptive = false\n[dynamics.schedule]\n"
+                      "V0 = [ { rate = -2.0, from = 0.0, until = 0.005 }, { rate = 2.0, from = 0.005, until = 0.01 } ]\n"
+                      "C0 = [ { at = 0.001, value = 3.0 }, { at = 0.003, value = 0.0 } ]\n",
+                      "area = \"initial\"\nvolume = \"initial\"\n");
+  const DynamicsRun run = app::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
+  ASSERT_TRUE(run.failure.empty()) << run.failure;
+  ASSERT_EQ(run.history.size(), 11u);
+  const double v0 = run.history.front().constraints[1];
+  EXPECT_NEAR(run.history[5].constraints[1] / v0, 0.99, 1e-9);
+  EXPECT_NEAR(run.history.back().constraints[1] / v0, 1.0, 1e-9);
+  EXPECT_LT(relative_drift(run, 0), 1e-10);
+  // The pulse changes the energy while it acts, and nothing before it.
+  const Case plain = make("t_end = 0.01\ndt = 1e-3\nadaptive = false\n[dynamics.schedule]\n"
+                          "V0 = [ { rate = -2.0, from = 0.0, until = 0.005 }, { rate = 2.0, from = 0.005, until = 0.01 } ]\n",
+                          "area = \"initial\"\nvolume = \"initial\"\n");
+  const DynamicsRun without = app::run_dynamics(PETSC_COMM_WORLD, plain.scene, plain.settings, nullptr, nullptr);
+  ASSERT_TRUE(without.failure.empty()) << without.failure;
+  EXPECT_NEAR(run.history[0].energy, without.history[0].energy, 1e-12 * without.history[0].energy);
+  for (std::size_t s = 1; s < 3; ++s) EXPECT_GT(std::abs(run.history[s].energy - without.history[s].energy), 1e-3) << "step " << s;
+  // After it C0 = 0 again: the energy differs only through the state the pulse left.
+  EXPECT_LT(std::abs(run.history.back().energy - without.history.back().energy), 0.05 * without.history.back().energy);
+}
+
 // Cartesian scenes: an elliptic vesicle in the unit square (2D) or an ellipsoid in the unit cube
 // (3D, coarse), fixed walls, the Lagrangian forms of plain coordinates.
 std::string cartesian_scene(int dim) {
@@ -409,6 +434,8 @@ TEST(Dynamics, BadScenesNameTheKey) {
       EXPECT_NE(std::string(e.what()).find("dissipation"), std::string::npos) << e.what();
     }
   }
+  msg = error_of("t_end = 0.01\ndt = 1e-3\n[dynamics.schedule]\nC0 = [ { at = 0.005, value = 1.0 }, { at = 0.002, value = 0.0 } ]\n");
+  EXPECT_NE(msg.find("time order"), std::string::npos) << msg;
   msg = error_of("t_end = 0.01\ndt = -1.0\n");
   EXPECT_NE(msg.find("dynamics.dt"), std::string::npos) << msg;
   EXPECT_NE(error_of("t_end = 0.01\ndt = 1e-3\nadaptive = false\nreport_times = [0.5]\n").find("outside"), std::string::npos);

@@ -12,6 +12,7 @@
 #include <limits>
 #include <memory>
 #include <numeric>
+#include <set>
 #include <ostream>
 #include <sstream>
 
@@ -32,6 +33,30 @@
 namespace lmeform::app {
 
 namespace fs = std::filesystem;
+
+/// One segment of a scheduled constant: a rate {rate, from, until} or a jump {at, value}. Messages
+/// name the constant's key; the segment's line follows from the file. (External linkage: inlined,
+/// GCC 12 reports a false -Wrestrict in SceneTable::table_of's message.)
+ScheduledConstant read_schedule_segment(const SceneTable& sched, const std::string& name, const toml::node& segment,
+                                        const DynamicsSettings& d) {
+  const auto e = sched.table_of(name, segment, {"rate", "from", "until", "at", "value"});
+  ScheduledConstant c;
+  c.name = name;
+  c.where = sched.where(name);
+  if (e.has("rate")) {
+    if (e.has("at") || e.has("value")) e.fail_key("rate", "a schedule is a rate (rate, from, until) or a jump (at, value), not both");
+    c.kind = ScheduledConstant::Kind::rate;
+    c.rate = e.number("rate");
+    c.from = e.number("from", d.t_start);
+    c.until = e.number("until", d.t_end);
+    if (!(c.until > c.from)) e.fail_key("until", fmt::format("= {} must exceed from = {}", c.until, c.from));
+  } else {
+    c.kind = ScheduledConstant::Kind::jump;
+    c.at = e.number("at");
+    c.value = e.number("value");
+  }
+  return c;
+}
 
 std::optional<DynamicsSettings> read_dynamics(const Scene& s) {
   const auto t = extension_table(
@@ -90,23 +115,25 @@ std::optional<DynamicsSettings> read_dynamics(const Scene& s) {
   if (const auto sched = t->optional_any_table("schedule")) {
     for (const auto& [key, node] : sched->entries()) {
       const std::string name(key.str());
-      const auto e = sched->table_of(name, node, {"rate", "from", "until", "at", "value"});
-      ScheduledConstant c;
-      c.name = name;
-      c.where = sched->where(name);
-      if (e.has("rate")) {
-        if (e.has("at") || e.has("value")) e.fail_key("rate", "a schedule is a rate (rate, from, until) or a jump (at, value), not both");
-        c.kind = ScheduledConstant::Kind::rate;
-        c.rate = e.number("rate");
-        c.from = e.number("from", d.t_start);
-        c.until = e.number("until", d.t_end);
-        if (!(c.until > c.from)) e.fail_key("until", fmt::format("= {} must exceed from = {}", c.until, c.from));
+      // One segment ({...}) or a history of segments in time order ([{...}, {...}]).
+      std::vector<const toml::node*> segments;
+      if (const auto* list = node.as_array()) {
+        if (list->empty()) sched->fail_key(name, "is an empty list: give at least one segment {rate, from, until} or {at, value}");
+        for (const auto& seg : *list) segments.push_back(&seg);
       } else {
-        c.kind = ScheduledConstant::Kind::jump;
-        c.at = e.number("at");
-        c.value = e.number("value");
+        segments.push_back(&node);
       }
-      d.schedule.push_back(c);
+      double previous_time = -std::numeric_limits<double>::infinity();
+      for (const toml::node* segment : segments) {
+        ScheduledConstant c = read_schedule_segment(*sched, name, *segment, d);
+        const double begins = c.kind == ScheduledConstant::Kind::rate ? c.from : c.at;
+        if (begins < previous_time)
+          sched->fail_key(name, fmt::format("has a segment starting at {} before the previous one's start ({}): list the "
+                                            "segments in time order",
+                                            begins, previous_time));
+        previous_time = begins;
+        d.schedule.push_back(c);
+      }
     }
   }
   return d;
@@ -401,18 +428,26 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
   // Scheduled constants start from their values at the start (a target given "initial" included).
   const std::vector<double> start_constraints = constraint_values(ref->u);
   const std::vector<double> base_targets = targets;
+  // A constant's value at t: the last jump at or before t (else its start value), plus the rates'
+  // changes relative to the start value, each rate acting over its own interval.
   auto apply_schedule = [&](double t) {
-    for (const auto& c : settings.schedule) {
+    std::set<std::string> done;
+    for (const auto& first : settings.schedule) {
+      if (!done.insert(first.name).second) continue;
       const auto target_of = std::find_if(b.constraints.begin(), b.constraints.end(),
-                                          [&](const BoundConstraint& bc) { return bc.target_constant == c.name; });
+                                          [&](const BoundConstraint& bc) { return bc.target_constant == first.name; });
       const std::size_t ci = static_cast<std::size_t>(target_of - b.constraints.begin());
-      const double base = target_of != b.constraints.end() ? base_targets[ci] : ref->space.constants.at(c.name);
-      double value = base;
-      if (c.kind == ScheduledConstant::Kind::rate) {
-        if (t > c.from) value = base * (1 + c.rate * (std::min(t, c.until) - c.from));
-      } else if (t >= c.at) {
-        value = c.value;
+      const double base = target_of != b.constraints.end() ? base_targets[ci] : ref->space.constants.at(first.name);
+      double value = base, change = 0;
+      for (const auto& c : settings.schedule) {
+        if (c.name != first.name) continue;
+        if (c.kind == ScheduledConstant::Kind::rate) {
+          if (t > c.from) change += base * c.rate * (std::min(t, c.until) - c.from);
+        } else if (t >= c.at) {
+          value = c.value;
+        }
       }
+      value += change;
       if (target_of != b.constraints.end()) {
         targets[ci] = value;
         ref->minimizer->set_target(ci, value);
@@ -420,7 +455,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
       }
       for (auto& a : ref->space.assemblers)
         for (int i = 0; i < a->form().n_constants; ++i)
-          if (a->form().constants[i] == c.name) a->set_constant(c.name, value);
+          if (a->form().constants[i] == first.name) a->set_constant(first.name, value);
     }
   };
 

@@ -23,7 +23,7 @@ namespace {
 using scene_detail::format_number;
 
 void read_initial_shape(const Scene& s, const SceneTable& t, VesicleModel& m) {
-  const std::string shape = t.choice_of("shape", t.string("shape"), {"ellipsoid", "sphere", "oblate", "prolate"});
+  const std::string shape = t.choice_of("shape", t.string("shape"), {"ellipsoid", "sphere", "oblate", "prolate", "stomatocyte"});
   const std::vector<double> c = t.numbers("center", s.dim());
   for (std::size_t i = 0; i < c.size(); ++i) m.center[i] = c[i];
   if (shape == "oblate" || shape == "prolate") {
@@ -46,9 +46,22 @@ void read_initial_shape(const Scene& s, const SceneTable& t, VesicleModel& m) {
     if (t.has("radius")) t.fail_key("radius", "belongs to shape 'sphere'; an ellipsoid takes 'semi_axes'");
     const std::vector<double> a = t.numbers("semi_axes", s.dim());
     for (std::size_t i = 0; i < a.size(); ++i) m.semi_axes[i] = t.positive("semi_axes", a[i]);
+  } else if (shape == "stomatocyte") {
+    m.shape = VesicleModel::Shape::stomatocyte;
+    if (t.has("semi_axes")) t.fail_key("semi_axes", "belongs to shape 'ellipsoid'; a stomatocyte takes 'radius', 'thickness' and 'aperture'");
+    const double r = t.positive("radius", t.number("radius"));
+    m.cup_thickness = t.positive("thickness", t.number("thickness"));
+    if (m.cup_thickness >= r) t.fail_key("thickness", fmt::format("= {} must be below the radius {}: the cup would have no cavity", m.cup_thickness, r));
+    const double aperture_degrees = t.number("aperture");
+    if (!(aperture_degrees > 0 && aperture_degrees < 180))
+      t.fail_key("aperture", "must lie in (0, 180) degrees, got " + format_number(aperture_degrees));
+    m.cup_aperture = aperture_degrees * std::numbers::pi / 180;
+    for (int i = 0; i < s.dim(); ++i) m.semi_axes[std::size_t(i)] = r + m.cup_thickness / 2;  // the extent, for the domain check
   } else {
     m.shape = VesicleModel::Shape::sphere;
     if (t.has("semi_axes")) t.fail_key("semi_axes", "belongs to shape 'ellipsoid'; a sphere takes 'radius'");
+    for (const char* key : {"thickness", "aperture"})
+      if (t.has(key)) t.fail_key(key, "belongs to shape 'stomatocyte'");
     const double r = t.positive("radius", t.number("radius"));
     for (int i = 0; i < s.dim(); ++i) m.semi_axes[std::size_t(i)] = r;
   }
@@ -57,7 +70,7 @@ void read_initial_shape(const Scene& s, const SceneTable& t, VesicleModel& m) {
     t.fail_key("center", "must lie on the axis (r = 0) in an axisymmetric scene, got r = " + format_number(m.center[0]));
   for (int i = 0; i < s.dim(); ++i) {
     const auto k = std::size_t(i);
-    const std::string key = m.shape == VesicleModel::Shape::sphere ? "radius" : "semi_axes";
+    const std::string key = m.shape == VesicleModel::Shape::ellipsoid ? "semi_axes" : "radius";
     const double lo = m.center[k] - m.semi_axes[k], hi = m.center[k] + m.semi_axes[k];
     if (hi > s.domain.hi[k])
       t.fail_key(key, fmt::format("puts the initial shape outside the domain: it reaches {} on axis {} > upper bound {}", hi, i,
@@ -161,7 +174,7 @@ std::optional<VesicleModel> read_vesicle(const Scene& s) {
       throw SceneError(fmt::format("{}: the target is already set by [vesicle] (radius / reduced_volume); give it once",
                                    c.where));
   }
-  if (const auto init = t->optional_table("initial", {"shape", "center", "semi_axes", "radius", "eps"})) {
+  if (const auto init = t->optional_table("initial", {"shape", "center", "semi_axes", "radius", "eps", "thickness", "aperture"})) {
     read_initial_shape(s, *init, m);
   } else {
     t->fail_key("initial", "is missing: the vesicle model starts from [vesicle.initial] (shape, center, semi_axes or radius)");
@@ -247,8 +260,21 @@ void check_feasible(double A0, double V0, int dim) {
 
 double initial_profile(const VesicleModel& m, std::span<const double> x, int dim) {
   const auto d = std::size_t(dim);
-  const double inside = ellipsoid_signed_distance(x.first(d), std::span<const double>(m.center).first(d),
-                                                  std::span<const double>(m.semi_axes).first(d));
+  double inside = 0;
+  if (m.shape == VesicleModel::Shape::stomatocyte) {
+    // The meridian plane: rho across the axis (the last coordinate), z along it.
+    double rho2 = 0;
+    for (std::size_t i = 0; i + 1 < d; ++i) rho2 += (x[i] - m.center[i]) * (x[i] - m.center[i]);
+    const double rho = std::sqrt(rho2), z = x[d - 1] - m.center[d - 1], radius = m.semi_axes[0] - m.cup_thickness / 2;
+    const double polar = std::atan2(rho, z);  // from the top pole
+    const double to_mid_surface = polar >= m.cup_aperture
+                                      ? std::abs(std::hypot(rho, z) - radius)
+                                      : std::hypot(rho - radius * std::sin(m.cup_aperture), z - radius * std::cos(m.cup_aperture));
+    inside = m.cup_thickness / 2 - to_mid_surface;
+  } else {
+    inside = ellipsoid_signed_distance(x.first(d), std::span<const double>(m.center).first(d),
+                                       std::span<const double>(m.semi_axes).first(d));
+  }
   return std::tanh(inside / (std::numbers::sqrt2 * m.profile_eps.value_or(m.eps)));
 }
 

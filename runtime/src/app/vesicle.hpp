@@ -70,9 +70,14 @@ struct VesicleModel {
   std::optional<double> area;          ///< A0 (from radius), set as the target of constraint "area"
   std::optional<double> volume;        ///< V0 (from reduced_volume), target of constraint "volume"
   std::optional<double> reduced_volume;
-  enum class Shape { ellipsoid, sphere } shape = Shape::ellipsoid;
+  enum class Shape { ellipsoid, sphere, stomatocyte } shape = Shape::ellipsoid;
   std::array<double, 3> center{};
   std::array<double, 3> semi_axes{};
+  /// A stomatocyte (a cup): the shell of `cup_thickness` around the sphere of radius
+  /// semi_axes[0] about `center`, open at the top (the last axis) within `cup_aperture` radians
+  /// of the pole, its rim rounded.
+  double cup_thickness = 0;
+  double cup_aperture = 0;
   std::optional<double> profile_eps;   ///< width of the initial profile (default: eps)
   double resolution_factor = 2.0;      ///< ε ≥ resolution_factor · h_min (seed App. B)
   std::optional<VesicleAdaptivity> adaptivity;
@@ -96,6 +101,7 @@ inline constexpr std::string_view kVesicleExtension = "vesicle";
 void check_feasible(double A0, double V0, int dim = 3);
 
 /// tanh(d / (√2 ε)) with d the signed distance to the model's initial shape (> 0 inside).
+/// (For a stomatocyte, d is exact: the distance to the cup's mid-surface, an arc in the meridian plane.)
 [[nodiscard]] double initial_profile(const VesicleModel& model, std::span<const double> x, int dim);
 
 /// A phase field of interface width eps_from re-profiled to eps_to: tanh(atanh(phi) eps_from / eps_to)
