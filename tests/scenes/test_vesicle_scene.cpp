@@ -264,7 +264,7 @@ TEST(VesicleScene, InitialShape) {
   expect_error(t, {"key 'vesicle.initial.semi_axes' belongs to shape 'ellipsoid'; a sphere takes 'radius'"});
   t = edit(kVesicle, "shape = \"ellipsoid\"", "shape = \"elipsoid\"");
   expect_error(t, {at_line(t, "shape ="), "key 'vesicle.initial.shape' must be one of 'ellipsoid', 'sphere', 'oblate', "
-                                          "'prolate', got 'elipsoid'; did you mean 'ellipsoid'?"});
+                                          "'prolate', 'stomatocyte', got 'elipsoid'; did you mean 'ellipsoid'?"});
   t = edit(kVesicle, "semi_axes = [0.4987, 0.2059]", "semi_axes = [0.4987, 0.2059, 0.3]");
   expect_error(t, {"key 'vesicle.initial.semi_axes' must be an array of 2 numbers, found 3 entries"});
   t = kVesicle.substr(0, kVesicle.find("[vesicle.initial]"));
@@ -278,6 +278,26 @@ TEST(VesicleScene, InitialShape) {
   EXPECT_NEAR(app::initial_profile(m, on, 2), 0.0, 1e-14);
   EXPECT_LT(app::initial_profile(m, out, 2), -0.99);
   EXPECT_NEAR(app::initial_profile(m, near, 2), std::tanh(0.01 / (std::numbers::sqrt2 * 0.02)), 1e-12);
+}
+
+TEST(VesicleScene, StomatocyteCup) {
+  // A cup about the sphere of radius 0.3 around (0, 1), wall 0.1, open within 60 degrees of the top.
+  const std::string cup = "shape = \"stomatocyte\"\ncenter = [0.0, 1.0]\nradius = 0.3\nthickness = 0.1\naperture = 60\n";
+  const std::string t = edit(kVesicle, "shape = \"ellipsoid\"\ncenter = [0.0, 1.0]\nsemi_axes = [0.4987, 0.2059]\n", cup);
+  const VesicleModel m = vesicle_of(t + "eps = 0.02\n");
+  const auto profile = [&](double r, double z) { return app::initial_profile(m, std::array<double, 2>{r, z}, 2); };
+  const double w = std::tanh(0.05 / (std::numbers::sqrt2 * 0.02));  // the wall's middle
+  EXPECT_NEAR(profile(0.0, 0.7), w, 1e-12);                                  // the bottom of the cup, on the axis
+  EXPECT_NEAR(profile(0.3, 1.0), w, 1e-12);                                  // its side
+  EXPECT_NEAR(profile(0.0, 0.75), 0.0, 1e-12);                               // the inner membrane
+  EXPECT_LT(profile(0.0, 1.0), -0.99);                                       // the cavity
+  EXPECT_LT(profile(0.0, 1.3), -0.99);                                       // the opening
+  const double rim_r = 0.3 * std::sin(std::numbers::pi / 3), rim_z = 1.0 + 0.3 * std::cos(std::numbers::pi / 3);
+  EXPECT_NEAR(profile(rim_r, rim_z), w, 1e-12);                              // the rim's centre
+  EXPECT_NEAR(profile(rim_r, rim_z + 0.05), 0.0, 1e-12);                     // rounded: 0.05 above it
+  // Bad parameters name the key.
+  expect_error(edit(t, "thickness = 0.1", "thickness = 0.4"), {"key 'vesicle.initial.thickness' = 0.4 must be below the radius 0.3"});
+  expect_error(edit(t, "aperture = 60", "aperture = 180"), {"key 'vesicle.initial.aperture' must lie in (0, 180) degrees"});
 }
 
 TEST(VesicleScene, BranchSpheroids) {
