@@ -298,6 +298,9 @@ TEST(VesicleScene, StomatocyteCup) {
   // Bad parameters name the key.
   expect_error(edit(t, "thickness = 0.1", "thickness = 0.4"), {"key 'vesicle.initial.thickness' = 0.4 must be below the radius 0.3"});
   expect_error(edit(t, "aperture = 60", "aperture = 180"), {"key 'vesicle.initial.aperture' must lie in (0, 180) degrees"});
+  // The first grid may resolve the initial profile; not coarser than the first solve's eps.
+  EXPECT_EQ(*vesicle_of(edit(t, "aperture = 60", "aperture = 60\nresolve = 0.01")).initial_resolve, 0.01);
+  expect_error(edit(t, "aperture = 60", "aperture = 60\nresolve = 0.5"), {"key 'vesicle.initial.resolve' = 0.5 is coarser than the first solve's"});
 }
 
 TEST(VesicleScene, BranchSpheroids) {
@@ -589,7 +592,7 @@ TEST(VesicleScene, ResolveInterfaceMeetsTheResolutionRule) {
   app::InterfaceResolution r;
   CvtOptions cvt;
   cvt.iterations = 20;
-  const NodeSet nodes = app::resolve_interface(solved, box, eps, factor, r, cvt);
+  const NodeSet nodes = app::resolve_interface(solved.nodes, solved.state, box, eps, factor, r, cvt);
   const SpacingSummary s = spacing_summary(nodes);
   // The resolution rule holds as measured, and the grid is graded: coarse far from the circle.
   EXPECT_LE(factor * s.h_min, eps * (1 + 1e-12));
@@ -606,7 +609,7 @@ TEST(VesicleScene, ResolveInterfaceMeetsTheResolutionRule) {
   EXPECT_LT(2 * nodes.size(), uniform_count);      // far fewer than a uniform grid of the same h_min
   // A budget below the grid's node count is refused.
   r.max_nodes = nodes.size() / 2;
-  EXPECT_THROW((void)app::resolve_interface(solved, box, eps, factor, r, cvt), std::invalid_argument);
+  EXPECT_THROW((void)app::resolve_interface(solved.nodes, solved.state, box, eps, factor, r, cvt), std::invalid_argument);
 }
 
 TEST(VesicleScene, ResolutionAgainstTheUniformGrid) {

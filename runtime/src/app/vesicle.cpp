@@ -174,8 +174,15 @@ std::optional<VesicleModel> read_vesicle(const Scene& s) {
       throw SceneError(fmt::format("{}: the target is already set by [vesicle] (radius / reduced_volume); give it once",
                                    c.where));
   }
-  if (const auto init = t->optional_table("initial", {"shape", "center", "semi_axes", "radius", "eps", "thickness", "aperture"})) {
+  if (const auto init = t->optional_table("initial", {"shape", "center", "semi_axes", "radius", "eps", "thickness", "aperture", "resolve"})) {
     read_initial_shape(s, *init, m);
+    if (init->has("resolve")) {
+      if (s.dim() != 2) init->fail_key("resolve", "needs a CVT grid: available in 2D and axisymmetric scenes only");
+      m.initial_resolve = init->positive("resolve", init->number("resolve"));
+      if (m.eps < *m.initial_resolve)
+        init->fail_key("resolve", fmt::format("= {} is coarser than the first solve's {} = {}: the first grid must resolve it",
+                                              *m.initial_resolve, m.width, m.eps));
+    }
   } else {
     t->fail_key("initial", "is missing: the vesicle model starts from [vesicle.initial] (shape, center, semi_axes or radius)");
   }
@@ -183,8 +190,9 @@ std::optional<VesicleModel> read_vesicle(const Scene& s) {
     if (s.dim() != 2) adapt->fail_key("stages", "CVT adaptivity is available in 2D and axisymmetric scenes only");
     read_adaptivity(*adapt, m);
   }
-  // The first solve must be resolved by the grid when the scene describes it completely.
-  if (s.nodes.kind == SceneNodes::Kind::spacing || s.nodes.kind == SceneNodes::Kind::counts) {
+  // The first solve must be resolved by the grid when the scene describes it completely (with
+  // initial.resolve, [nodes] only samples the initial profile).
+  if (!m.initial_resolve && (s.nodes.kind == SceneNodes::Kind::spacing || s.nodes.kind == SceneNodes::Kind::counts)) {
     double h = std::numeric_limits<double>::infinity();
     for (int i = 0; i < s.dim(); ++i) {
       const auto k = std::size_t(i);
@@ -332,7 +340,7 @@ StageRecord run_vesicle_stage(MPI_Comm comm, const BoundScene& bound, const Vesi
       CvtOptions cvt;
       cvt.iterations = st.lloyd_iterations;
       cvt.samples_per_node = model.adaptivity->samples_per_node;
-      nodes = resolve_interface(stages[from].result, scene.domain, *st.resolve, model.resolution_factor,
+      nodes = resolve_interface(stages[from].result.nodes, stages[from].result.state, scene.domain, *st.resolve, model.resolution_factor,
                                 model.adaptivity->interface, cvt, log);
     } else if (st.lloyd_iterations > 0) {
       CvtOptions cvt;
@@ -348,6 +356,16 @@ StageRecord run_vesicle_stage(MPI_Comm comm, const BoundScene& bound, const Vesi
              << (cvt.centroids == CvtCentroids::voronoi ? " density evaluations per iteration\n" : " samples\n");
       }
     }
+    rec.adapt_s = seconds_since(t0);
+  } else if (model.initial_resolve) {
+    std::vector<double> profile(nodes.size());
+    for (std::size_t a = 0; a < nodes.size(); ++a) profile[a] = initial_profile(model, nodes.point(a), scene.dim());
+    CvtOptions cvt;
+    cvt.iterations = AdaptivityStage{}.lloyd_iterations;
+    cvt.samples_per_node = model.adaptivity ? model.adaptivity->samples_per_node : VesicleAdaptivity{}.samples_per_node;
+    nodes = resolve_interface(nodes, profile, scene.domain, *model.initial_resolve, model.resolution_factor,
+                              model.adaptivity ? model.adaptivity->interface : InterfaceResolution{}, cvt, log);
+    rec.grid = "interface";
     rec.adapt_s = seconds_since(t0);
   }
   const SpacingSummary spacing = spacing_summary(nodes);
@@ -491,12 +509,12 @@ SpacingField interface_spacing(const NodeSet& nodes, std::span<const double> phi
   return field;
 }
 
-NodeSet resolve_interface(const ProblemResult& solved, const Box& box, double eps_resolve, double resolution_factor,
+NodeSet resolve_interface(const NodeSet& sampled, std::span<const double> phi, const Box& box, double eps_resolve, double resolution_factor,
                           const InterfaceResolution& resolution, const CvtOptions& cvt, std::ostream* log) {
   const auto t0 = std::chrono::steady_clock::now();
   double h_interface = eps_resolve / resolution_factor;
   for (int attempt = 0;; ++attempt) {
-    const SpacingField field = interface_spacing(solved.nodes, solved.state, eps_resolve, h_interface, resolution);
+    const SpacingField field = interface_spacing(sampled, phi, eps_resolve, h_interface, resolution);
     CvtReport report;
     NodeSet nodes = cvt_for_spacing(box, field, resolution.max_nodes, cvt, &report);
     const SpacingSummary spacing = spacing_summary(nodes);

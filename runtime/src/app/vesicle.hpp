@@ -79,6 +79,9 @@ struct VesicleModel {
   double cup_thickness = 0;
   double cup_aperture = 0;
   std::optional<double> profile_eps;   ///< width of the initial profile (default: eps)
+  /// The first grid resolves the initial profile's interface for every ε ≥ this (resolve_interface;
+  /// for shapes whose features a uniform grid at the first ε would merge).
+  std::optional<double> initial_resolve;
   double resolution_factor = 2.0;      ///< ε ≥ resolution_factor · h_min (seed App. B)
   std::optional<VesicleAdaptivity> adaptivity;
 };
@@ -124,10 +127,11 @@ void check_feasible(double A0, double V0, int dim = 3);
 [[nodiscard]] SpacingField interface_spacing(const NodeSet& nodes, std::span<const double> phi, double eps_resolve,
                                              double h_interface, const InterfaceResolution& resolution);
 
-/// A grid that resolves the interface of `solved` for every ε ≥ eps_resolve: cvt_for_spacing of
-/// interface_spacing with h_interface = eps_resolve / resolution_factor, made finer and rebuilt
-/// (at most three times) until eps_resolve ≥ resolution_factor · h_min holds as measured.
-[[nodiscard]] NodeSet resolve_interface(const ProblemResult& solved, const Box& box, double eps_resolve,
+/// A grid that resolves the interface of the nodal values phi on `nodes` (a solution, or the
+/// initial profile) for every ε ≥ eps_resolve: cvt_for_spacing of interface_spacing with
+/// h_interface = eps_resolve / resolution_factor, made finer and rebuilt (at most three times)
+/// until eps_resolve ≥ resolution_factor · h_min holds as measured.
+[[nodiscard]] NodeSet resolve_interface(const NodeSet& nodes, std::span<const double> phi, const Box& box, double eps_resolve,
                                         double resolution_factor, const InterfaceResolution& resolution,
                                         const CvtOptions& cvt, std::ostream* log = nullptr);
 
