@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <string>
 
@@ -124,6 +125,39 @@ TEST(Dynamics, ForwardEulerAgreesWithTheVariationalIntegratorAtSmallSteps) {
   // Forward Euler linearizes the constraints: it drifts, the integrator does not.
   EXPECT_GT(relative_drift(b, 0), 1e-12);
   EXPECT_LT(relative_drift(a, 0), 1e-10);
+}
+
+TEST(Dynamics, StepsAThousandTimesForwardEulersStableStep) {
+  // Forward Euler's largest stable constant step on this grid lies in [4e-3, 8e-3): at 4e-3 the
+  // energy falls for 50 steps, at 8e-3 it rises within 50.
+  auto euler = [](const std::string& dt) {
+    const Case c = make("method = \"forward_euler\"\nt_end = " + std::to_string(50 * std::stod(dt)) + "\ndt = " + dt +
+                        "\nadaptive = false\nrequire_decrease = false\n");
+    return app::run_dynamics(PETSC_COMM_WORLD, c.scene, c.settings, nullptr, nullptr);
+  };
+  auto rises = [](const DynamicsRun& run) {
+    if (!run.failure.empty()) return true;
+    for (std::size_t s = 1; s < run.history.size(); ++s)
+      if (!(run.history[s].energy < run.history[s - 1].energy)) return true;
+    return false;
+  };
+  const DynamicsRun stable = euler("4e-3");
+  EXPECT_FALSE(rises(stable));
+  EXPECT_TRUE(rises(euler("8e-3")));
+  // The integrator takes two steps of 1000 times the stable one (dt* = 4): each converges (the
+  // first in 26 Newton iterations, so the cap is raised from 25), lowers the energy, keeps area and
+  // volume and leaves det F > 0; the first already lands below where Euler's 50 stable steps (to
+  // t* = 0.2) got.
+  const Case big = make("t_end = 8.0\ndt = 4.0\nadaptive = false\n[solver]\nmax_newton_iterations = 60\n");
+  const DynamicsRun run = app::run_dynamics(PETSC_COMM_WORLD, big.scene, big.settings, nullptr, nullptr);
+  ASSERT_TRUE(run.failure.empty()) << run.failure;
+  ASSERT_EQ(run.accepted, 2);
+  EXPECT_EQ(run.rejected, 0);
+  EXPECT_LT(run.history[1].energy, stable.history.back().energy);
+  EXPECT_LT(run.history[2].energy, run.history[1].energy);
+  EXPECT_LT(relative_drift(run, 0), 1e-10);
+  EXPECT_LT(relative_drift(run, 1), 1e-10);
+  for (const auto& step : run.history) EXPECT_GT(step.min_jacobian, 0.05);
 }
 
 TEST(Dynamics, AStepWhoseNewtonFailsIsRejectedAndRetried) {

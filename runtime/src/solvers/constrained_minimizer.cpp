@@ -15,6 +15,13 @@ namespace lmeform {
 
 namespace {
 
+/// A residual or tolerance for a message: 3 significant digits at any magnitude.
+std::string scientific(double v) {
+  std::ostringstream o;
+  o << std::setprecision(3) << std::scientific << v;
+  return o.str();
+}
+
 // Negative eigenvalues of the symmetric part of a small dense matrix.
 PetscInt negative_count(const Eigen::MatrixXd& A) {
   if (A.size() == 0) return 0;
@@ -390,9 +397,8 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
   }
   result.seconds_augmented = MPI_Wtime() - start_time_ - seconds_newton;
   if (!stage1_done) {
-    result.message = "augmented Lagrangian stage did not reach the constraint tolerance " +
-                     std::to_string(al_tolerance) + " in " + std::to_string(options_.max_outer_iterations) +
-                     " multiplier updates";
+    result.message = "augmented Lagrangian stage did not reach the constraint tolerance " + scientific(al_tolerance) +
+                     " in " + std::to_string(options_.max_outer_iterations) + " multiplier updates";
     break;
   }
   LMEFORM_PETSC_CHECK(VecCopy(u, u_saved));
@@ -443,7 +449,8 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
       }
       if (it == options_.max_newton_iterations) {
         result.message = "KKT Newton did not converge in " + std::to_string(options_.max_newton_iterations) +
-                         " iterations (|grad L| = " + std::to_string(gnorm) + ")";
+                         " iterations (|grad L| = " + scientific(gnorm) + ", tolerance " +
+                         scientific(options_.newton_tolerance * scale + proximal_noise) + ")";
         // Started without the augmented Lagrangian from a poor start: let it take over from here.
         diverged = attempt == 0 && options_.kkt_first && options_.augmented_fallback;
         break;
