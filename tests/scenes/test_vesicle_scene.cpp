@@ -298,6 +298,8 @@ TEST(VesicleScene, StomatocyteCup) {
   // Bad parameters name the key.
   expect_error(edit(t, "thickness = 0.1", "thickness = 0.4"), {"key 'vesicle.initial.thickness' = 0.4 must be below the radius 0.3"});
   expect_error(edit(t, "aperture = 60", "aperture = 180"), {"key 'vesicle.initial.aperture' must lie in (0, 180) degrees"});
+  expect_error(edit(kVesicle, "semi_axes = [0.4987, 0.2059]", "semi_axes = [0.4987, 0.2059]\nthickness = 0.1"),
+               {"key 'vesicle.initial.thickness' belongs to shape 'stomatocyte'"});
   // The first grid may resolve the initial profile; not coarser than the first solve's eps.
   EXPECT_EQ(*vesicle_of(edit(t, "aperture = 60", "aperture = 60\nresolve = 0.01")).initial_resolve, 0.01);
   expect_error(edit(t, "aperture = 60", "aperture = 60\nresolve = 0.5"), {"key 'vesicle.initial.resolve' = 0.5 is coarser than the first solve's"});

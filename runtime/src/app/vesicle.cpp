@@ -49,22 +49,24 @@ void read_initial_shape(const Scene& s, const SceneTable& t, VesicleModel& m) {
   } else if (shape == "stomatocyte") {
     m.shape = VesicleModel::Shape::stomatocyte;
     if (t.has("semi_axes")) t.fail_key("semi_axes", "belongs to shape 'ellipsoid'; a stomatocyte takes 'radius', 'thickness' and 'aperture'");
-    const double r = t.positive("radius", t.number("radius"));
+    m.cup_radius = t.positive("radius", t.number("radius"));
     m.cup_thickness = t.positive("thickness", t.number("thickness"));
-    if (m.cup_thickness >= r) t.fail_key("thickness", fmt::format("= {} must be below the radius {}: the cup would have no cavity", m.cup_thickness, r));
+    if (m.cup_thickness >= m.cup_radius)
+      t.fail_key("thickness", fmt::format("= {} must be below the radius {}: the cup would have no cavity", m.cup_thickness, m.cup_radius));
     const double aperture_degrees = t.number("aperture");
     if (!(aperture_degrees > 0 && aperture_degrees < 180))
       t.fail_key("aperture", "must lie in (0, 180) degrees, got " + format_number(aperture_degrees));
     m.cup_aperture = aperture_degrees * std::numbers::pi / 180;
-    for (int i = 0; i < s.dim(); ++i) m.semi_axes[std::size_t(i)] = r + m.cup_thickness / 2;  // the extent, for the domain check
+    for (int i = 0; i < s.dim(); ++i) m.semi_axes[std::size_t(i)] = m.cup_radius + m.cup_thickness / 2;
   } else {
     m.shape = VesicleModel::Shape::sphere;
     if (t.has("semi_axes")) t.fail_key("semi_axes", "belongs to shape 'ellipsoid'; a sphere takes 'radius'");
-    for (const char* key : {"thickness", "aperture"})
-      if (t.has(key)) t.fail_key(key, "belongs to shape 'stomatocyte'");
     const double r = t.positive("radius", t.number("radius"));
     for (int i = 0; i < s.dim(); ++i) m.semi_axes[std::size_t(i)] = r;
   }
+  if (m.shape != VesicleModel::Shape::stomatocyte)
+    for (const char* key : {"thickness", "aperture"})
+      if (t.has(key)) t.fail_key(key, "belongs to shape 'stomatocyte'");
   if (t.has("eps")) m.profile_eps = t.positive("eps", t.number("eps"));
   if (s.axisymmetric() && m.center[0] != 0.0)
     t.fail_key("center", "must lie on the axis (r = 0) in an axisymmetric scene, got r = " + format_number(m.center[0]));
@@ -273,7 +275,7 @@ double initial_profile(const VesicleModel& m, std::span<const double> x, int dim
     // The meridian plane: rho across the axis (the last coordinate), z along it.
     double rho2 = 0;
     for (std::size_t i = 0; i + 1 < d; ++i) rho2 += (x[i] - m.center[i]) * (x[i] - m.center[i]);
-    const double rho = std::sqrt(rho2), z = x[d - 1] - m.center[d - 1], radius = m.semi_axes[0] - m.cup_thickness / 2;
+    const double rho = std::sqrt(rho2), z = x[d - 1] - m.center[d - 1], radius = m.cup_radius;
     const double polar = std::atan2(rho, z);  // from the top pole
     const double to_mid_surface = polar >= m.cup_aperture
                                       ? std::abs(std::hypot(rho, z) - radius)

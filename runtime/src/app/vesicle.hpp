@@ -73,9 +73,10 @@ struct VesicleModel {
   enum class Shape { ellipsoid, sphere, stomatocyte } shape = Shape::ellipsoid;
   std::array<double, 3> center{};
   std::array<double, 3> semi_axes{};
-  /// A stomatocyte (a cup): the shell of `cup_thickness` around the sphere of radius
-  /// semi_axes[0] about `center`, open at the top (the last axis) within `cup_aperture` radians
-  /// of the pole, its rim rounded.
+  /// A stomatocyte (a cup): the shell of `cup_thickness` around the sphere of radius `cup_radius`
+  /// about `center`, open at the top (the last axis) within `cup_aperture` radians of the pole, its
+  /// rim rounded. (semi_axes then hold its outer extent, for the domain check.)
+  double cup_radius = 0;
   double cup_thickness = 0;
   double cup_aperture = 0;
   std::optional<double> profile_eps;   ///< width of the initial profile (default: eps)
