@@ -14,6 +14,7 @@
 
 #include "dynamics.hpp"
 #include "problem.hpp"
+#include "lmeform/node_sets.hpp"
 #include "lmeform/petsc.hpp"
 #include "lmeform/scene.hpp"
 
@@ -266,15 +267,20 @@ TEST(Dynamics, AFoldingStepResetsTheReferenceWhenResetsAreOn) {
   EXPECT_NEAR(run.history.back().t_star, 0.02, 1e-12);
 }
 
-class DynamicsRestart : public ::testing::TestWithParam<int> {};
+// Plain, with a reset every 3 steps (the checkpoint at step 4 holds a carried quadrature), and with
+// a re-mesh every 3 steps (the checkpoint holds new nodes, cells and projected fields).
+struct RestartCase {
+  std::string name;
+  std::string keys;
+};
+
+class DynamicsRestart : public ::testing::TestWithParam<RestartCase> {};
 
 TEST_P(DynamicsRestart, ARunResumedFromItsCheckpointEndsLikeTheUninterruptedRun) {
-  const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("lmeform_test_dynamics_restart_" + std::to_string(GetParam()));
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("lmeform_test_dynamics_restart_" + GetParam().name);
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
-  // Without resets, and with a reset every 3 steps (the checkpoint at step 4 holds a carried quadrature).
-  const std::string dynamics = "t_end = 0.012\ndt = 1e-3\ncheckpoint_every = 4\noutput_every = 2\nreset_every = " +
-                               std::to_string(GetParam()) + "\n";
+  const std::string dynamics = "t_end = 0.012\ndt = 1e-3\ncheckpoint_every = 4\noutput_every = 2\n" + GetParam().keys;
   const Case whole = make(dynamics);
   app::DynamicsOutput out_whole{dir / "whole", "run", false};
   std::filesystem::create_directories(out_whole.directory);
@@ -303,14 +309,23 @@ TEST_P(DynamicsRestart, ARunResumedFromItsCheckpointEndsLikeTheUninterruptedRun)
   EXPECT_TRUE(std::filesystem::exists(out_parts.directory / "run.xmf"));
   EXPECT_TRUE(std::filesystem::exists(out_parts.directory / "series" / "run_000012.h5"));
   EXPECT_TRUE(std::filesystem::exists(out_parts.directory / "series" / "run_000002.h5"));
-  if (GetParam() > 0) {
+  if (!GetParam().keys.empty()) {
     EXPECT_TRUE(std::filesystem::exists(out_parts.directory / "run_checkpoint_quadrature.h5"));
-    EXPECT_EQ(c.resets, a.resets);
+  }
+  EXPECT_EQ(c.resets, a.resets);
+  EXPECT_EQ(c.remeshes, a.remeshes);
+  EXPECT_EQ(c.remesh_changes, a.remesh_changes);
+  if (GetParam().name == "remesh") {
+    EXPECT_GE(a.remeshes, 3);  // every 3 steps: the checkpoint at step 4 follows the first
+    EXPECT_EQ(b.remeshes, 1);
   }
   std::filesystem::remove_all(dir);
 }
 
-INSTANTIATE_TEST_SUITE_P(ResetsOffAndOn, DynamicsRestart, ::testing::Values(0, 3));
+INSTANTIATE_TEST_SUITE_P(PlainResetsAndReMeshes, DynamicsRestart,
+                         ::testing::Values(RestartCase{"plain", ""}, RestartCase{"reset", "reset_every = 3\n"},
+                                           RestartCase{"remesh", "remesh_every = 3\nremesh_factor = 10.0\n"}),
+                         [](const ::testing::TestParamInfo<RestartCase>& param) { return param.param.name; });
 
 TEST(Dynamics, AScheduledDeflationMovesTheVolumeTarget) {
   // V0(t) = V0(0) (1 - 2 t*) for t* <= 0.01: 2 % less volume at the end, area kept.
@@ -411,22 +426,58 @@ TEST_P(DynamicsCartesian, TheEnergyFallsAndAreaAndVolumeHold) {
 INSTANTIATE_TEST_SUITE_P(TwoAndThreeDimensions, DynamicsCartesian, ::testing::Values(2, 3));
 
 TEST(Dynamics, AReMeshProjectsTheFieldOntoAnAdaptedGridAndTheRunGoesOn) {
-  const Case fitted = make("t_end = 0.006\ndt = 1e-3\nadaptive = false\nremesh_every = 4\nremesh_factor = 10.0\n");
-  const Case copied =
-      make("t_end = 0.006\ndt = 1e-3\nadaptive = false\nremesh_every = 4\nremesh_factor = 10.0\nremesh_fit_iterations = 0\n");
+  const std::string keys = "t_end = 0.006\ndt = 1e-3\nadaptive = false\nremesh_every = 4\nremesh_factor = 10.0\n";
+  const Case fitted = make(keys + "remesh_projection = \"nodes\"\n");
+  const Case copied = make(keys + "remesh_projection = \"nodes\"\nremesh_fit_iterations = 0\n");
+  const Case projected = make(keys);
   const DynamicsRun a = app::run_dynamics(PETSC_COMM_WORLD, fitted.scene, fitted.settings, nullptr, nullptr);
   const DynamicsRun b = app::run_dynamics(PETSC_COMM_WORLD, copied.scene, copied.settings, nullptr, nullptr);
-  ASSERT_TRUE(a.failure.empty() && b.failure.empty()) << a.failure << b.failure;
+  const DynamicsRun c = app::run_dynamics(PETSC_COMM_WORLD, projected.scene, projected.settings, nullptr, nullptr);
+  ASSERT_TRUE(a.failure.empty() && b.failure.empty() && c.failure.empty()) << a.failure << b.failure << c.failure;
+  std::printf("re-mesh: relative change of E fitted %+.2e, copied %+.2e, L2-projected from the points %+.2e\n", a.remesh_changes[0],
+              b.remesh_changes[0], c.remesh_changes[0]);
   ASSERT_EQ(a.remeshes, 1);
   ASSERT_EQ(a.remesh_changes.size(), 1u);
-  // The projection changes E (it is one), by little when the new field is fitted to the old one:
-  // measured +1.1e-3 fitted, -5.7e-2 copied (LME smooths the copied values a second time).
+  // The projection changes E (it is one), by little when the new field is fitted to the old one or
+  // L2-projected from the points: measured +1.1e-3 fitted, +9.5e-4 projected, -5.7e-2 copied (LME
+  // smooths the copied values a second time).
   EXPECT_LT(std::abs(a.remesh_changes[0]), 5e-3);
+  EXPECT_LT(std::abs(c.remesh_changes[0]), 5e-3);
   EXPECT_GT(std::abs(b.remesh_changes[0]), 10 * std::abs(a.remesh_changes[0]));
+  for (std::size_t s = 5; s < c.history.size(); ++s) EXPECT_LT(c.history[s].energy, c.history[s - 1].energy) << "step " << s;
   // Area and volume keep their targets, and the motion goes on downhill from the projected state.
   EXPECT_LT(relative_drift(a, 0), 1e-10);
   EXPECT_LT(relative_drift(a, 1), 1e-10);
   for (std::size_t s = 5; s < a.history.size(); ++s) EXPECT_LT(a.history[s].energy, a.history[s - 1].energy) << "step " << s;
+}
+
+TEST(Dynamics, TheL2ProjectionFromPointsReproducesAFieldOfTheSpace) {
+  // LME reproduces affine fields: their coefficients are their nodal values, so the projection of an
+  // affine field's point values must return exactly those, on a strongly graded node set.
+  const NodeSet nodes = graded_grid_2d();  // h from 0.01 on a circle to 0.12
+  auto affine = [](double x, double y) { return 0.3 + 2.0 * x - 1.5 * y; };
+  const NodeSet cloud = random_points(Box::unit(2), 20000, 7);
+  SplitMix64 random(11);
+  std::vector<double> points = cloud.coords, weights, values;
+  for (std::size_t q = 0; q < cloud.size(); ++q) {
+    weights.push_back(q % 7 == 0 ? 0.0 : 0.5 + random.uniform());  // some points skipped
+    values.push_back(affine(cloud.point(q)[0], cloud.point(q)[1]));
+  }
+  const std::vector<double> start(nodes.size(), 0.0);
+  const app::PointProjection l2 = app::project_point_values(nodes, 0.8, LmeOptions{}, points, weights, values, start, 1e-12);
+  EXPECT_LT(l2.relative_residual, 1e-12);
+  double error = 0;
+  for (std::size_t a = 0; a < nodes.size(); ++a) error = std::max(error, std::abs(l2.values[a] - affine(nodes.point(a)[0], nodes.point(a)[1])));
+  EXPECT_LT(error, 1e-6);  // measured 2.2e-8: the mass matrix of a smooth basis is ill-conditioned
+  // A node with no point in its support is an error, not a silent zero.
+  std::vector<double> far_points, far_weights, far_values;
+  for (std::size_t q = 0; q < weights.size(); ++q)
+    if (points[2 * q] < 0.5) {
+      far_points.insert(far_points.end(), {points[2 * q], points[2 * q + 1]});
+      far_weights.push_back(weights[q]);
+      far_values.push_back(values[q]);
+    }
+  EXPECT_THROW((void)app::project_point_values(nodes, 0.8, LmeOptions{}, far_points, far_weights, far_values, start), std::runtime_error);
 }
 
 TEST(Dynamics, AJumpOfSpontaneousCurvatureActsFromItsTime) {

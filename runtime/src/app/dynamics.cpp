@@ -64,7 +64,7 @@ std::optional<DynamicsSettings> read_dynamics(const Scene& s) {
       {"method", "deformation", "dissipation", "time_unit", "t_start", "t_end", "dt", "adaptive", "dt_max",
        "dt_min", "growth", "energy_decrement", "target_newton", "max_steps", "max_retries", "hessian", "min_jacobian",
        "output_every", "checkpoint_every", "report_times", "schedule", "reset_every", "reset_distortion", "require_decrease", "remesh_every", "remesh_factor",
-       "remesh_iterations", "remesh_field", "remesh_fit_iterations"});
+       "remesh_iterations", "remesh_field", "remesh_fit_iterations", "remesh_projection"});
   if (!t) return std::nullopt;
   DynamicsSettings d;
   const std::string method = t->choice_of("method", t->optional_string("method").value_or("vti"), {"vti", "forward_euler"});
@@ -93,6 +93,9 @@ std::optional<DynamicsSettings> read_dynamics(const Scene& s) {
   d.remesh_factor = t->non_negative("remesh_factor", t->number("remesh_factor", d.remesh_factor));
   d.remesh_iterations = t->at_least("remesh_iterations", t->integer("remesh_iterations", d.remesh_iterations), 1);
   if (t->has("remesh_field")) d.remesh_field = t->string("remesh_field");
+  d.remesh_projection = t->choice_of("remesh_projection", t->optional_string("remesh_projection").value_or("points"), {"points", "nodes"}) == "points"
+                            ? DynamicsSettings::Projection::points
+                            : DynamicsSettings::Projection::nodes;
   d.remesh_fit_iterations = t->at_least("remesh_fit_iterations", t->integer("remesh_fit_iterations", d.remesh_fit_iterations), 0);
   d.reset_every = t->at_least("reset_every", t->integer("reset_every", d.reset_every), 0);
   d.reset_distortion = t->non_negative("reset_distortion", t->number("reset_distortion", 0.0));
@@ -581,7 +584,8 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
                              {"resets", s.resets},
                              {"wall_s", s.wall_s}});
     js["series"] = nlohmann::json::array();
-    for (const auto& s : series) js["series"].push_back({{"time", s.time}, {"file", s.h5_file.generic_string()}});
+    for (const auto& s : series)
+      js["series"].push_back({{"time", s.time}, {"file", s.h5_file.generic_string()}, {"nodes", s.nodes}, {"cells", s.cells}});
     return js;
   };
 
@@ -589,10 +593,6 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
   // changes, written with a checkpoint so that a restart continues on the same reference.
   auto write_checkpoint = [&]() {
     if (output == nullptr) return;
-    if (run.remeshes > 0) {
-      if (out != nullptr) *out << "  (no checkpoint after a re-mesh: restarts resume from the original nodes only)\n";
-      return;
-    }
     const std::vector<double> y = to_original(*ref->space.disc, ref->u, bs);
     if (rank != 0) return;
     OutputAttributes attributes{{"step", static_cast<std::int64_t>(step)},
@@ -603,12 +603,15 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
                                 {"rejected", static_cast<std::int64_t>(run.rejected)},
                                 {"resets", static_cast<std::int64_t>(run.resets)},
                                 {"steps_since_reset", static_cast<std::int64_t>(steps_since_reset)},
+                                {"remeshes", static_cast<std::int64_t>(run.remeshes)},
+                                {"steps_since_remesh", static_cast<std::int64_t>(steps_since_remesh)},
                                 {"scene", scene.source}};
+    for (std::size_t i = 0; i < run.remesh_changes.size(); ++i) attributes.emplace(fmt::format("remesh_change_{}", i), run.remesh_changes[i]);
     for (std::size_t i = 0; i < k; ++i) {
       attributes.emplace(fmt::format("multiplier_{}", i), nu[i]);
       attributes.emplace(fmt::format("target_{}", i), targets[i]);
     }
-    if (run.resets > 0) {
+    if (run.resets > 0 || run.remeshes > 0) {
       // The quadrature as a point set (no cells) with its weights and jets as point data.
       const CellQuadrature& quad = ref->space.disc->quadrature();
       FieldViews qfields;
@@ -624,9 +627,10 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
                        {{"step", static_cast<std::int64_t>(step)}, {"points_per_cell", static_cast<std::int64_t>(quad.points_per_cell)}});
     }
     write_text_atomically(history_path, history_json().dump(1) + "\n");
-    write_field_hdf5(checkpoint_path, ref->nodes, run.cells,
-                     {{"state", FieldView{y, bs}}, {"velocity", FieldView{velocity, bs}}, {"material_nodes", FieldView{material_nodes.coords, dim}}},
-                     attributes);
+    // After a re-mesh the material nodes, their triangulation and the projected nodal fields are new.
+    FieldViews fields{{"state", FieldView{y, bs}}, {"velocity", FieldView{velocity, bs}}, {"material_nodes", FieldView{material_nodes.coords, dim}}};
+    for (const auto& [name, values] : scalar_fields) fields.emplace("field_" + name, FieldView{values, 1});
+    write_field_hdf5(checkpoint_path, ref->nodes, run.cells, fields, attributes);
   };
 
   // Reset of the reference configuration (seed Fig. 3.8): the current positions become the nodes,
@@ -637,6 +641,40 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     std::map<std::string, std::vector<double>, std::less<>> values;
     for (const auto& [name, v] : scalar_fields) values[name] = v;
     return values;
+  };
+  // Where the material points of the nodes went, y(X_a), not the coefficients y_a: LME is not
+  // interpolating, and a free node's coefficient can leave the domain (measured: r = -0.11 beside
+  // the axis of a compressed graded grid). Nodes held in every component of y keep their
+  // prescribed place (on hull vertices the map's value is the coefficient anyway). Returns the
+  // positions and the state y with those positions as its coefficients (the identity on them).
+  auto material_node_positions = [&](const std::vector<double>& y) {
+    std::vector<int> held(n_nodes, 0);
+    for (const auto& [node, dof] : ref->space.fixed_pairs)
+      if (dof >= offset && dof < offset + dim) ++held[std::size_t(node)];
+    std::vector<double> positions(n_nodes * std::size_t(dim));
+    std::vector<double> state = y;
+    LmeOptions lme;
+    lme.spacing_smoothing = scene.nodes.spacing_smoothing;
+    const LmeBasis basis(ref->nodes, std::vector<double>(n_nodes, scene.nodes.gamma), lme);
+    for (std::size_t a = 0; a < n_nodes; ++a) {
+      std::array<double, 3> x{};
+      for (int i = 0; i < dim; ++i) x[std::size_t(i)] = y[a * std::size_t(bs) + std::size_t(offset + i)];
+      if (held[a] < dim) {
+        const auto X = ref->nodes.point(a);
+        const auto list = basis.neighbours(X);
+        const auto p = basis.evaluate(X, list, 0);
+        for (int i = 0; i < dim; ++i) {
+          double v = 0;
+          for (std::size_t m = 0; m < list.size(); ++m) v += p[m] * y[std::size_t(list[m]) * std::size_t(bs) + std::size_t(offset + i)];
+          x[std::size_t(i)] = v;
+        }
+      }
+      for (int i = 0; i < dim; ++i) {
+        positions[a * std::size_t(dim) + std::size_t(i)] = x[std::size_t(i)];
+        state[a * std::size_t(bs) + std::size_t(offset + i)] = x[std::size_t(i)];
+      }
+    }
+    return std::pair{positions, state};
   };
   auto reset_reference = [&]() {
     const double t0 = MPI_Wtime();
@@ -710,41 +748,9 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
       if (!j.gradient.empty()) sum(pushed[j.gradient]);
       if (!j.hessian.empty()) sum(pushed[j.hessian]);
     }
-    // The new nodes are where the material points of the old ones went, y(X_a), not the
-    // coefficients y_a: LME is not interpolating, and a free node's coefficient can leave the
-    // domain (measured: r = -0.11 beside the axis of a compressed graded grid). Any node position
-    // gives the same state, since the new basis reproduces the identity; these stay inside Ω. Nodes
-    // held in every component of y keep their prescribed place (on hull vertices the map's value
-    // is the coefficient anyway).
-    std::vector<int> held(n_nodes, 0);
-    for (const auto& [node, dof] : ref->space.fixed_pairs)
-      if (dof >= offset && dof < offset + dim) ++held[std::size_t(node)];
-    std::vector<double> positions(n_nodes * std::size_t(dim));
-    std::vector<double> state = y;
-    {
-      LmeOptions lme;
-      lme.spacing_smoothing = scene.nodes.spacing_smoothing;
-      const LmeBasis basis(ref->nodes, std::vector<double>(n_nodes, scene.nodes.gamma), lme);
-      for (std::size_t a = 0; a < n_nodes; ++a) {
-        std::array<double, 3> x{};
-        for (int i = 0; i < dim; ++i) x[std::size_t(i)] = y[a * std::size_t(bs) + std::size_t(offset + i)];
-        if (held[a] < dim) {
-          const auto X = ref->nodes.point(a);
-          const auto list = basis.neighbours(X);
-          const auto p = basis.evaluate(X, list, 0);
-          for (int i = 0; i < dim; ++i) {
-            double v = 0;
-            for (std::size_t m = 0; m < list.size(); ++m) v += p[m] * y[std::size_t(list[m]) * std::size_t(bs) + std::size_t(offset + i)];
-            x[std::size_t(i)] = v;
-          }
-        }
-        for (int i = 0; i < dim; ++i) {
-          positions[a * std::size_t(dim) + std::size_t(i)] = x[std::size_t(i)];
-          state[a * std::size_t(bs) + std::size_t(offset + i)] = x[std::size_t(i)];
-        }
-      }
-    }
-    NodeSet nodes(dim, positions);
+    auto carried_nodes = material_node_positions(y);
+    const std::vector<double> state = std::move(carried_nodes.second);
+    NodeSet nodes(dim, std::move(carried_nodes.first));
     ref = build(nodes, state, std::move(carried), std::move(pushed), true, material_fields());
     apply_schedule(t);
     // The same physical state: energy and constraints unchanged up to the basis' consistency error.
@@ -786,10 +792,24 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     const double t0 = MPI_Wtime();
     apply_schedule(t);
     const double energy_before = energy_of(ref->u);
+    // The current node positions start the CVT, carry the density |∇φ| and, for fields without
+    // point values, the interpolated field: the coefficients y_a, where the new basis reproduces the
+    // first moments the old one does through the map (on the test box, with nodes at y(X_a) the
+    // step after a `nodes` re-mesh raised E). A coefficient that left the box takes y(X_a) instead,
+    // which stays inside.
     const std::vector<double> y = to_original(*ref->space.disc, ref->u, bs);
+    const std::vector<double> inside = material_node_positions(y).first;
     std::vector<double> positions(n_nodes * std::size_t(dim));
-    for (std::size_t a = 0; a < n_nodes; ++a)
-      for (int i = 0; i < dim; ++i) positions[a * std::size_t(dim) + std::size_t(i)] = y[a * std::size_t(bs) + std::size_t(offset + i)];
+    for (std::size_t a = 0; a < n_nodes; ++a) {
+      bool out_of_box = false;
+      for (int i = 0; i < dim; ++i) {
+        const double x = y[a * std::size_t(bs) + std::size_t(offset + i)];
+        out_of_box = out_of_box || x < scene.domain.lo[std::size_t(i)] || x > scene.domain.hi[std::size_t(i)];
+      }
+      for (int i = 0; i < dim; ++i)
+        positions[a * std::size_t(dim) + std::size_t(i)] =
+            out_of_box ? inside[a * std::size_t(dim) + std::size_t(i)] : y[a * std::size_t(bs) + std::size_t(offset + i)];
+    }
     const NodeSet current(dim, positions);
     LmeOptions lme;
     lme.spacing_smoothing = scene.nodes.spacing_smoothing;
@@ -826,11 +846,45 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     CvtOptions cvt;
     cvt.iterations = settings.remesh_iterations;
     const NodeSet nodes = cvt_relocate(current, scene.domain, phase_field_density(settings.remesh_factor, current, grad_norm), cvt);
-    // The new nodal values make the new LME field take the old field's values at the new nodes.
+    // A field with a value jet is known exactly at the current quadrature points (a material field,
+    // carried): its L2 projection onto the new space depends on no node positions. Otherwise the new
+    // nodal values make the new LME field take the old field's values at the new nodes.
+    std::vector<double> points, weights;
+    auto from_points = [&](const std::string& name) {
+      const auto j = jets.find(name);
+      return settings.remesh_projection == DynamicsSettings::Projection::points && j != jets.end() &&
+             ref->space.qdata.contains(j->second.value);
+    };
+    if (std::any_of(scalar_fields.begin(), scalar_fields.end(), [&](const auto& f) { return from_points(f.first); })) {
+      const Discretization& disc = *ref->space.disc;
+      const CellQuadrature& quad = disc.quadrature();
+      points.assign(quad.size() * std::size_t(dim), 0.0);
+      weights.assign(quad.size(), 0.0);
+      for_each_point_kinematics(disc, y, bs, offset, 1,
+                                [&](int point, const std::array<double, 3>& position, const std::array<double, 9>& F, const std::array<double, 27>&) {
+                                  const auto p = std::size_t(point);
+                                  for (int i = 0; i < dim; ++i) points[p * std::size_t(dim) + std::size_t(i)] = position[std::size_t(i)];
+                                  Eigen::MatrixXd Fm(dim, dim);
+                                  for (int i = 0; i < dim; ++i)
+                                    for (int I = 0; I < dim; ++I) Fm(i, I) = F[std::size_t(i * dim + I)];
+                                  weights[p] = quad.weights[p] * Fm.determinant();
+                                });
+      MPI_Allreduce(MPI_IN_PLACE, points.data(), static_cast<int>(points.size()), MPI_DOUBLE, MPI_SUM, comm);
+      MPI_Allreduce(MPI_IN_PLACE, weights.data(), static_cast<int>(weights.size()), MPI_DOUBLE, MPI_SUM, comm);
+    }
     std::map<std::string, std::vector<double>, std::less<>> projected;
+    std::string projections;
     for (auto& [name, values] : scalar_fields) {
-      values = fit_nodal_values(nodes, interpolate_nodal_field(current, values, scene.nodes.gamma, lme, nodes), scene.nodes.gamma, lme,
-                                settings.remesh_fit_iterations);
+      const std::vector<double> interpolated = interpolate_nodal_field(current, values, scene.nodes.gamma, lme, nodes);
+      if (from_points(name)) {
+        const PointProjection l2 =
+            project_point_values(nodes, scene.nodes.gamma, lme, points, weights, ref->space.qdata.at(jets.at(name).value), interpolated);
+        values = l2.values;
+        projections += fmt::format("; '{}' L2-projected from the points ({} CG iterations, relative residual {:.1e})", name,
+                                   l2.iterations, l2.relative_residual);
+      } else {
+        values = fit_nodal_values(nodes, interpolated, scene.nodes.gamma, lme, settings.remesh_fit_iterations);
+      }
       projected[name] = values;
     }
     material_nodes = nodes;
@@ -849,8 +903,9 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     const double energy_after = energy_of(ref->u);
     run.remesh_changes.push_back(relative(energy_after, energy_before));
     if (out != nullptr)
-      *out << fmt::format("  re-mesh {} at step {}: {} nodes, the projection changed E by {:+.2e} (relative)\n", run.remeshes, step,
-                          n_nodes, run.remesh_changes.back());
+      *out << fmt::format("  re-mesh {} at step {}: {} nodes, the projection changed E by {:+.2e} (relative){}\n", run.remeshes, step,
+                          n_nodes, run.remesh_changes.back(), projections)
+           << std::flush;
     run.seconds_reset += MPI_Wtime() - t0;
   };
 
@@ -870,11 +925,29 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
       if (it == cp.fields.end()) throw std::runtime_error(fmt::format("--restart: {} has no field '{}'", checkpoint_path.string(), name));
       return it->second.values;
     };
-    if (field("material_nodes") != material_nodes.coords)
-      throw std::runtime_error(fmt::format("--restart: {} was written for other nodes than the scene's", checkpoint_path.string()));
     step = static_cast<int>(std::get<std::int64_t>(attr(cp, checkpoint_path, "step")));
     run.resets = static_cast<int>(std::get<std::int64_t>(attr(cp, checkpoint_path, "resets")));
-    if (run.resets > 0) {
+    // Checkpoints written before re-meshes were checkpointed have neither count: none had happened.
+    auto count_or = [&](const char* name, int fallback) {
+      const auto it = cp.attributes.find(name);
+      return it == cp.attributes.end() ? fallback : static_cast<int>(std::get<std::int64_t>(it->second));
+    };
+    run.remeshes = count_or("remeshes", 0);
+    steps_since_remesh = count_or("steps_since_remesh", step);
+    if (run.remeshes == 0) {
+      if (field("material_nodes") != material_nodes.coords)
+        throw std::runtime_error(fmt::format("--restart: {} was written for other nodes than the scene's", checkpoint_path.string()));
+    } else {  // the nodes, triangulation, boundary sets and nodal fields of the last re-mesh
+      material_nodes = NodeSet(dim, field("material_nodes"));
+      n_nodes = material_nodes.size();
+      run.cells = cp.cells;
+      run.reference_nodes = material_nodes;
+      dirichlet_sets = dirichlet_nodes(scene, material_nodes);
+      for (auto& [name, values] : scalar_fields) values = field("field_" + name);
+      for (int i = 0; i < run.remeshes; ++i)
+        run.remesh_changes.push_back(std::get<double>(attr(cp, checkpoint_path, fmt::format("remesh_change_{}", i))));
+    }
+    if (run.resets > 0 || run.remeshes > 0) {
       const FieldFile qf = read_field_hdf5(quadrature_path);
       if (std::get<std::int64_t>(attr(qf, quadrature_path, "step")) != step)
         throw std::runtime_error(fmt::format("--restart: {} belongs to another step than {}", quadrature_path.string(), checkpoint_path.string()));
@@ -900,7 +973,6 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     run.accepted = static_cast<int>(std::get<std::int64_t>(attr(cp, checkpoint_path, "accepted")));
     run.rejected = static_cast<int>(std::get<std::int64_t>(attr(cp, checkpoint_path, "rejected")));
     steps_since_reset = static_cast<int>(std::get<std::int64_t>(attr(cp, checkpoint_path, "steps_since_reset")));
-    steps_since_remesh = step;  // no checkpoint is written after a re-mesh
     for (std::size_t i = 0; i < k; ++i) nu[i] = std::get<double>(attr(cp, checkpoint_path, fmt::format("multiplier_{}", i)));
     std::ifstream in(history_path);
     const nlohmann::json js = nlohmann::json::parse(in);
@@ -928,15 +1000,15 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
       e.time = s.at("time");
       e.h5_file = s.at("file").get<std::string>();
       e.dim = dim;
-      e.nodes = n_nodes;
-      e.cells = run.cells.size();
+      e.nodes = s.value("nodes", n_nodes);  // a re-mesh changes the triangulation
+      e.cells = s.value("cells", run.cells.size());
       e.fields = {{"displacement", dim}, {"velocity", dim}};
       for (const auto& [name, values] : scalar_fields) e.fields.emplace_back(name, 1);
       std::sort(e.fields.begin(), e.fields.end());
       series.push_back(e);
     }
     resumed = true;
-    if (out != nullptr) *out << fmt::format("resumed from {} at step {}, t* {:.6e}, {} resets\n", checkpoint_path.string(), step, t, run.resets);
+    if (out != nullptr) *out << fmt::format("resumed from {} at step {}, t* {:.6e}, {} resets\n", checkpoint_path.string(), step, t, run.resets) << std::flush;
   }
   run.seconds_setup = seconds_since(t_begin);
   if (!resumed) {

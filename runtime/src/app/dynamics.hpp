@@ -67,7 +67,11 @@ struct DynamicsSettings {
   std::string remesh_field = "phi";       ///< the scalar [coefficients] field whose gradient the new nodes follow
   double remesh_factor = 100;             ///< f of the CVT density 1 + f |∇φ|
   int remesh_iterations = 20;             ///< Lloyd iterations of a re-mesh
-  int remesh_fit_iterations = 20;         ///< iterations fitting the new nodal values to the old field (0: copy)
+  /// How a re-mesh carries a scalar field: `points`, the L2 projection of its values at the current
+  /// quadrature points (fields with a [qdata] value jet: the material field itself); `nodes`, its
+  /// nodal values interpolated at the new nodes and fitted (remesh_fit_iterations).
+  enum class Projection { points, nodes } remesh_projection = Projection::points;
+  int remesh_fit_iterations = 20;         ///< `nodes`: iterations fitting the new nodal values to the old field (0: copy)
   int reset_every = 0;                    ///< reset the reference configuration every N steps (0: never)
   double reset_distortion = 0;            ///< ... or when σ_max/σ_min of F exceeds this (0: never)
   int output_every = 10;                  ///< time-series files every N steps (0: start and end only)

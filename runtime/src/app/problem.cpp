@@ -15,7 +15,9 @@
 #include <sstream>
 #include <cstdlib>
 
+#include <Eigen/Sparse>
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include "lmeform/assembler.hpp"
 #include "lmeform/convex_hull.hpp"
@@ -586,6 +588,70 @@ std::vector<double> fit_nodal_values(const NodeSet& nodes, std::span<const doubl
     phi.swap(next);
   }
   return phi;
+}
+
+PointProjection project_point_values(const NodeSet& nodes, double gamma, const LmeOptions& lme, std::span<const double> points,
+                                     std::span<const double> weights, std::span<const double> values, std::span<const double> start,
+                                     double tolerance, int max_iterations) {
+  const int dim = nodes.dim;
+  const std::size_t n = nodes.size();
+  if (points.size() != weights.size() * std::size_t(dim) || values.size() != weights.size() || start.size() != n)
+    throw std::invalid_argument(fmt::format("project_point_values: {} coordinates, {} weights, {} values and {} start values "
+                                            "do not match {} nodes in dimension {}",
+                                            points.size(), weights.size(), values.size(), start.size(), n, dim));
+  const LmeBasis basis(nodes, std::vector<double>(n, gamma), lme);
+  struct Row {
+    double weight;
+    std::vector<int> nodes;
+    std::vector<double> p;
+  };
+  std::vector<Row> rows;
+  Eigen::VectorXd rhs = Eigen::VectorXd::Zero(Eigen::Index(n)), diagonal = Eigen::VectorXd::Zero(Eigen::Index(n));
+  for (std::size_t q = 0; q < weights.size(); ++q) {
+    if (weights[q] <= 0) continue;
+    const std::span<const double> x = points.subspan(q * std::size_t(dim), std::size_t(dim));
+    Row r{weights[q], basis.neighbours(x), {}};
+    r.p = basis.evaluate(x, r.nodes, 0);
+    for (std::size_t a = 0; a < r.nodes.size(); ++a) {
+      rhs[r.nodes[a]] += r.weight * r.p[a] * values[q];
+      diagonal[r.nodes[a]] += r.weight * r.p[a] * r.p[a];
+    }
+    rows.push_back(std::move(r));
+  }
+  for (std::size_t a = 0; a < n; ++a)
+    if (!(diagonal[Eigen::Index(a)] > 0))
+      throw std::runtime_error(fmt::format("project_point_values: node {} at ({}) has no point in its support", a, fmt::join(nodes.point(a), ", ")));
+  auto apply_mass = [&](const Eigen::VectorXd& c) {
+    Eigen::VectorXd m = Eigen::VectorXd::Zero(c.size());
+    for (const Row& r : rows) {
+      double v = 0;
+      for (std::size_t a = 0; a < r.nodes.size(); ++a) v += r.p[a] * c[r.nodes[a]];
+      v *= r.weight;
+      for (std::size_t a = 0; a < r.nodes.size(); ++a) m[r.nodes[a]] += v * r.p[a];
+    }
+    return m;
+  };
+  PointProjection result;
+  Eigen::VectorXd c = Eigen::Map<const Eigen::VectorXd>(start.data(), Eigen::Index(n));
+  Eigen::VectorXd residual = rhs - apply_mass(c);
+  const double norm_rhs = std::max(rhs.norm(), 1e-300);
+  Eigen::VectorXd z = residual.cwiseQuotient(diagonal), direction = z;
+  double rz = residual.dot(z);
+  result.relative_residual = residual.norm() / norm_rhs;
+  while (result.relative_residual > tolerance && result.iterations < max_iterations) {
+    const Eigen::VectorXd md = apply_mass(direction);
+    const double alpha = rz / direction.dot(md);
+    c += alpha * direction;
+    residual -= alpha * md;
+    z = residual.cwiseQuotient(diagonal);
+    const double rz_next = residual.dot(z);
+    direction = z + (rz_next / rz) * direction;
+    rz = rz_next;
+    ++result.iterations;
+    result.relative_residual = residual.norm() / norm_rhs;
+  }
+  result.values.assign(c.data(), c.data() + c.size());
+  return result;
 }
 
 std::vector<double> coefficient_values(const BoundScene& b, const std::string& name, int components, const NodeSet& nodes) {

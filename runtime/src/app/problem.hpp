@@ -238,6 +238,22 @@ struct SceneRun {
 [[nodiscard]] std::vector<double> fit_nodal_values(const NodeSet& nodes, std::span<const double> values, double gamma,
                                                    const LmeOptions& lme, int iterations);
 
+/// The L2 projection onto the LME space of `nodes` of a field known only at weighted points (a
+/// field carried by quadrature points, as a material field after a motion): the coefficients c
+/// minimizing Σ_q w_q (Σ_a p_a(x_q) c_a − v_q)². The mass matrix is never formed (a point sees
+/// O(100) nodes at small γ): Jacobi-preconditioned conjugate gradients from `start`, to a relative
+/// residual `tolerance`. Points with w_q ≤ 0 are skipped. Throws std::runtime_error if a node has
+/// no point in its support.
+struct PointProjection {
+  std::vector<double> values;
+  int iterations = 0;
+  double relative_residual = 0;
+};
+[[nodiscard]] PointProjection project_point_values(const NodeSet& nodes, double gamma, const LmeOptions& lme,
+                                                   std::span<const double> points, std::span<const double> weights,
+                                                   std::span<const double> values, std::span<const double> start,
+                                                   double tolerance = 1e-8, int max_iterations = 5000);
+
 /// "; did you mean 'x'?" for the candidate closest to a misspelt name, else "".
 [[nodiscard]] std::string did_you_mean(std::string_view name, const std::vector<std::string>& candidates);
 
