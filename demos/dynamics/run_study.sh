@@ -2,7 +2,7 @@
 # Regenerates the dynamics results of docs/dynamics.md: the oblate relaxation (VTI, adaptive dt) and
 # its static equilibrium on the same grid, the kinetics of deflation at three rates, seed Table 3.3
 # in form (bench_dynamics, full mode), and the plots. Run from the repository root after `make build`.
-#   demos/dynamics/run_study.sh [build-dir]        (about 40 minutes on one core)
+#   demos/dynamics/run_study.sh [build-dir]        (about 50 minutes on one core)
 set -euo pipefail
 build=${1:-build}
 lmeform=$build/lmeform
@@ -15,6 +15,19 @@ python=/usr/bin/python3
 reference=$($python -c "import json; print(json.load(open('$out/oblate_equilibrium.json'))['energy'])")
 $python scripts/plot_dynamics.py "$out/oblate_relaxation/oblate_relaxation_history.json" --out docs/figures/oblate_relaxation \
   --reference-energy "$reference" --mirror --snapshots 4
+
+# The same relaxation to t* = 40, and the static solve on grids refined twice (its converged value).
+sed -e 's/^t_end = .*/t_end = 40.0/' -e 's/^dt_max = .*/dt_max = 2.0/' -e 's/^name = .*/name = "oblate_relaxation_long"/' \
+    -e "s#^directory = .*#directory = \"$out/oblate_relaxation_long\"#" demos/dynamics/oblate_relaxation.toml > "$out/oblate_relaxation_long.toml"
+"$lmeform" run "$out/oblate_relaxation_long.toml" --json "$out/oblate_relaxation_long.json"
+for spacing in 0.0125 0.00625; do
+  sed -e "s/^spacing = .*/spacing = $spacing/" -e "s/^name = .*/name = \"oblate_equilibrium_$spacing\"/" \
+      -e "s#^directory = .*#directory = \"$out/oblate_equilibrium_$spacing\"#" demos/dynamics/oblate_equilibrium.toml > "$out/oblate_equilibrium_$spacing.toml"
+  "$lmeform" run "$out/oblate_equilibrium_$spacing.toml" --json "$out/oblate_equilibrium_$spacing.json"
+done
+converged=$($python -c "import json; print(json.load(open('$out/oblate_equilibrium_0.00625.json'))['energy'])")
+$python scripts/plot_dynamics.py "$out/oblate_relaxation_long/oblate_relaxation_long_history.json" --out docs/figures/oblate_relaxation_long \
+  --reference-energy "$converged" --mirror --snapshots 4
 
 # Kinetics: v = 0.9 -> 0.8 over t* = 0.1, 1 and 10, then relaxation at fixed volume (coarse grid).
 "$lmeform" run demos/dynamics/kinetics_start.toml --json "$out/kinetics_start.json"
