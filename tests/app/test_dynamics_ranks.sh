@@ -2,7 +2,8 @@
 # The oblate-relaxation demo (demos/dynamics/oblate_relaxation.toml) on a coarse box for a short
 # run: 1 and 2 MPI ranks take the same steps and reach the same energy to 1e-9 (relative); the run
 # writes its XDMF time series and history; --restart resumes from the checkpoint and ends where the
-# uninterrupted run ends; --restart of a scene without [dynamics] is refused.
+# uninterrupted run ends; --restart of a scene without [dynamics] is refused; [solver] monitor prints
+# the Newton iterations of each step.
 #
 #   test_dynamics_ranks.sh LMEFORM OUT_DIR
 set -euo pipefail
@@ -23,8 +24,12 @@ grep -q '^spacing = 0.0625$' "$out/oblate.toml" || fail "could not make the smal
 "$lmeform" run "$out/oblate.toml" --json "$out/one.json" --output "$out/one" > "$out/one.log" 2>&1 ||
   { tail -20 "$out/one.log"; fail "1 rank: lmeform run failed"; }
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
-mpirun -n 2 "$lmeform" run "$out/oblate.toml" --json "$out/two.json" --output "$out/two" > "$out/two.log" 2>&1 ||
+# The 2-rank run also prints its Newton iterations ([solver] monitor), which must not change them.
+{ cat "$out/oblate.toml"; printf '\n[solver]\nmonitor = true\n'; } > "$out/oblate_monitor.toml"
+mpirun -n 2 "$lmeform" run "$out/oblate_monitor.toml" --json "$out/two.json" --output "$out/two" > "$out/two.log" 2>&1 ||
   { tail -20 "$out/two.log"; fail "2 ranks: lmeform run failed"; }
+grep -q "^ KKT    0  E" "$out/two.log" || fail "[solver] monitor printed no Newton iterations"
+grep -q "^ KKT" "$out/one.log" && fail "Newton iterations printed without [solver] monitor"
 for f in one/oblate_relaxation.xmf one/oblate_relaxation_history.json one/series/oblate_relaxation_000000.h5 \
          one/series/oblate_relaxation_000004.h5 one/oblate_relaxation_checkpoint.h5; do
   [ -s "$out/$f" ] || fail "missing output $f"

@@ -90,6 +90,7 @@ max_inner_iterations = 15
 newton_tolerance = 1e-10
 constraint_tolerance = 1e-11
 max_newton_iterations = 12
+monitor = true
 petsc_options = "-ksp_type gmres -pc_type ilu"
 
 [reference]
@@ -277,6 +278,7 @@ TEST(Scene, FullSceneLoadsEveryField) {
   EXPECT_EQ(s.solver.newton_tolerance, 1e-10);
   EXPECT_EQ(s.solver.constraint_tolerance, 1e-11);
   EXPECT_EQ(s.solver.max_newton_iterations, 12);
+  EXPECT_TRUE(s.solver.monitor);
   EXPECT_EQ(s.solver.petsc_options, "-ksp_type gmres -pc_type ilu");
 
   // [reference]
@@ -339,6 +341,7 @@ TEST(Scene, AbsentSectionsTakeDefaults) {
   // An empty [solver] and an [output] with only a directory: the defaults.
   const Scene o = parse(kMinimal + "[solver]\n[output]\ndirectory = \"out\"\n");
   EXPECT_EQ(o.solver.max_newton_iterations, 25);
+  EXPECT_FALSE(o.solver.monitor);
   ASSERT_TRUE(o.output);
   EXPECT_TRUE(o.output->hdf5);
   EXPECT_TRUE(o.output->png);

@@ -51,6 +51,10 @@ struct ConstrainedMinimizerOptions {
   /// KKT Newton: false assembles and factors the Hessian once per minimize() and reuses it (a
   /// chord method: cheaper iterations, linear convergence), refreshing it only when a step fails.
   bool refresh_hessian_every_iteration = true;
+  /// With a reused Hessian: refresh it when a step shrank the KKT residual by less than this
+  /// factor (the chord method's linear rate is then too slow to be cheaper than one assembly).
+  /// 1 or more: refresh only on a failed step.
+  double stale_hessian_rate = 0.5;
   /// Inertia-controlled Newton: the Hessian is factored as LDLᵀ, whose inertia says whether the
   /// Newton step heads for a minimum. When it does not (the KKT matrix must have exactly k negative
   /// eigenvalues; L_A's Hessian none), H + δ·|diag H| is factored instead, δ raised tenfold until

@@ -147,6 +147,8 @@ struct SceneSolver {
   double constraint_tolerance = 1e-10;
   int max_newton_iterations = 25;
   bool inertia_correction = true;      ///< ConstrainedMinimizerOptions::inertia_correction
+  /// Print every Newton iteration of a time step (static solves always print them).
+  bool monitor = false;
   /// Appended to the PETSc options database before the solve ("-ksp_type gmres -pc_type ...").
   std::string petsc_options;
 };

@@ -379,6 +379,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     options.constraint_tolerance = scene.solver.constraint_tolerance;
     options.max_newton_iterations = scene.solver.max_newton_iterations;
     options.penalty = scene.solver.penalty;
+    if (scene.solver.monitor) options.log = out;
     r->minimizer = std::make_unique<ConstrainedMinimizer>(r->space.energy_terms, r->space.constraints, options);
     r->minimizer->set_fixed_dofs(r->space.fixed);
     Assembler& primary = *r->space.primary;

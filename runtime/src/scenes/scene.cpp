@@ -393,7 +393,7 @@ void read_output(const Section& root, Scene& s) {
 void read_solver(const Section& root, Scene& s) {
   const auto t = root.optional_table(
       "solver", {"start", "penalty", "augmented_tolerance", "inner_tolerance", "max_outer_iterations", "max_inner_iterations",
-                 "newton_tolerance", "constraint_tolerance", "max_newton_iterations", "inertia_correction", "petsc_options"});
+                 "newton_tolerance", "constraint_tolerance", "max_newton_iterations", "inertia_correction", "monitor", "petsc_options"});
   if (!t) return;
   SceneSolver& o = s.solver;
   o.kkt_first = t->choice_of("start", t->optional_string("start").value_or("kkt"), {"kkt", "augmented"}) == "kkt";
@@ -408,6 +408,7 @@ void read_solver(const Section& root, Scene& s) {
   o.max_newton_iterations =
       t->at_least("max_newton_iterations", t->integer("max_newton_iterations", o.max_newton_iterations), 0);
   o.inertia_correction = t->boolean("inertia_correction", o.inertia_correction);
+  o.monitor = t->boolean("monitor", o.monitor);
   if (t->has("petsc_options")) o.petsc_options = t->string("petsc_options");
 }
 

@@ -428,6 +428,7 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
     bool have_factor = false;     // a factorization of this minimize() exists
     bool hessian_current = false; // ... and it is the Hessian at u
     bool stale_failed = false;    // a step with a reused Hessian failed: refresh it
+    double previous_merit = 0, first_scale = 1;
     for (int it = 0; it <= options_.max_newton_iterations; ++it) {
       lagrangian_gradient(ev, nu, rhs);
       const double gnorm = norm(rhs);
@@ -436,8 +437,19 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
       // Divergence is judged on the whole KKT residual: a Newton step that restores the
       // constraints typically raises |∇L| for a step while the residual as a whole falls.
       const double merit = std::max(gnorm / scale, relative_residual(ev));
-      if (it == 0) first_merit = merit;
-      if (!std::isfinite(ev.energy) || !std::isfinite(gnorm) || (it > 0 && merit > 1e3 * std::max(first_merit, 1e-12))) {
+      if (it == 0) first_merit = merit, first_scale = scale;
+      // A chord step (reused Hessian) that contracted slowly: measured on a prolate time step at
+      // eps = 0.01, 25 chord iterations ended at |grad L| = 1e-6 against a tolerance of 2e-7 and
+      // the step was rejected.
+      if (it > 0 && have_factor && !hessian_current && merit > options_.stale_hessian_rate * previous_merit)
+        stale_failed = true;
+      previous_merit = merit;
+      // The merit is relative to |∇E|, which itself explodes where the iterate folds a map
+      // (det F → 0 in a Lagrangian energy): measured on prolate time steps, |∇L| and |∇E| grew
+      // to 6e6 and 1e8 (about 1e2 in the converged steps) and each step ran all 25 iterations,
+      // 200 s, before it was rejected. Such growth of |∇E| ends the iteration as a divergence.
+      if (!std::isfinite(ev.energy) || !std::isfinite(gnorm) || (it > 0 && merit > 1e3 * std::max(first_merit, 1e-12)) ||
+          scale > 1e4 * first_scale) {
         diverged = true;
         restore = true;
         break;
