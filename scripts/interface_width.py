@@ -63,14 +63,20 @@ def triangle_samples():
     return np.c_[b, 1 - b.sum(axis=1)]
 
 
+def read_datasets(path, keys, what):
+    """The named datasets of an HDF5 file, or a clear failure naming the one missing."""
+    try:
+        with h5py.File(path, "r") as f:
+            for key in keys:
+                if key not in f:
+                    fail(f"{path}: no dataset '{key}' ({what} has {', '.join(keys)})")
+            return [f[key][:] for key in keys]
+    except OSError as error:
+        fail(f"{path}: {error}")
+
+
 def measure(path, samples):
-    with h5py.File(path, "r") as f:
-        for key in ("nodes", "cells", "fields/phi"):
-            if key not in f:
-                fail(f"{path}: no dataset '{key}' (a series file of an lmeform dynamics run has nodes, cells, fields/phi)")
-        x = f["nodes"][:]
-        cells = f["cells"][:]
-        phi = f["fields/phi"][:]
+    x, cells, phi = read_datasets(path, ("nodes", "cells", "fields/phi"), "a series file of an lmeform dynamics run")
     if x.shape[1] != 2:
         fail(f"{path}: nodes have {x.shape[1]} coordinates; this script measures axisymmetric (r, z) runs")
     p = x[cells]
@@ -99,13 +105,8 @@ def measure(path, samples):
 
 
 def measure_quadrature(path, eps, area):
-    with h5py.File(path, "r") as f:
-        for key in ("nodes", "fields/weight", "fields/qdata_phi0"):
-            if key not in f:
-                fail(f"{path}: no dataset '{key}' (a checkpoint's quadrature file of a run with a qdata phi0)")
-        x = f["nodes"][:]
-        weight = f["fields/weight"][:]
-        phi0 = f["fields/qdata_phi0"][:]
+    x, weight, phi0 = read_datasets(path, ("nodes", "fields/weight", "fields/qdata_phi0"),
+                                    "the checkpoint quadrature file of a run with a qdata phi0")
     ring = weight * 2 * math.pi * x[:, 0]
     band = ring[np.abs(phi0) < 0.5].sum()
     width = band / area
