@@ -64,7 +64,7 @@ std::optional<DynamicsSettings> read_dynamics(const Scene& s) {
       {"method", "deformation", "dissipation", "time_unit", "t_start", "t_end", "dt", "adaptive", "dt_max",
        "dt_min", "growth", "energy_decrement", "target_newton", "max_steps", "max_retries", "hessian", "min_jacobian",
        "output_every", "checkpoint_every", "report_times", "schedule", "reset_every", "reset_distortion", "require_decrease", "remesh_every", "remesh_factor",
-       "remesh_iterations", "remesh_field", "remesh_fit_iterations", "remesh_projection"});
+       "remesh_iterations", "remesh_field", "remesh_fit_iterations", "remesh_projection", "remesh_gradient_length"});
   if (!t) return std::nullopt;
   DynamicsSettings d;
   const std::string method = t->choice_of("method", t->optional_string("method").value_or("vti"), {"vti", "forward_euler"});
@@ -91,12 +91,13 @@ std::optional<DynamicsSettings> read_dynamics(const Scene& s) {
   d.require_decrease = t->boolean("require_decrease", d.require_decrease);
   d.remesh_every = t->at_least("remesh_every", t->integer("remesh_every", d.remesh_every), 0);
   d.remesh_factor = t->non_negative("remesh_factor", t->number("remesh_factor", d.remesh_factor));
-  d.remesh_iterations = t->at_least("remesh_iterations", t->integer("remesh_iterations", d.remesh_iterations), 1);
+  d.remesh_iterations = t->at_least("remesh_iterations", t->integer("remesh_iterations", d.remesh_iterations), 0);
   if (t->has("remesh_field")) d.remesh_field = t->string("remesh_field");
   d.remesh_projection = t->choice_of("remesh_projection", t->optional_string("remesh_projection").value_or("points"), {"points", "nodes"}) == "points"
                             ? DynamicsSettings::Projection::points
                             : DynamicsSettings::Projection::nodes;
   d.remesh_fit_iterations = t->at_least("remesh_fit_iterations", t->integer("remesh_fit_iterations", d.remesh_fit_iterations), 0);
+  d.remesh_gradient_length = t->non_negative("remesh_gradient_length", t->number("remesh_gradient_length", 0.0));
   d.reset_every = t->at_least("reset_every", t->integer("reset_every", d.reset_every), 0);
   d.reset_distortion = t->non_negative("reset_distortion", t->number("reset_distortion", 0.0));
   if (d.reset_distortion > 0 && d.reset_distortion <= 1)
@@ -851,6 +852,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     // carried): its L2 projection onto the new space depends on no node positions. Otherwise the new
     // nodal values make the new LME field take the old field's values at the new nodes.
     std::vector<double> points, weights;
+    std::map<std::string, std::vector<double>, std::less<>> point_gradients;  // by field, at the current points
     auto from_points = [&](const std::string& name) {
       const auto j = jets.find(name);
       return settings.remesh_projection == DynamicsSettings::Projection::points && j != jets.end() &&
@@ -861,6 +863,10 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
       const CellQuadrature& quad = disc.quadrature();
       points.assign(quad.size() * std::size_t(dim), 0.0);
       weights.assign(quad.size(), 0.0);
+      if (settings.remesh_gradient_length > 0)
+        for (const auto& [name, values] : scalar_fields)
+          if (from_points(name) && ref->space.qdata.contains(jets.at(name).gradient))
+            point_gradients[name].assign(quad.size() * std::size_t(dim), 0.0);
       for_each_point_kinematics(disc, y, bs, offset, 1,
                                 [&](int point, const std::array<double, 3>& position, const std::array<double, 9>& F, const std::array<double, 27>&) {
                                   const auto p = std::size_t(point);
@@ -869,20 +875,34 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
                                   for (int i = 0; i < dim; ++i)
                                     for (int I = 0; I < dim; ++I) Fm(i, I) = F[std::size_t(i * dim + I)];
                                   weights[p] = quad.weights[p] * Fm.determinant();
+                                  if (point_gradients.empty()) return;
+                                  const Eigen::MatrixXd Fi = Fm.inverse();
+                                  for (auto& [name, g] : point_gradients) {
+                                    const auto& g0 = ref->space.qdata.at(jets.at(name).gradient);
+                                    Eigen::VectorXd G0(dim);
+                                    for (int I = 0; I < dim; ++I) G0[I] = g0[p * std::size_t(dim) + std::size_t(I)];
+                                    const Eigen::VectorXd pushed_forward = Fi.transpose() * G0;  // ∂φ/∂y = F⁻ᵀ ∂φ0/∂X
+                                    for (int i = 0; i < dim; ++i) g[p * std::size_t(dim) + std::size_t(i)] = pushed_forward[i];
+                                  }
                                 });
       MPI_Allreduce(MPI_IN_PLACE, points.data(), static_cast<int>(points.size()), MPI_DOUBLE, MPI_SUM, comm);
       MPI_Allreduce(MPI_IN_PLACE, weights.data(), static_cast<int>(weights.size()), MPI_DOUBLE, MPI_SUM, comm);
+      for (auto& [name, g] : point_gradients)
+        MPI_Allreduce(MPI_IN_PLACE, g.data(), static_cast<int>(g.size()), MPI_DOUBLE, MPI_SUM, comm);
     }
     std::map<std::string, std::vector<double>, std::less<>> projected;
     std::string projections;
     for (auto& [name, values] : scalar_fields) {
       const std::vector<double> interpolated = interpolate_nodal_field(current, values, scene.nodes.gamma, lme, nodes);
       if (from_points(name)) {
+        const auto g = point_gradients.find(name);
+        const bool h1 = g != point_gradients.end();
         const PointProjection l2 =
-            project_point_values(nodes, scene.nodes.gamma, lme, points, weights, ref->space.qdata.at(jets.at(name).value), interpolated);
+            project_point_values(nodes, scene.nodes.gamma, lme, points, weights, ref->space.qdata.at(jets.at(name).value), interpolated,
+                                 1e-8, 5000, h1 ? PointGradients{g->second, settings.remesh_gradient_length} : PointGradients{});
         values = l2.values;
-        projections += fmt::format("; '{}' L2-projected from the points ({} CG iterations, relative residual {:.1e})", name,
-                                   l2.iterations, l2.relative_residual);
+        projections += fmt::format("; '{}' {}-projected from the points ({} CG iterations, relative residual {:.1e})", name,
+                                   h1 ? "H1" : "L2", l2.iterations, l2.relative_residual);
       } else {
         values = fit_nodal_values(nodes, interpolated, scene.nodes.gamma, lme, settings.remesh_fit_iterations);
       }

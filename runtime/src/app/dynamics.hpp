@@ -72,6 +72,9 @@ struct DynamicsSettings {
   /// nodal values interpolated at the new nodes and fitted (remesh_fit_iterations).
   enum class Projection { points, nodes } remesh_projection = Projection::points;
   int remesh_fit_iterations = 20;         ///< `nodes`: iterations fitting the new nodal values to the old field (0: copy)
+  /// `points`: ℓ of an H1 fit, Σ w [(φ − φ_q)² + ℓ² |∇φ − ∇φ_q|²], for fields with a gradient jet
+  /// too (0: the L2 projection)
+  double remesh_gradient_length = 0;
   int reset_every = 0;                    ///< reset the reference configuration every N steps (0: never)
   double reset_distortion = 0;            ///< ... or when σ_max/σ_min of F exceeds this (0: never)
   int output_every = 10;                  ///< time-series files every N steps (0: start and end only)

@@ -592,13 +592,20 @@ std::vector<double> fit_nodal_values(const NodeSet& nodes, std::span<const doubl
 
 PointProjection project_point_values(const NodeSet& nodes, double gamma, const LmeOptions& lme, std::span<const double> points,
                                      std::span<const double> weights, std::span<const double> values, std::span<const double> start,
-                                     double tolerance, int max_iterations) {
+                                     double tolerance, int max_iterations, PointGradients gradients) {
   const int dim = nodes.dim;
   const std::size_t n = nodes.size();
   if (points.size() != weights.size() * std::size_t(dim) || values.size() != weights.size() || start.size() != n)
     throw std::invalid_argument(fmt::format("project_point_values: {} coordinates, {} weights, {} values and {} start values "
                                             "do not match {} nodes in dimension {}",
                                             points.size(), weights.size(), values.size(), start.size(), n, dim));
+  const bool h1 = gradients.length > 0 && !gradients.values.empty();
+  if (h1 && gradients.values.size() != weights.size() * std::size_t(dim))
+    throw std::invalid_argument(fmt::format("project_point_values: {} gradient values for {} points in dimension {}",
+                                            gradients.values.size(), weights.size(), dim));
+  if (gradients.length < 0) throw std::invalid_argument("project_point_values: the gradient length must not be negative");
+  const double l2 = gradients.length * gradients.length;
+  const std::size_t jets = h1 ? std::size_t(1 + dim) : 1;  // value, then each derivative, per neighbour
   const LmeBasis basis(nodes, std::vector<double>(n, gamma), lme);
   struct Row {
     double weight;
@@ -611,10 +618,17 @@ PointProjection project_point_values(const NodeSet& nodes, double gamma, const L
     if (weights[q] <= 0) continue;
     const std::span<const double> x = points.subspan(q * std::size_t(dim), std::size_t(dim));
     Row r{weights[q], basis.neighbours(x), {}};
-    r.p = basis.evaluate(x, r.nodes, 0);
-    for (std::size_t a = 0; a < r.nodes.size(); ++a) {
+    r.p = basis.evaluate(x, r.nodes, h1 ? 1 : 0);
+    r.p.resize(jets * r.nodes.size());
+    const std::size_t m = r.nodes.size();
+    for (std::size_t a = 0; a < m; ++a) {
       rhs[r.nodes[a]] += r.weight * r.p[a] * values[q];
       diagonal[r.nodes[a]] += r.weight * r.p[a] * r.p[a];
+      for (std::size_t i = 1; i < jets; ++i) {
+        const double d = r.p[i * m + a];
+        rhs[r.nodes[a]] += r.weight * l2 * d * gradients.values[q * std::size_t(dim) + i - 1];
+        diagonal[r.nodes[a]] += r.weight * l2 * d * d;
+      }
     }
     rows.push_back(std::move(r));
   }
@@ -624,10 +638,14 @@ PointProjection project_point_values(const NodeSet& nodes, double gamma, const L
   auto apply_mass = [&](const Eigen::VectorXd& c) {
     Eigen::VectorXd m = Eigen::VectorXd::Zero(c.size());
     for (const Row& r : rows) {
-      double v = 0;
-      for (std::size_t a = 0; a < r.nodes.size(); ++a) v += r.p[a] * c[r.nodes[a]];
-      v *= r.weight;
-      for (std::size_t a = 0; a < r.nodes.size(); ++a) m[r.nodes[a]] += v * r.p[a];
+      const std::size_t count = r.nodes.size();
+      for (std::size_t i = 0; i < jets; ++i) {
+        const double* p = r.p.data() + i * count;
+        double v = 0;
+        for (std::size_t a = 0; a < count; ++a) v += p[a] * c[r.nodes[a]];
+        v *= i == 0 ? r.weight : r.weight * l2;
+        for (std::size_t a = 0; a < count; ++a) m[r.nodes[a]] += v * p[a];
+      }
     }
     return m;
   };

@@ -249,10 +249,18 @@ struct PointProjection {
   int iterations = 0;
   double relative_residual = 0;
 };
+/// The field's gradient at the same points (dim values per point) and a length ℓ: the projection
+/// then minimizes Σ_q w_q [(φ(x_q) − v_q)² + ℓ² |∇φ(x_q) − g_q|²], an H1 fit for fields whose use
+/// depends on their derivatives. ℓ = 0 or no values: the L2 projection.
+struct PointGradients {
+  std::span<const double> values;
+  double length = 0;
+};
 [[nodiscard]] PointProjection project_point_values(const NodeSet& nodes, double gamma, const LmeOptions& lme,
                                                    std::span<const double> points, std::span<const double> weights,
                                                    std::span<const double> values, std::span<const double> start,
-                                                   double tolerance = 1e-8, int max_iterations = 5000);
+                                                   double tolerance = 1e-8, int max_iterations = 5000,
+                                                   PointGradients gradients = {});
 
 /// "; did you mean 'x'?" for the candidate closest to a misspelt name, else "".
 [[nodiscard]] std::string did_you_mean(std::string_view name, const std::vector<std::string>& candidates);
