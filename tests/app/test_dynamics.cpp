@@ -454,6 +454,34 @@ TEST(Dynamics, AReMeshProjectsTheFieldOntoAnAdaptedGridAndTheRunGoesOn) {
   for (std::size_t s = 5; s < a.history.size(); ++s) EXPECT_LT(a.history[s].energy, a.history[s - 1].energy) << "step " << s;
 }
 
+TEST(Dynamics, AReMeshCanChangeTheNodeCount) {
+  const std::string keys = "t_end = 0.006\ndt = 1e-3\nadaptive = false\nremesh_every = 4\nremesh_factor = 10.0\n";
+  const Case same = make(keys);
+  const DynamicsRun a = app::run_dynamics(PETSC_COMM_WORLD, same.scene, same.settings, nullptr, nullptr);
+  ASSERT_TRUE(a.failure.empty()) << a.failure;
+  const std::size_t n = a.reference_nodes.size(), more = n + n / 2;
+  const Case grown = make(keys + "remesh_nodes = " + std::to_string(more) + "\n");
+  const DynamicsRun b = app::run_dynamics(PETSC_COMM_WORLD, grown.scene, grown.settings, nullptr, nullptr);
+  ASSERT_TRUE(b.failure.empty()) << b.failure;
+  ASSERT_EQ(b.remeshes, 1);
+  EXPECT_EQ(b.reference_nodes.size(), more);
+  std::printf("re-mesh to %zu nodes (from %zu): relative change of E %+.2e (same count %+.2e)\n", more, n, b.remesh_changes[0],
+              a.remesh_changes[0]);
+  EXPECT_LT(std::abs(b.remesh_changes[0]), 5e-3);
+  // The walls keep their nodes: the box is still held, and the motion goes on downhill.
+  EXPECT_LT(relative_drift(b, 0), 1e-10);
+  EXPECT_LT(relative_drift(b, 1), 1e-10);
+  for (std::size_t s = 5; s < b.history.size(); ++s) EXPECT_LT(b.history[s].energy, b.history[s - 1].energy) << "step " << s;
+  // Fewer nodes than the walls hold is refused with the key's name.
+  const Case tiny = make(keys + "remesh_nodes = 5\n");
+  try {
+    const DynamicsRun c = app::run_dynamics(PETSC_COMM_WORLD, tiny.scene, tiny.settings, nullptr, nullptr);
+    EXPECT_NE(c.failure.find("remesh_nodes"), std::string::npos) << c.failure;
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("remesh_nodes = 5"), std::string::npos) << e.what();
+  }
+}
+
 TEST(Dynamics, TheL2ProjectionFromPointsReproducesAFieldOfTheSpace) {
   // LME reproduces affine fields: their coefficients are their nodal values, so the projection of an
   // affine field's point values must return exactly those, on a strongly graded node set.

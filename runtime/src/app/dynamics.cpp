@@ -64,7 +64,7 @@ std::optional<DynamicsSettings> read_dynamics(const Scene& s) {
       {"method", "deformation", "dissipation", "time_unit", "t_start", "t_end", "dt", "adaptive", "dt_max",
        "dt_min", "growth", "energy_decrement", "target_newton", "max_steps", "max_retries", "hessian", "min_jacobian",
        "output_every", "checkpoint_every", "report_times", "schedule", "reset_every", "reset_distortion", "require_decrease", "remesh_every", "remesh_factor",
-       "remesh_iterations", "remesh_field", "remesh_fit_iterations", "remesh_projection", "remesh_gradient_length"});
+       "remesh_iterations", "remesh_field", "remesh_fit_iterations", "remesh_projection", "remesh_gradient_length", "remesh_nodes"});
   if (!t) return std::nullopt;
   DynamicsSettings d;
   const std::string method = t->choice_of("method", t->optional_string("method").value_or("vti"), {"vti", "forward_euler"});
@@ -93,6 +93,7 @@ std::optional<DynamicsSettings> read_dynamics(const Scene& s) {
   d.remesh_factor = t->non_negative("remesh_factor", t->number("remesh_factor", d.remesh_factor));
   d.remesh_iterations = t->at_least("remesh_iterations", t->integer("remesh_iterations", d.remesh_iterations), 0);
   if (t->has("remesh_field")) d.remesh_field = t->string("remesh_field");
+  d.remesh_nodes = std::size_t(t->at_least("remesh_nodes", t->integer("remesh_nodes", 0), 0));
   d.remesh_projection = t->choice_of("remesh_projection", t->optional_string("remesh_projection").value_or("points"), {"points", "nodes"}) == "points"
                             ? DynamicsSettings::Projection::points
                             : DynamicsSettings::Projection::nodes;
@@ -847,7 +848,40 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     }
     CvtOptions cvt;
     cvt.iterations = settings.remesh_iterations;
-    const NodeSet nodes = cvt_relocate(current, scene.domain, phase_field_density(settings.remesh_factor, current, grad_norm), cvt);
+    NodeSet start = current;
+    const Density density = phase_field_density(settings.remesh_factor, current, grad_norm);
+    if (settings.remesh_nodes > 0 && settings.remesh_nodes != n_nodes) {
+      if (settings.remesh_nodes < n_nodes)
+        throw std::runtime_error(fmt::format("{}: [dynamics] remesh_nodes = {} is below the {} nodes of the run: a re-mesh adds "
+                                             "nodes, it does not remove them",
+                                             scene.source, settings.remesh_nodes, n_nodes));
+      // More nodes: the current ones keep their places (a good start for Lloyd), and one is added
+      // at the centroid of each of the cells that hold most of a CVT's nodes for their size, the
+      // measure times ρ^(dim/(dim+2)) (the node density of a CVT with density ρ).
+      const BackgroundCells cells = delaunay(current);
+      std::vector<std::pair<double, std::size_t>> share(cells.size());
+      std::vector<double> centroids(cells.size() * std::size_t(dim), 0.0);
+      for (std::size_t c = 0; c < cells.size(); ++c) {
+        const std::span<double> x(centroids.data() + c * std::size_t(dim), std::size_t(dim));
+        for (const int v : cells.cell(c))
+          for (int i = 0; i < dim; ++i) x[std::size_t(i)] += current.point(std::size_t(v))[std::size_t(i)] / double(dim + 1);
+        share[c] = {cells.measures[c] * std::pow(density(x), double(dim) / double(dim + 2)), c};
+      }
+      const std::size_t added = settings.remesh_nodes - n_nodes;
+      if (added > cells.size())
+        throw std::runtime_error(fmt::format("{}: [dynamics] remesh_nodes = {}: a re-mesh adds at most one node per cell, {} to the {} "
+                                             "nodes of the run",
+                                             scene.source, settings.remesh_nodes, cells.size(), n_nodes));
+      std::partial_sort(share.begin(), share.begin() + std::ptrdiff_t(added), share.end(), std::greater<>());
+      std::vector<double> coords = current.coords;
+      for (std::size_t pick = 0; pick < added; ++pick) {
+        const std::size_t c = share[pick].second;
+        coords.insert(coords.end(), centroids.begin() + std::ptrdiff_t(c * std::size_t(dim)),
+                      centroids.begin() + std::ptrdiff_t((c + 1) * std::size_t(dim)));
+      }
+      start = NodeSet(dim, std::move(coords));
+    }
+    const NodeSet nodes = cvt_relocate(start, scene.domain, density, cvt);
     // A field with a value jet is known exactly at the current quadrature points (a material field,
     // carried): its L2 projection onto the new space depends on no node positions. Otherwise the new
     // nodal values make the new LME field take the old field's values at the new nodes.

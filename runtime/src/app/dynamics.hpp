@@ -67,6 +67,7 @@ struct DynamicsSettings {
   std::string remesh_field = "phi";       ///< the scalar [coefficients] field whose gradient the new nodes follow
   double remesh_factor = 100;             ///< f of the CVT density 1 + f |∇φ|
   int remesh_iterations = 20;             ///< Lloyd iterations of a re-mesh
+  std::size_t remesh_nodes = 0;           ///< nodes after a re-mesh (0: as many as before); placed by the density
   /// How a re-mesh carries a scalar field: `points`, the L2 projection of its values at the current
   /// quadrature points (fields with a [qdata] value jet: the material field itself); `nodes`, its
   /// nodal values interpolated at the new nodes and fitted (remesh_fit_iterations).
