@@ -482,6 +482,20 @@ TEST(Dynamics, AReMeshCanChangeTheNodeCount) {
   }
 }
 
+TEST(Dynamics, CarryingAFieldToPointsOutsideTheOldHullFailsOrFallsBackToTheNearestValue) {
+  // Old nodes on [0, 0.5] x [0, 1]; new points inside and one at x = 0.9, outside their hull.
+  const NodeSet old_nodes = uniform_grid(Box{2, {0.0, 0.0, 0.0}, {0.5, 1.0, 0.0}}, std::array<int, 3>{6, 11, 1});
+  std::vector<double> values(old_nodes.size());
+  for (std::size_t a = 0; a < old_nodes.size(); ++a) values[a] = 1.0 + 2.0 * old_nodes.point(a)[0] + old_nodes.point(a)[1];
+  const NodeSet new_nodes(2, {0.25, 0.5, 0.9, 0.5});
+  EXPECT_THROW((void)app::interpolate_nodal_field(old_nodes, values, 0.8, LmeOptions{}, new_nodes), LmeEvaluationError);
+  std::size_t fallbacks = 0;
+  const std::vector<double> carried = app::interpolate_nodal_field(old_nodes, values, 0.8, LmeOptions{}, new_nodes, &fallbacks);
+  EXPECT_EQ(fallbacks, 1u);
+  EXPECT_NEAR(carried[0], 1.0 + 0.5 + 0.5, 1e-8);  // affine: reproduced inside
+  EXPECT_NEAR(carried[1], 1.0 + 1.0 + 0.5, 1e-12);  // the nearest old node, (0.5, 0.5)
+}
+
 TEST(Dynamics, TheL2ProjectionFromPointsReproducesAFieldOfTheSpace) {
   // LME reproduces affine fields: their coefficients are their nodal values, so the projection of an
   // affine field's point values must return exactly those, on a strongly graded node set.

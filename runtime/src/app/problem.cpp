@@ -550,17 +550,28 @@ std::vector<double> nodal_values(const BoundScene& b, const std::vector<SceneIni
 }  // namespace
 
 std::vector<double> interpolate_nodal_field(const NodeSet& old_nodes, std::span<const double> phi, double gamma, const LmeOptions& lme,
-                                 const NodeSet& new_nodes) {
+                                            const NodeSet& new_nodes, std::size_t* nearest_fallbacks) {
   const std::vector<double> gammas(old_nodes.size(), gamma);
   const LmeBasis basis(old_nodes, gammas, lme);
   std::vector<double> out(new_nodes.size());
   for (std::size_t a = 0; a < new_nodes.size(); ++a) {
     const auto x = new_nodes.point(a);
     const auto list = basis.neighbours(x);
-    const auto p = basis.evaluate(x, list, 0);
-    double v = 0;
-    for (std::size_t m = 0; m < list.size(); ++m) v += p[m] * phi[static_cast<std::size_t>(list[m])];
-    out[a] = v;
+    try {
+      const auto p = basis.evaluate(x, list, 0);
+      double v = 0;
+      for (std::size_t m = 0; m < list.size(); ++m) v += p[m] * phi[static_cast<std::size_t>(list[m])];
+      out[a] = v;
+    } catch (const LmeEvaluationError&) {
+      if (nearest_fallbacks == nullptr) throw;
+      double best = std::numeric_limits<double>::infinity();
+      for (std::size_t b = 0; b < old_nodes.size(); ++b) {
+        double d2 = 0;
+        for (int i = 0; i < old_nodes.dim; ++i) d2 += std::pow(old_nodes.point(b)[std::size_t(i)] - x[std::size_t(i)], 2);
+        if (d2 < best) best = d2, out[a] = phi[b];
+      }
+      ++*nearest_fallbacks;
+    }
   }
   return out;
 }

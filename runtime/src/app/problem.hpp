@@ -228,8 +228,12 @@ struct SceneRun {
 
 /// A scalar nodal field (values at old_nodes) evaluated at new points with the LME basis of the old
 /// nodes (values only): a field carried to another node set (an adapted grid, a re-mesh).
+/// A point the old basis cannot evaluate (outside the hull of its neighbours, where a motion tore
+/// the old nodes apart) throws LmeEvaluationError, unless `nearest_fallbacks` is given: then it
+/// takes the value of its nearest old node, counted there (for a start guess, not a result).
 [[nodiscard]] std::vector<double> interpolate_nodal_field(const NodeSet& old_nodes, std::span<const double> phi, double gamma,
-                                                          const LmeOptions& lme, const NodeSet& new_nodes);
+                                                          const LmeOptions& lme, const NodeSet& new_nodes,
+                                                          std::size_t* nearest_fallbacks = nullptr);
 
 /// Nodal coefficients whose LME field takes the given values at the nodes themselves: LME is not
 /// interpolating (Σ_a p_a(x_b) φ_a ≠ φ_b), so using values as coefficients smooths the field once
