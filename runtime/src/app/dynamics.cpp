@@ -277,6 +277,14 @@ struct Reference {
   NodeSet nodes;                        ///< the reference nodes (original order)
 };
 
+/// ∂φ/∂y = F⁻ᵀ ∂φ0/∂X at quadrature point p: a reference gradient jet carried to the current
+/// configuration (Fi = F⁻¹).
+Eigen::VectorXd pushed_forward_gradient(const Eigen::MatrixXd& Fi, const std::vector<double>& reference_gradients, std::size_t p, int dim) {
+  Eigen::VectorXd G0(dim);
+  for (int I = 0; I < dim; ++I) G0[I] = reference_gradients[p * std::size_t(dim) + std::size_t(I)];
+  return Fi.transpose() * G0;
+}
+
 /// The scene's quadrature data that are jets of a nodal field, by field: value, gradient, Hessian names.
 struct FieldJets {
   std::string value, gradient, hessian;
@@ -721,10 +729,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
           const Eigen::MatrixXd Fi = Fm.inverse();  // Fi(I, i) = ∂X_I / ∂y_i
           for (const auto& [field, j] : carried_jets) {
             if (j.gradient.empty()) continue;
-            const auto& g0 = ref->space.qdata.at(j.gradient);
-            Eigen::VectorXd G0(dim), g(dim);
-            for (int I = 0; I < dim; ++I) G0[I] = g0[p * std::size_t(dim) + std::size_t(I)];
-            g = Fi.transpose() * G0;  // ∂φ/∂y_i = Fi_Ii ∂φ0/∂X_I
+            const Eigen::VectorXd g = pushed_forward_gradient(Fi, ref->space.qdata.at(j.gradient), p, dim);
             for (int i = 0; i < dim; ++i) pushed[j.gradient][p * std::size_t(dim) + std::size_t(i)] = g[i];
             if (j.hessian.empty()) continue;
             // ∂²φ/∂y_i∂y_j = Fi_Ii Fi_Jj (∂²φ0/∂X_I∂X_J − Σ_k ∂φ/∂y_k ∂²y_k/∂X_I∂X_J)
@@ -912,11 +917,9 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
                                   if (point_gradients.empty()) return;
                                   const Eigen::MatrixXd Fi = Fm.inverse();
                                   for (auto& [name, g] : point_gradients) {
-                                    const auto& g0 = ref->space.qdata.at(jets.at(name).gradient);
-                                    Eigen::VectorXd G0(dim);
-                                    for (int I = 0; I < dim; ++I) G0[I] = g0[p * std::size_t(dim) + std::size_t(I)];
-                                    const Eigen::VectorXd pushed_forward = Fi.transpose() * G0;  // ∂φ/∂y = F⁻ᵀ ∂φ0/∂X
-                                    for (int i = 0; i < dim; ++i) g[p * std::size_t(dim) + std::size_t(i)] = pushed_forward[i];
+                                    const Eigen::VectorXd current_gradient =
+                                        pushed_forward_gradient(Fi, ref->space.qdata.at(jets.at(name).gradient), p, dim);
+                                    for (int i = 0; i < dim; ++i) g[p * std::size_t(dim) + std::size_t(i)] = current_gradient[i];
                                   }
                                 });
       MPI_Allreduce(MPI_IN_PLACE, points.data(), static_cast<int>(points.size()), MPI_DOUBLE, MPI_SUM, comm);
@@ -925,41 +928,37 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
         MPI_Allreduce(MPI_IN_PLACE, g.data(), static_cast<int>(g.size()), MPI_DOUBLE, MPI_SUM, comm);
     }
     std::string projections;
-    auto project_onto = [&](const NodeSet& target, std::string& note) {
-      std::map<std::string, std::vector<double>, std::less<>> carried_fields;
-      for (const auto& [name, values] : scalar_fields) {
-        // From the points, the old field at the new nodes only starts the CG iteration: where the
-        // motion tore the old nodes apart and their basis cannot be evaluated, the nearest old value
-        // does. Fitted to the old field, it must be evaluated everywhere.
-        std::size_t fallbacks = 0;
-        const std::vector<double> interpolated =
-            interpolate_nodal_field(current, values, scene.nodes.gamma, lme, target, from_points(name) ? &fallbacks : nullptr);
-        if (fallbacks > 0) note += fmt::format("; the CG start took the nearest old value at {} new nodes", fallbacks);
-        if (from_points(name)) {
-          const auto g = point_gradients.find(name);
-          const bool h1 = g != point_gradients.end();
-          const PointProjection l2 =
-              project_point_values(target, scene.nodes.gamma, lme, points, weights, ref->space.qdata.at(jets.at(name).value), interpolated,
-                                   1e-8, 5000, h1 ? PointGradients{g->second, settings.remesh_gradient_length} : PointGradients{});
-          carried_fields[name] = l2.values;
-          note += fmt::format("; '{}' {}-projected from the points ({} CG iterations, relative residual {:.1e})", name, h1 ? "H1" : "L2",
-                             l2.iterations, l2.relative_residual);
-        } else {
-          carried_fields[name] = fit_nodal_values(target, interpolated, scene.nodes.gamma, lme, settings.remesh_fit_iterations);
-        }
-      }
-      return carried_fields;
-    };
+    // The new values are gathered first and replace the old ones only when every field is carried.
     std::map<std::string, std::vector<double>, std::less<>> projected;
-    try {
-      projected = project_onto(nodes, projections);
-    } catch (const LmeEvaluationError& e) {
-      // Measured on the eps = 0.01 prolate at step 120 (f = 1000 and 300): a carried quadrature
-      // point beside the waist lay outside the hull of its new neighbours, whether the CVT started
-      // from the coefficients y_a or from y(X_a). The run stops here, before anything is replaced.
-      throw std::runtime_error(fmt::format("re-mesh {} at step {} (t* = {:.6e}, remesh_factor = {}, remesh_iterations = {}): a carried "
-                                           "quadrature point cannot be evaluated on the new nodes: {}",
-                                           run.remeshes + 1, step, t, settings.remesh_factor, settings.remesh_iterations, e.what()));
+    for (const auto& [name, values] : scalar_fields) {
+      // From the points, the old field at the new nodes only starts the CG iteration: where the
+      // motion tore the old nodes apart and their basis cannot be evaluated, the nearest old value
+      // does. Fitted to the old field, it must be evaluated everywhere.
+      std::size_t fallbacks = 0;
+      const std::vector<double> interpolated =
+          interpolate_nodal_field(current, values, scene.nodes.gamma, lme, nodes, from_points(name) ? &fallbacks : nullptr);
+      if (fallbacks > 0) projections += fmt::format("; the CG start took the nearest old value at {} new nodes", fallbacks);
+      if (!from_points(name)) {
+        projected[name] = fit_nodal_values(nodes, interpolated, scene.nodes.gamma, lme, settings.remesh_fit_iterations);
+        continue;
+      }
+      const auto g = point_gradients.find(name);
+      const bool h1 = g != point_gradients.end();
+      PointProjection fit;
+      try {
+        fit = project_point_values(nodes, scene.nodes.gamma, lme, points, weights, ref->space.qdata.at(jets.at(name).value), interpolated,
+                                   1e-8, 5000, h1 ? PointGradients{g->second, settings.remesh_gradient_length} : PointGradients{});
+      } catch (const LmeEvaluationError& e) {
+        // Measured on the eps = 0.01 prolate at step 120 (f = 1000 and 300): a carried quadrature
+        // point beside the waist lay outside the hull of its new neighbours, whether the CVT started
+        // from the coefficients y_a or from y(X_a). The run stops here, before anything is replaced.
+        throw std::runtime_error(fmt::format("re-mesh {} at step {} (t* = {:.6e}, remesh_factor = {}, remesh_iterations = {}): a carried "
+                                             "quadrature point cannot be evaluated on the new nodes: {}",
+                                             run.remeshes + 1, step, t, settings.remesh_factor, settings.remesh_iterations, e.what()));
+      }
+      projected[name] = std::move(fit.values);
+      projections += fmt::format("; '{}' {}-projected from the points ({} CG iterations, relative residual {:.1e})", name, h1 ? "H1" : "L2",
+                                 fit.iterations, fit.relative_residual);
     }
     for (auto& [name, values] : scalar_fields) values = projected.at(name);
     material_nodes = nodes;
