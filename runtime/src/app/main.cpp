@@ -18,7 +18,9 @@
 #include <filesystem>
 #include <iostream>
 #include <limits>
+#include <optional>
 #include <string>
+#include <string_view>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -281,8 +283,17 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return cli.exit(e);
   }
+  // The session outlives the handlers: an error thrown on one rank only (an LME evaluation, a
+  // re-mesh) is printed and then aborts the job, where finalizing would wait for the other ranks
+  // forever and swallow the message.
+  std::optional<PetscSession> session;
+  auto fail = [&](std::string_view kind, const char* what) {
+    std::cerr << fmt::format("lmeform: {}: {}\n", kind, what) << std::flush;  // one write: ranks do not interleave
+    if (session && PetscSession::size() > 1) MPI_Abort(PETSC_COMM_WORLD, 1);
+    return 1;
+  };
   try {
-    PetscSession session(&argc, &argv);
+    session.emplace(&argc, &argv);
 #ifdef LMEFORM_HAVE_CHECK
     if (check_cmd->parsed()) return run_check_command(check_options);
 #endif
@@ -291,13 +302,10 @@ int main(int argc, char** argv) {
         throw SceneError(fmt::format("unknown option '{}' of 'lmeform run' (PETSc options take one dash: -ksp_type ...)", extra));
     return run(scene_path, json_path, output_dir, settings, restart);
   } catch (const SceneError& e) {
-    std::cerr << "lmeform: scene error: " << e.what() << "\n";
-    return 1;
+    return fail("scene error", e.what());
   } catch (const FormLoadError& e) {
-    std::cerr << "lmeform: form error: " << e.what() << "\n";
-    return 1;
+    return fail("form error", e.what());
   } catch (const std::exception& e) {
-    std::cerr << "lmeform: error: " << e.what() << "\n";
-    return 1;
+    return fail("error", e.what());
   }
 }
