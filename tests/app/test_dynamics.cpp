@@ -16,7 +16,9 @@
 
 #include "dynamics.hpp"
 #include "problem.hpp"
+#include "lmeform/delaunay.hpp"
 #include "lmeform/lme_basis.hpp"
+#include "lmeform/quadrature.hpp"
 #include "lmeform/node_sets.hpp"
 #include "lmeform/petsc.hpp"
 #include "lmeform/scene.hpp"
@@ -523,6 +525,45 @@ TEST(Dynamics, TheL2ProjectionFromPointsReproducesAFieldOfTheSpace) {
       far_values.push_back(values[q]);
     }
   EXPECT_THROW((void)app::project_point_values(nodes, 0.8, LmeOptions{}, far_points, far_weights, far_values, start), std::runtime_error);
+}
+
+TEST(Dynamics, TheProjectionEvaluatesPointsOutsideTheHullOfTheirSupportsThroughTheirCell) {
+  // On a strongly graded node set some points of long cells lie outside the hull of the nodes whose
+  // supports reach them (as carried quadrature points did at a re-mesh of the eps = 0.01 prolate).
+  // The projection adds the enclosing Delaunay cell's vertices there and still reproduces an
+  // affine field.
+  // A fine strip (h = 0.02, x <= 0.1) beside coarse nodes (h = 0.2, x >= 0.3): in the gap the fine
+  // supports (radius 0.037 at gamma = 4) end short, and the coarse nodes reaching there all lie on
+  // one side.
+  std::vector<double> xy;
+  for (int i = 0; i <= 5; ++i)
+    for (int j = 0; j <= 50; ++j) xy.insert(xy.end(), {0.02 * i, 0.02 * j});
+  for (int i = 0; i <= 3; ++i)
+    for (int j = 0; j <= 5; ++j) xy.insert(xy.end(), {0.3 + 0.2 * i, 0.2 * j});
+  const NodeSet nodes(2, std::move(xy));
+  const double gamma = 4.0;
+  const CellQuadrature cloud = map_to_cells(delaunay(nodes), nodes, triangle_rule(6));
+  const LmeBasis basis(nodes, std::vector<double>(nodes.size(), gamma), LmeOptions{});
+  std::size_t unevaluable = 0;
+  for (std::size_t q = 0; q < cloud.size(); ++q) {
+    try {
+      (void)basis.evaluate(cloud.point(q), basis.neighbours(cloud.point(q)), 0);
+    } catch (const LmeEvaluationError&) {
+      ++unevaluable;
+    }
+  }
+  std::printf("%zu of %zu points cannot be evaluated on their own neighbours\n", unevaluable, cloud.size());
+  ASSERT_GT(unevaluable, 0u);
+
+  auto affine = [](double x, double y) { return 0.3 + 2.0 * x - 1.5 * y; };
+  std::vector<double> values;
+  for (std::size_t q = 0; q < cloud.size(); ++q) values.push_back(affine(cloud.point(q)[0], cloud.point(q)[1]));
+  const std::vector<double> start(nodes.size(), 0.0);
+  const app::PointProjection l2 = app::project_point_values(nodes, gamma, LmeOptions{}, cloud.points, cloud.weights, values, start, 1e-12);
+  EXPECT_LT(l2.relative_residual, 1e-12);
+  double error = 0;
+  for (std::size_t a = 0; a < nodes.size(); ++a) error = std::max(error, std::abs(l2.values[a] - affine(nodes.point(a)[0], nodes.point(a)[1])));
+  EXPECT_LT(error, 1e-6);
 }
 
 TEST(Dynamics, TheH1ProjectionFromPointsFitsGradientsBetterThanL2) {

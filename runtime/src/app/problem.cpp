@@ -22,6 +22,7 @@
 #include "lmeform/assembler.hpp"
 #include "lmeform/convex_hull.hpp"
 #include "lmeform/cvt.hpp"
+#include "lmeform/delaunay.hpp"
 #include "lmeform/discretization.hpp"
 #include "lmeform/node_sets.hpp"
 #include "lmeform/output.hpp"
@@ -547,6 +548,28 @@ std::vector<double> nodal_values(const BoundScene& b, const std::vector<SceneIni
   return state;
 }
 
+// On a strongly graded node set a point of a long cell can lie outside the hull of the nodes whose
+// supports reach it, or see only collinear ones (measured: carried and new quadrature points beside
+// the waist of the eps = 0.01 prolate at a re-mesh, 41 neighbours all on the fine side). The
+// vertices of a cell holding the point restore the hull, as the discretization's own point lists
+// do. `cell_vertices` is asked only then; it returns the vertices in the basis' numbering, or none.
+template <class CellVertices>
+std::vector<double> evaluate_with_cell_fallback(const LmeBasis& basis, std::span<const double> x, std::vector<int>& list, int order,
+                                                CellVertices&& cell_vertices) {
+  try {
+    return basis.evaluate(x, list, order);
+  } catch (const LmeEvaluationError& e) {
+    const auto r = e.reason();
+    if (r != LmeFailure::outside_hull && r != LmeFailure::degenerate && r != LmeFailure::too_few_neighbours) throw;
+    const std::vector<int> vertices = cell_vertices();
+    if (vertices.empty()) throw;
+    for (const int v : vertices)
+      if (std::find(list.begin(), list.end(), v) == list.end()) list.push_back(v);
+    std::sort(list.begin(), list.end());
+    return basis.evaluate(x, list, order);
+  }
+}
+
 }  // namespace
 
 std::vector<double> interpolate_nodal_field(const NodeSet& old_nodes, std::span<const double> phi, double gamma, const LmeOptions& lme,
@@ -624,12 +647,24 @@ PointProjection project_point_values(const NodeSet& nodes, double gamma, const L
     std::vector<double> p;
   };
   std::vector<Row> rows;
+  std::optional<BackgroundCells> cells;  // for points the plain neighbour lists cannot evaluate
+  std::optional<CellLocator> locator;
+  auto enclosing_cell = [&](std::span<const double> x) {
+    if (!locator) {
+      cells.emplace(delaunay(nodes));
+      locator.emplace(*cells, nodes);
+    }
+    const long c = locator->locate(x, 1e-10);
+    if (c < 0) return std::vector<int>{};
+    const auto v = cells->cell(std::size_t(c));
+    return std::vector<int>(v.begin(), v.end());
+  };
   Eigen::VectorXd rhs = Eigen::VectorXd::Zero(Eigen::Index(n)), diagonal = Eigen::VectorXd::Zero(Eigen::Index(n));
   for (std::size_t q = 0; q < weights.size(); ++q) {
     if (weights[q] <= 0) continue;
     const std::span<const double> x = points.subspan(q * std::size_t(dim), std::size_t(dim));
     Row r{weights[q], basis.neighbours(x), {}};
-    r.p = basis.evaluate(x, r.nodes, h1 ? 1 : 0);
+    r.p = evaluate_with_cell_fallback(basis, x, r.nodes, h1 ? 1 : 0, [&] { return enclosing_cell(x); });
     r.p.resize(jets * r.nodes.size());
     const std::size_t m = r.nodes.size();
     for (std::size_t a = 0; a < m; ++a) {
@@ -795,11 +830,19 @@ std::vector<double> interpolated_field_qdata(const Discretization& disc, std::sp
     for (int q = disc.element_first_point(e); q < disc.element_first_point(e) + disc.element_point_count(e); ++q) {
       const auto x = quad.point(std::size_t(q));
       std::span<const int> list = lists[std::size_t(q)];
+      std::vector<double> jet;
       if (field_basis != nullptr) {
         own_list = field_basis->neighbours(x);
+        jet = evaluate_with_cell_fallback(*field_basis, x, own_list, derivative, [&] {
+          std::vector<int> vertices;
+          for (const int v : disc.cells().cell(std::size_t(q) / std::size_t(quad.points_per_cell)))
+            vertices.push_back(original[std::size_t(v)]);
+          return vertices;
+        });
         list = own_list;
+      } else {
+        jet = disc.basis().evaluate(x, list, derivative);
       }
-      const auto jet = (field_basis != nullptr ? *field_basis : disc.basis()).evaluate(x, list, derivative);
       for (std::size_t m = 0; m < list.size(); ++m) {
         const auto node = field_basis != nullptr ? std::size_t(list[m]) : std::size_t(original[std::size_t(list[m])]);
         const double phi = original_values[node];

@@ -261,26 +261,29 @@ struct Lme {
       // J singular or indefinite in floating point (e.g. near a hull vertex): steepest descent,
       // which the line search below still globalises.
       if (!ok) dir = -r;
-      const double slope = r.dot(dir);
-      double t = 1.0;
       bool accepted = false;
       V lam_t, r_t;
       double lnz_t = lnz;
-      for (int ls = 0; ls < 60; ++ls, t *= 0.5) {
-        lam_t = lam + t * dir;
-        lnz_t = eval(n, y, c, lam_t, p, r_t);
-        if (lnz_t <= lnz + 1e-4 * t * slope) {
-          accepted = true;
-          break;
+      auto line_search = [&](const V& d) {
+        const double slope = r.dot(d);
+        double t = 1.0;
+        for (int ls = 0; ls < 60; ++ls, t *= 0.5) {
+          lam_t = lam + t * d;
+          lnz_t = eval(n, y, c, lam_t, p, r_t);
+          if (lnz_t <= lnz + 1e-4 * t * slope) return true;
+          // Near the minimum ln Z is flat to rounding: then the gradient norm decides.
+          if (std::abs(lnz_t - lnz) <= 8.0 * std::numeric_limits<double>::epsilon() * (1.0 + std::abs(lnz)) &&
+              r_t.norm() <= gnorm)
+            return true;
+          if (converged) return false;  // polishing is best effort: no backtracking
         }
-        // Near the minimum ln Z is flat to rounding: then the gradient norm decides.
-        if (std::abs(lnz_t - lnz) <= 8.0 * std::numeric_limits<double>::epsilon() * (1.0 + std::abs(lnz)) &&
-            r_t.norm() <= gnorm) {
-          accepted = true;
-          break;
-        }
-        if (converged) break;  // polishing is best effort: no backtracking
-      }
+        return false;
+      };
+      accepted = line_search(dir);
+      // With the weight on one or two neighbours J is nearly singular and the rounding in
+      // sum p_a y_a y_a^T - r r^T can spoil the Newton direction (measured: a point of a long cell
+      // between a fine and a coarse node set); steepest descent still decreases ln Z.
+      if (!accepted && ok && !converged) accepted = line_search(-r);
       if (!accepted) {
         if (converged) {
           // p was overwritten by the rejected trial: restore the converged state.
