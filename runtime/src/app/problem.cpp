@@ -560,7 +560,9 @@ std::vector<double> evaluate_with_cell_fallback(const LmeBasis& basis, std::span
     return basis.evaluate(x, list, order);
   } catch (const LmeEvaluationError& e) {
     const auto r = e.reason();
-    if (r != LmeFailure::outside_hull && r != LmeFailure::degenerate && r != LmeFailure::too_few_neighbours) throw;
+    if (r != LmeFailure::outside_hull && r != LmeFailure::degenerate && r != LmeFailure::too_few_neighbours &&
+        r != LmeFailure::singular_jacobian)  // at a vertex of its neighbours' hull
+      throw;
     const std::vector<int> vertices = cell_vertices();
     if (vertices.empty()) throw;
     for (const int v : vertices)
