@@ -15,6 +15,7 @@
 
 #include "lmeform/assembler.hpp"
 #include "lmeform/petsc.hpp"
+#include "lmeform/symmetric_factorization.hpp"
 
 namespace lmeform {
 
@@ -146,10 +147,7 @@ class ConstrainedMinimizer {
   PetscVector proximal_difference_, proximal_product_;
   ConstrainedResult* counters_ = nullptr;  // the result being filled (evaluation counts and times)
   PetscMatrix hessian_;
-  PetscLinearSolver ksp_;
-  bool factor_configured_ = false;
-  bool factor_failed_ = false;           // the last factorization failed (a zero pivot)
-  PetscInt negative_eigenvalues_ = -1;  // of the last factorization; -1: unknown (not an LDLᵀ by MUMPS)
+  SymmetricFactorization factorization_;
   double last_shift_ = 0;               // δ of the last corrected factorization in this minimize()
   PetscVector shift_scale_;
   double start_time_ = 0;

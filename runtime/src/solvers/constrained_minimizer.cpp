@@ -47,7 +47,8 @@ ConstrainedMinimizer::ConstrainedMinimizer(Assembler& energy, std::vector<Scalar
 ConstrainedMinimizer::ConstrainedMinimizer(std::vector<Assembler*> energy_terms, std::vector<ScalarConstraint> constraints,
                                            ConstrainedMinimizerOptions options)
     : energy_(energy_terms.empty() ? nullptr : energy_terms.front()), energy_terms_(std::move(energy_terms)),
-      constraints_(std::move(constraints)), options_(options) {
+      constraints_(std::move(constraints)), options_(options),
+      factorization_(energy_ != nullptr ? energy_->discretization().comm() : MPI_COMM_SELF, "constrained_") {
   if (energy_ == nullptr) throw std::invalid_argument("constrained minimizer: no energy");
   Assembler& energy = *energy_;
   for (const Assembler* term : energy_terms_) {
@@ -65,16 +66,7 @@ ConstrainedMinimizer::ConstrainedMinimizer(std::vector<Assembler*> energy_terms,
   }
   if (!(options_.penalty > 0)) throw std::invalid_argument("augmented Lagrangian penalty must be positive");
   hessian_ = energy.create_matrix();
-  LMEFORM_PETSC_CHECK(KSPCreate(energy.discretization().comm(), ksp_.out()));
-  LMEFORM_PETSC_CHECK(KSPSetType(ksp_, KSPPREONLY));
-  PC pc = nullptr;
-  LMEFORM_PETSC_CHECK(KSPGetPC(ksp_, &pc));
-  // MUMPS's symmetric indefinite LDLᵀ: it pivots, so indefinite Hessians (far from a minimum)
-  // factor too, costs half an LU, and its inertia tells whether a Newton step heads for a minimum.
-  LMEFORM_PETSC_CHECK(PCSetType(pc, PCCHOLESKY));
-  LMEFORM_PETSC_CHECK(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
-  LMEFORM_PETSC_CHECK(KSPSetOptionsPrefix(ksp_, "constrained_"));
-  LMEFORM_PETSC_CHECK(KSPSetFromOptions(ksp_));
+  factorization_.set_log(options_.log);
 }
 
 void ConstrainedMinimizer::zero_fixed(Vec v) {
@@ -146,41 +138,13 @@ void ConstrainedMinimizer::assemble_hessian(Vec u, const std::vector<double>& si
 
 void ConstrainedMinimizer::factor(Mat A) {
   const double t0 = MPI_Wtime();
-  LMEFORM_PETSC_CHECK(KSPSetOperators(ksp_, A, A));
-  PC pc = nullptr;
-  LMEFORM_PETSC_CHECK(KSPGetPC(ksp_, &pc));
-  PCType pc_type = nullptr;
-  MatSolverType solver_type = nullptr;
-  LMEFORM_PETSC_CHECK(PCGetType(pc, &pc_type));
-  LMEFORM_PETSC_CHECK(PCFactorGetMatSolverType(pc, &solver_type));
-  const bool mumps_ldlt = pc_type != nullptr && solver_type != nullptr && std::string_view(pc_type) == PCCHOLESKY &&
-                          std::string_view(solver_type) == MATSOLVERMUMPS;
-  if (!factor_configured_ && mumps_ldlt) {
-    LMEFORM_PETSC_CHECK(PCFactorSetUpMatSolverType(pc));
-    Mat F = nullptr;
-    LMEFORM_PETSC_CHECK(PCFactorGetMatrix(pc, &F));
-    // Without ScaLAPACK on the root front MUMPS counts the negative pivots of every rank.
-    LMEFORM_PETSC_CHECK(MatMumpsSetIcntl(F, 13, 1));
-  }
-  factor_configured_ = true;
-  LMEFORM_PETSC_CHECK(KSPSetUp(ksp_));
-  negative_eigenvalues_ = -1;
-  PCFailedReason failed = PC_NOERROR;
-  LMEFORM_PETSC_CHECK(PCGetFailedReason(pc, &failed));
-  factor_failed_ = failed != PC_NOERROR;
-  if (mumps_ldlt && !factor_failed_) {
-    Mat F = nullptr;
-    LMEFORM_PETSC_CHECK(PCFactorGetMatrix(pc, &F));
-    PetscInt negative = 0;
-    LMEFORM_PETSC_CHECK(MatGetInertia(F, &negative, nullptr, nullptr));
-    negative_eigenvalues_ = negative;
-  }
+  factorization_.factor(A);
   if (counters_ != nullptr) counters_->seconds_factor += MPI_Wtime() - t0;
 }
 
 double ConstrainedMinimizer::factor_with_inertia_correction(const std::function<bool()>& inertia_acceptable) {
   // A factorization that failed (an exactly singular H) is shifted like one of the wrong inertia.
-  auto acceptable = [&] { return !factor_failed_ && (negative_eigenvalues_ < 0 || inertia_acceptable()); };
+  auto acceptable = [&] { return !factorization_.failed() && (factorization_.negative_eigenvalues() < 0 || inertia_acceptable()); };
   factor(hessian_);
   if (!options_.inertia_correction || acceptable()) return 0;
   // The shift follows the diagonal (Marquardt's scaling): the Hessian's diagonal spans orders of
@@ -218,14 +182,8 @@ double ConstrainedMinimizer::factor_with_inertia_correction(const std::function<
 
 void ConstrainedMinimizer::solve(Vec b, Vec x) {
   const double t0 = MPI_Wtime();
-  LMEFORM_PETSC_CHECK(KSPSolve(ksp_, b, x));
+  factorization_.solve(b, x);
   if (counters_ != nullptr) counters_->seconds_factor += MPI_Wtime() - t0;
-  KSPConvergedReason reason;
-  LMEFORM_PETSC_CHECK(KSPGetConvergedReason(ksp_, &reason));
-  if (reason < 0) {
-    throw std::runtime_error(std::string("constrained minimizer: the linear solve failed (") + KSPConvergedReasons[reason] +
-                             "): the Hessian is singular at this state");
-  }
 }
 
 void ConstrainedMinimizer::log_iterate(const ConstrainedIterate& it) {
@@ -354,7 +312,7 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
       auto capacitance = [&] {
         M = Eigen::MatrixXd::Identity(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k)) + inverse_gram(ev.gradients, Z) / mu;
         capacitance_current = true;
-        return negative_count(M) == negative_eigenvalues_;
+        return negative_count(M) == factorization_.negative_eigenvalues();
       };
       if (factor_with_inertia_correction(capacitance) > 0) ++result.corrected_steps;
       if (!capacitance_current) capacitance();
@@ -404,6 +362,7 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
   LMEFORM_PETSC_CHECK(VecCopy(u, u_saved));
   const std::vector<double> nu_saved = nu;
   bool diverged = false, restore = false;
+  std::string divergence;  // why stage 2 gave up, for the message
   double first_merit = 0;
 
   // ---- Stage 2: Newton on the KKT system, Schur complement on the multipliers ------------------
@@ -452,6 +411,13 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
           scale > 1e4 * first_scale) {
         diverged = true;
         restore = true;
+        if (!std::isfinite(ev.energy) || !std::isfinite(gnorm))
+          divergence = "a non-finite energy or gradient at iteration " + std::to_string(it);
+        else if (scale > 1e4 * first_scale)
+          divergence = "|grad E| grew from " + scientific(first_scale) + " to " + scientific(scale) + " by iteration " +
+                       std::to_string(it);
+        else
+          divergence = "the KKT residual grew 1000-fold by iteration " + std::to_string(it);
         break;
       }
       if (gnorm <= options_.newton_tolerance * scale + proximal_noise && relative_residual(ev) <= options_.constraint_tolerance) {
@@ -476,7 +442,7 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
       auto schur = [&] {
         S = inverse_gram(ev.gradients, Z);
         schur_current = true;
-        return negative_eigenvalues_ + (static_cast<PetscInt>(k) - negative_count(S)) == static_cast<PetscInt>(k);
+        return factorization_.negative_eigenvalues() + (static_cast<PetscInt>(k) - negative_count(S)) == static_cast<PetscInt>(k);
       };
       double shift = 0;
       if (!have_factor || stale_failed || options_.refresh_hessian_every_iteration) {
@@ -490,6 +456,11 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
       if (shift < 0) {
         // No shift up to 1e11 |diag H| gave the right inertia: hand over to the augmented Lagrangian.
         diverged = true;
+        divergence = factorization_.failed()
+                         ? "the Hessian's factorization failed, shifted or not (" + factorization_.failure() + ")"
+                         : "no diagonal shift gave the Hessian the inertia of a minimum (" +
+                               std::to_string(factorization_.negative_eigenvalues()) + " negative pivots)";
+        divergence += " at iteration " + std::to_string(it);
         break;
       }
       if (!schur_current) schur();
@@ -542,7 +513,7 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
       // (measured: an oblate start at v = 0.7 stalled at |∇L| = 0.06, E = 11.45, a saddle above the
       // minimum at 10.86); a shifted step need not reduce it at all. So the residual merit judges
       // the full step, and P, when the step was shifted or the full step failed, the backtracking.
-      const bool inertia_checked = hessian_current && negative_eigenvalues_ >= 0 && options_.inertia_correction;
+      const bool inertia_checked = hessian_current && factorization_.negative_eigenvalues() >= 0 && options_.inertia_correction;
       bool penalty_search = shift > 0;
       if (!penalty_search) {
         for (int backtrack = 0; backtrack < (inertia_checked ? 1 : 8); ++backtrack, alpha *= 0.5) {
@@ -623,6 +594,9 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
         // No step along the Newton direction reduces the residual, or only short ones, three times
         // in a row: far from the quadratic regime. Back to the augmented Lagrangian (below).
         diverged = true;
+        divergence = !accepted ? "no step along the Newton direction decreased the merit at iteration " + std::to_string(it) +
+                                     (inertia_checked ? "" : " (inertia unknown)")
+                               : "three damped steps in a row at iteration " + std::to_string(it);
         break;
       }
       // A step that raised the constraint residual (the constraints curve away from their
@@ -662,7 +636,7 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
   sigma = nu;
   evaluate(u, nu, false, ev);
   if (!options_.augmented_fallback) {
-    result.message = "KKT Newton diverged or stalled";
+    result.message = "KKT Newton diverged or stalled: " + divergence;
     break;
   }
   al_tolerance *= 0.01;
@@ -670,7 +644,7 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
   // constraints drift far beyond where they were (measured: 6e-15 → 3.8e-6 in five steps on a
   // prolate v = 0.7 at eps = 0.01): stiffen it with the tolerance.
   mu = std::min(mu, options_.penalty * al_tolerance / options_.augmented_tolerance);
-  result.message = "KKT Newton diverged or stalled from the augmented Lagrangian's state";
+  result.message = "KKT Newton diverged or stalled from the augmented Lagrangian's state: " + divergence;
   if (options_.log != nullptr && energy_->discretization().rank() == 0) {
     *options_.log << "KKT Newton diverged or stalled: back to the augmented Lagrangian with tolerance " << al_tolerance
                   << std::endl;
