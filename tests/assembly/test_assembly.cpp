@@ -148,6 +148,72 @@ TEST(Assembly, EveryPointListHoldsItsCellVertices) {
   }
 }
 
+TEST(Assembly, ACarriedPointOutsideItsCellTakesAnEnclosingCellsVertices) {
+  // Carried quadrature points move with a map that is not affine on a cell, and can leave it. On a
+  // fine strip (h = 0.02, x <= 0.1) beside coarse nodes (h = 0.2, x >= 0.3) the points of the gap
+  // lie outside the hull of the nodes whose supports reach them (gamma 4): there only the cell's
+  // vertices make them evaluable. Carried by the wrong cells (the points of the first and last
+  // gap cells exchanged), they get the vertices of a Delaunay cell holding them instead.
+  std::vector<double> xy;
+  for (int i = 0; i <= 5; ++i)
+    for (int j = 0; j <= 50; ++j) xy.insert(xy.end(), {0.02 * i, 0.02 * j});
+  for (int i = 0; i <= 3; ++i)
+    for (int j = 0; j <= 5; ++j) xy.insert(xy.end(), {0.3 + 0.2 * i, 0.2 * j});
+  const NodeSet nodes(2, std::move(xy));
+  CarriedQuadrature carried;
+  carried.cells = delaunay(nodes);
+  carried.quadrature = map_to_cells(carried.cells, nodes, triangle_rule(6));
+  const LmeBasis basis(nodes, std::vector<double>(nodes.size(), 4.0), LmeOptions{});
+  const std::size_t per_cell = 6;
+  std::vector<std::size_t> unevaluable_cells;
+  for (std::size_t c = 0; c < carried.cells.size(); ++c) {
+    for (std::size_t k = 0; k < per_cell; ++k) {
+      const auto x = carried.quadrature.point(c * per_cell + k);
+      try {
+        (void)basis.evaluate(x, basis.neighbours(x), 0);
+      } catch (const LmeEvaluationError&) {
+        unevaluable_cells.push_back(c);
+        break;
+      }
+    }
+  }
+  ASSERT_GE(unevaluable_cells.size(), 2u);
+  const std::size_t a = unevaluable_cells.front(), b = unevaluable_cells.back();
+  for (std::size_t k = 0; k < per_cell * 2; ++k)
+    std::swap(carried.quadrature.points[a * per_cell * 2 + k], carried.quadrature.points[b * per_cell * 2 + k]);
+  for (std::size_t k = 0; k < per_cell; ++k)
+    std::swap(carried.quadrature.weights[a * per_cell + k], carried.quadrature.weights[b * per_cell + k]);
+
+  DiscretizationOptions opts = options(4.0, 6, NeighbourhoodStrategy::CellBased);
+  opts.carried = carried;
+  const Discretization disc(PETSC_COMM_SELF, nodes, opts);
+  std::printf("%zu cells with unevaluable points; %zu carried points outside their cells\n", unevaluable_cells.size(),
+              disc.points_outside_carried_cells());
+  EXPECT_GE(disc.points_outside_carried_cells(), 2 * per_cell - 2);
+  // Every point's shape functions reproduce affine fields: Σ p_a = 1 and Σ p_a x_a = x.
+  LmeWorkspace ws;
+  for (int e = 0; e < disc.n_elements(); ++e) {
+    const auto list = disc.element_nodes(e);
+    const int points = disc.element_point_count(e);
+    const std::size_t J = 3;  // value and gradient in 2D
+    std::vector<double> tab(static_cast<std::size_t>(points) * J * list.size());
+    disc.tabulate(e, 1, tab, ws);
+    for (int q = 0; q < points; ++q) {
+      const auto x = disc.quadrature().point(static_cast<std::size_t>(disc.element_first_point(e) + q));
+      double sum = 0, sx = 0, sy = 0;
+      for (std::size_t m = 0; m < list.size(); ++m) {
+        const double p = tab[(static_cast<std::size_t>(q) * J) * list.size() + m];
+        sum += p;
+        sx += p * disc.nodes().point(static_cast<std::size_t>(list[m]))[0];
+        sy += p * disc.nodes().point(static_cast<std::size_t>(list[m]))[1];
+      }
+      ASSERT_NEAR(sum, 1.0, 1e-10);
+      ASSERT_NEAR(sx, x[0], 1e-8);
+      ASSERT_NEAR(sy, x[1], 1e-8);
+    }
+  }
+}
+
 TEST(Assembly, DirectAndSetValuesInsertionGiveTheSameMatrix) {
   const NodeSet nodes = jittered_grid(10, 0.3, 21);
   const auto scalar = JetKernel<Nonlinear>::descriptor("nonlinear", nullptr, 0);

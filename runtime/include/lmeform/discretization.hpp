@@ -110,6 +110,9 @@ class Discretization {
   [[nodiscard]] const QuadratureRule& rule() const noexcept { return rule_; }
   [[nodiscard]] const CellQuadrature& quadrature() const noexcept { return quadrature_; }
   [[nodiscard]] const CsrLists& point_lists() const noexcept { return point_lists_; }
+  /// Carried quadrature: points the map moved out of their cells, whose lists were given the
+  /// vertices of a Delaunay cell of the current nodes holding them.
+  [[nodiscard]] std::size_t points_outside_carried_cells() const noexcept { return points_outside_carried_cells_; }
 
   // --- this rank's elements -------------------------------------------------------------
   [[nodiscard]] int n_elements() const noexcept { return static_cast<int>(element_nodes_.size()); }
@@ -165,6 +168,7 @@ class Discretization {
   QuadratureRule rule_;
   CellQuadrature quadrature_;
   CsrLists point_lists_;
+  std::size_t points_outside_carried_cells_ = 0;
 
   CsrLists element_nodes_;
   CsrLists element_local_;

@@ -782,9 +782,12 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     if (out != nullptr) {
       std::string c;
       for (std::size_t i = 0; i < k; ++i) c += fmt::format(", {} {:+.1e}", run.constraint_names[i], change.constraints[i]);
+      const std::size_t outside = ref->space.disc->points_outside_carried_cells();
       *out << fmt::format("  reset {} of the reference configuration at step {}: relative change of E {:+.1e}{}; "
-                          "identity reproduced to |F - I| {:.1e}, |D2 y| {:.1e}\n",
-                          run.resets + 1, step, change.energy, c, change.gradient_consistency, change.hessian_consistency)
+                          "identity reproduced to |F - I| {:.1e}, |D2 y| {:.1e}{}\n",
+                          run.resets + 1, step, change.energy, c, change.gradient_consistency, change.hessian_consistency,
+                          outside == 0 ? std::string()
+                                       : fmt::format("; {} points carried out of their cells took an enclosing cell's vertices", outside))
            << std::flush;
     }
     ++run.resets;

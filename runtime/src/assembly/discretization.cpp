@@ -5,6 +5,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "lmeform/delaunay.hpp"
 #include "lmeform/kernel.hpp"
 #include "lmeform/neighbourhoods.hpp"
 
@@ -79,6 +80,50 @@ CsrLists with_cell_vertices(const CsrLists& lists, const BackgroundCells& cells,
   return out;
 }
 
+// Carried quadrature points move with the map and their cells with its nodal values, but the map
+// is not affine on a cell: where it compresses strongly, a point leaves its cell and can lie
+// outside the hull of its list (measured: beside the axis, where the neck of the eps = 0.01
+// prolate after C0 R0 = 10 squeezes the map, a reset stopped on a point at r = 0.005 with 12
+// neighbours all on one side). Such a point gets the vertices of the cell of a Delaunay
+// triangulation of the current nodes (in the original numbering, so independent of the ranks)
+// that holds it. Returns the number of points given them.
+std::size_t add_enclosing_cells(CsrLists& lists, const CellQuadrature& quadrature, const BackgroundCells& cells,
+                                const NodeSet& nodes, const NodeSet& original_nodes, std::span<const int> new_index) {
+  const auto dim = static_cast<std::size_t>(nodes.dim);
+  std::vector<std::size_t> outside;
+  for (std::size_t q = 0; q < quadrature.size(); ++q) {
+    const std::span<const double> x(quadrature.points.data() + q * dim, dim);
+    const auto b = barycentric(cells, nodes, q / static_cast<std::size_t>(quadrature.points_per_cell), x);
+    if (std::any_of(b.begin(), b.begin() + static_cast<std::ptrdiff_t>(dim + 1), [](double v) { return v < -1e-10; }))
+      outside.push_back(q);
+  }
+  if (outside.empty()) return 0;
+  const BackgroundCells current = delaunay(original_nodes);
+  const CellLocator locator(current, original_nodes);
+  std::vector<std::vector<int>> rows(lists.size());
+  for (std::size_t q = 0; q < lists.size(); ++q) rows[q].assign(lists[q].begin(), lists[q].end());
+  std::size_t added = 0;
+  for (const std::size_t q : outside) {
+    const std::span<const double> x(quadrature.points.data() + q * dim, dim);
+    const long c = locator.locate(x, 1e-10);
+    if (c < 0) continue;  // outside the nodes' hull: the basis reports it
+    auto& row = rows[q];
+    for (const int v : current.cell(static_cast<std::size_t>(c))) {
+      const int renumbered = new_index[static_cast<std::size_t>(v)];
+      if (!std::binary_search(row.begin(), row.end(), renumbered)) row.insert(std::upper_bound(row.begin(), row.end(), renumbered), renumbered);
+    }
+    ++added;
+  }
+  CsrLists out;
+  out.offsets.assign(lists.size() + 1, 0);
+  for (std::size_t q = 0; q < rows.size(); ++q) {
+    out.indices.insert(out.indices.end(), rows[q].begin(), rows[q].end());
+    out.offsets[q + 1] = static_cast<int>(out.indices.size());
+  }
+  lists = std::move(out);
+  return added;
+}
+
 }  // namespace
 
 Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, DiscretizationOptions options)
@@ -150,6 +195,9 @@ Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, Discretizati
     if (!basis_) basis_.emplace(nodes_, renumbered_gamma, std::move(renumbered_spacing), options_.lme);
     point_lists_ = with_cell_vertices(basis_->neighbour_lists(quadrature_.points), cells_,
                                       quadrature_.points_per_cell);
+    if (options_.carried)
+      points_outside_carried_cells_ =
+          add_enclosing_cells(point_lists_, quadrature_, cells_, nodes_, nodes, partition_.new_index);
   }
 
   // Elements: cells (union of their points' lists) or single points.
