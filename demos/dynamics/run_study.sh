@@ -2,7 +2,8 @@
 # Regenerates the dynamics results of docs/dynamics.md: the oblate relaxation (VTI, adaptive dt) and
 # its static equilibrium on the same grid, the kinetics of deflation at three rates, seed Table 3.3
 # in form (bench_dynamics, full mode), and the plots. Run from the repository root after `make build`.
-#   demos/dynamics/run_study.sh [build-dir]        (about 50 minutes on one core)
+#   demos/dynamics/run_study.sh [build-dir]             (about 50 minutes on one core)
+#   demos/dynamics/run_study.sh build --prolate         also the prolate after C0 R0 = 10 (hours, two ranks)
 set -euo pipefail
 build=${1:-build}
 lmeform=$build/lmeform
@@ -48,3 +49,12 @@ $python scripts/plot_dynamics.py "${histories[0]}" --out docs/figures/kinetics -
 
 "$build"/tests/app/bench_dynamics --out "$build/bench"
 "$build"/tests/app/bench_dynamics --out "$build/bench" -window 0.3 0.4
+
+# The prolate v = 0.8 after a jump of spontaneous curvature to C0 R0 = 10: its static start at
+# eps = 0.01 on an adapted grid, then the dynamics with resets and re-meshes to the budded shape.
+if [[ "${2:-}" == "--prolate" ]]; then
+  mpirun -n 2 "$lmeform" run demos/dynamics/prolate_start.toml --json "$out/prolate_start.json"
+  mpirun -n 2 "$lmeform" run demos/dynamics/prolate_c0_jump.toml --json "$out/prolate_c0_jump.json"
+  $python scripts/plot_dynamics.py "$out/prolate_c0_jump/prolate_c0_jump_history.json" --out docs/figures/prolate_eps01 \
+    --snapshots 4 --mirror
+fi
