@@ -535,12 +535,7 @@ TEST(Dynamics, TheProjectionEvaluatesPointsOutsideTheHullOfTheirSupportsThroughT
   // A fine strip (h = 0.02, x <= 0.1) beside coarse nodes (h = 0.2, x >= 0.3): in the gap the fine
   // supports (radius 0.037 at gamma = 4) end short, and the coarse nodes reaching there all lie on
   // one side.
-  std::vector<double> xy;
-  for (int i = 0; i <= 5; ++i)
-    for (int j = 0; j <= 50; ++j) xy.insert(xy.end(), {0.02 * i, 0.02 * j});
-  for (int i = 0; i <= 3; ++i)
-    for (int j = 0; j <= 5; ++j) xy.insert(xy.end(), {0.3 + 0.2 * i, 0.2 * j});
-  const NodeSet nodes(2, std::move(xy));
+  const NodeSet nodes = fine_strip_beside_coarse_nodes();
   const double gamma = 4.0;
   const CellQuadrature cloud = map_to_cells(delaunay(nodes), nodes, triangle_rule(6));
   const LmeBasis basis(nodes, std::vector<double>(nodes.size(), gamma), LmeOptions{});

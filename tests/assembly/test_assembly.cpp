@@ -154,12 +154,7 @@ TEST(Assembly, ACarriedPointOutsideItsCellTakesAnEnclosingCellsVertices) {
   // lie outside the hull of the nodes whose supports reach them (gamma 4): there only the cell's
   // vertices make them evaluable. Carried by the wrong cells (the points of the first and last
   // gap cells exchanged), they get the vertices of a Delaunay cell holding them instead.
-  std::vector<double> xy;
-  for (int i = 0; i <= 5; ++i)
-    for (int j = 0; j <= 50; ++j) xy.insert(xy.end(), {0.02 * i, 0.02 * j});
-  for (int i = 0; i <= 3; ++i)
-    for (int j = 0; j <= 5; ++j) xy.insert(xy.end(), {0.3 + 0.2 * i, 0.2 * j});
-  const NodeSet nodes(2, std::move(xy));
+  const NodeSet nodes = fine_strip_beside_coarse_nodes();
   CarriedQuadrature carried;
   carried.cells = delaunay(nodes);
   carried.quadrature = map_to_cells(carried.cells, nodes, triangle_rule(6));

@@ -57,6 +57,12 @@ struct GradedGridOptions {
 /// The target spacing of graded_grid_2d at x.
 [[nodiscard]] double graded_spacing(const GradedGridOptions& options, double x, double y);
 
+/// The hardest grading for LME point lists: a fine uniform strip (spacing 0.02, 0 <= x <= 0.1)
+/// beside coarse uniform nodes (spacing 0.2, 0.3 <= x <= 0.9) on 0 <= y <= 1, nothing between.
+/// At gamma 4 the fine supports end short of the gap, and many points of the long cells spanning
+/// it lie outside the hull of the nodes whose supports reach them.
+[[nodiscard]] NodeSet fine_strip_beside_coarse_nodes();
+
 /// Moves every node that is not on a face of the box (tolerance: 1e-12 * box diagonal) by a uniform
 /// random offset in [-amplitude, amplitude] per coordinate, clamped to stay inside the box.
 /// Deterministic: the same seed gives the same nodes on every platform (own generator, no std:: distributions).

@@ -293,6 +293,15 @@ NodeSet jitter_interior(const NodeSet& nodes, const Box& box, double amplitude, 
   return out;
 }
 
+NodeSet fine_strip_beside_coarse_nodes() {
+  std::vector<double> xy;
+  for (int i = 0; i <= 5; ++i)
+    for (int j = 0; j <= 50; ++j) xy.insert(xy.end(), {0.02 * i, 0.02 * j});
+  for (int i = 0; i <= 3; ++i)
+    for (int j = 0; j <= 5; ++j) xy.insert(xy.end(), {0.3 + 0.2 * i, 0.2 * j});
+  return NodeSet(2, std::move(xy));
+}
+
 NodeSet random_points(const Box& box, std::size_t n, std::uint64_t seed) {
   box.validate("random_points");
   const auto d = static_cast<std::size_t>(box.dim);
