@@ -51,13 +51,9 @@ std::vector<double> expand_gamma(const std::vector<double>& gamma, std::size_t n
   return gamma;
 }
 
-// Every quadrature point's list also holds the vertices of its cell, so the point lies in the
-// convex hull of its list and the LME problem there has a solution. The support cutoff alone does
-// not guarantee it on strongly graded grids: a fine node's support can end short of a point in a
-// long triangle it shares with coarse nodes (measured: a dumbbell CVT with h from 0.004 to 0.09,
-// "point outside the convex hull of its neighbours" at 41 neighbours). A vertex added this way
-// contributes its Gaussian factor, below tol0 there.
-CsrLists with_cell_vertices(const CsrLists& lists, const BackgroundCells& cells, int points_per_cell) {
+// Each list with the vertices `extra(q)` merged in (sorted, without repeats).
+template <class ExtraVertices>
+CsrLists with_vertices(const CsrLists& lists, ExtraVertices&& extra) {
   CsrLists out;
   out.offsets.assign(lists.offsets.size(), 0);
   out.indices.reserve(lists.indices.size());
@@ -65,19 +61,31 @@ CsrLists with_cell_vertices(const CsrLists& lists, const BackgroundCells& cells,
   for (std::size_t q = 0; q < lists.size(); ++q) {
     const auto own = lists[q];
     row.assign(own.begin(), own.end());
-    const std::size_t c = q / static_cast<std::size_t>(points_per_cell);
     bool added = false;
-    for (const int v : cells.cell(c)) {
+    for (const int v : extra(q)) {
       if (!std::binary_search(own.begin(), own.end(), v)) {
         row.push_back(v);
         added = true;
       }
     }
-    if (added) std::sort(row.begin(), row.end());
+    if (added) {
+      std::sort(row.begin(), row.end());
+      row.erase(std::unique(row.begin(), row.end()), row.end());
+    }
     out.indices.insert(out.indices.end(), row.begin(), row.end());
     out.offsets[q + 1] = static_cast<int>(out.indices.size());
   }
   return out;
+}
+
+// Every quadrature point's list also holds the vertices of its cell, so the point lies in the
+// convex hull of its list and the LME problem there has a solution. The support cutoff alone does
+// not guarantee it on strongly graded grids: a fine node's support can end short of a point in a
+// long triangle it shares with coarse nodes (measured: a dumbbell CVT with h from 0.004 to 0.09,
+// "point outside the convex hull of its neighbours" at 41 neighbours). A vertex added this way
+// contributes its Gaussian factor, below tol0 there.
+CsrLists with_cell_vertices(const CsrLists& lists, const BackgroundCells& cells, int points_per_cell) {
+  return with_vertices(lists, [&](std::size_t q) { return cells.cell(q / static_cast<std::size_t>(points_per_cell)); });
 }
 
 // Carried quadrature points move with the map and their cells with its nodal values, but the map
@@ -100,27 +108,16 @@ std::size_t add_enclosing_cells(CsrLists& lists, const CellQuadrature& quadratur
   if (outside.empty()) return 0;
   const BackgroundCells current = delaunay(original_nodes);
   const CellLocator locator(current, original_nodes);
-  std::vector<std::vector<int>> rows(lists.size());
-  for (std::size_t q = 0; q < lists.size(); ++q) rows[q].assign(lists[q].begin(), lists[q].end());
+  std::vector<std::vector<int>> extra(lists.size());
   std::size_t added = 0;
   for (const std::size_t q : outside) {
     const std::span<const double> x(quadrature.points.data() + q * dim, dim);
     const long c = locator.locate(x, 1e-10);
     if (c < 0) continue;  // outside the nodes' hull: the basis reports it
-    auto& row = rows[q];
-    for (const int v : current.cell(static_cast<std::size_t>(c))) {
-      const int renumbered = new_index[static_cast<std::size_t>(v)];
-      if (!std::binary_search(row.begin(), row.end(), renumbered)) row.insert(std::upper_bound(row.begin(), row.end(), renumbered), renumbered);
-    }
+    for (const int v : current.cell(static_cast<std::size_t>(c))) extra[q].push_back(new_index[static_cast<std::size_t>(v)]);
     ++added;
   }
-  CsrLists out;
-  out.offsets.assign(lists.size() + 1, 0);
-  for (std::size_t q = 0; q < rows.size(); ++q) {
-    out.indices.insert(out.indices.end(), rows[q].begin(), rows[q].end());
-    out.offsets[q + 1] = static_cast<int>(out.indices.size());
-  }
-  lists = std::move(out);
+  lists = with_vertices(lists, [&](std::size_t q) { return std::span<const int>(extra[q]); });
   return added;
 }
 
