@@ -343,6 +343,29 @@ TEST(Dynamics, AScheduledDeflationMovesTheVolumeTarget) {
   EXPECT_LT(relative_drift(run, 0), 1e-10);
 }
 
+TEST(Dynamics, AReportTimeIsLandedOnAndWritesTheFieldsThere) {
+  // Constant steps of 1e-3 and a report time between steps: the step that lands on it writes a
+  // time-series file although output_every writes none (the shape at the end of a deflation).
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / "lmeform_test_dynamics_report_time";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const Case r = make("t_end = 0.006\ndt = 1e-3\nadaptive = false\noutput_every = 0\nreport_times = [0.0035]\n"
+                      "[dynamics.schedule]\nV0 = { rate = -2.0, until = 0.0035 }\n");
+  app::DynamicsOutput out{dir, "run", false};
+  const DynamicsRun run = app::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, &out, nullptr);
+  ASSERT_TRUE(run.failure.empty()) << run.failure;
+  ASSERT_GE(run.history.size(), 5u);
+  EXPECT_NEAR(run.history[4].t_star, 0.0035, 1e-14);
+  ASSERT_EQ(run.energy_at.count(0.0035), 1u);
+  EXPECT_EQ(run.energy_at.at(0.0035), run.history[4].energy);
+  EXPECT_TRUE(std::filesystem::exists(dir / "series" / "run_000004.h5"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "series" / "run_000003.h5"));
+  EXPECT_TRUE(std::filesystem::exists(dir / "series" / "run_000000.h5"));
+  char last[32];
+  std::snprintf(last, sizeof last, "run_%06zu.h5", run.history.size() - 1);  // the end is always written
+  EXPECT_TRUE(std::filesystem::exists(dir / "series" / last));
+}
+
 TEST(Dynamics, AScheduleHistoryDeflatesThenReinflatesAndAPulseOfCurvatureEnds) {
   // V0 falls by 2 %/t* over [0, 0.005] and rises back over [0.005, 0.01]; C0 = 3 on [0.001, 0.003).
   const Case r = make("t_end = 0.01\ndt = 1e-3\nadaptive = false\n[dynamics.schedule]\n"

@@ -1122,6 +1122,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     ++next_report;
   }
   while (t < settings.t_end - t_tolerance) {
+    bool at_report_time = false;
     if (step >= settings.max_steps) {
       run.failure = fmt::format("stopped after max_steps = {} steps at t* = {:.6e}", settings.max_steps, t);
       break;
@@ -1228,6 +1229,7 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
         ++run.accepted;
         while (next_report < settings.report_times.size() && settings.report_times[next_report] <= t + t_tolerance) {
           run.energy_at[settings.report_times[next_report]] = last.energy;
+          at_report_time = true;
           ++next_report;
         }
         const double shortened = dt_step;  // the step taken (report times and t_end shorten it)
@@ -1268,7 +1270,8 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     }
     record(ref->u, last.energy, euler ? 0 : last.newton_iterations, rejected, dt_try, accepted_measures);
     const bool finished = t >= settings.t_end - t_tolerance;
-    if ((settings.output_every > 0 && step % settings.output_every == 0) || finished) write_series(ref->u);
+    // A report time gets its fields too: the shape at a scheduled event (the end of a deflation).
+    if ((settings.output_every > 0 && step % settings.output_every == 0) || finished || at_report_time) write_series(ref->u);
     if (settings.checkpoint_every > 0 && step % settings.checkpoint_every == 0) write_checkpoint();
   }
   if (!run.failure.empty() && settings.checkpoint_every > 0) write_checkpoint();
