@@ -13,7 +13,10 @@ field files relative to the JSON's folder. Two figures are written:
                         the relative drift |C(t) - C(0)| / |C(0)| of each constraint (floor 1e-17).
   PREFIX_snapshots.png  K series files evenly spaced from first to last (default 4): nodes coloured
                         by phi, the phi = 0 contour in black; --mirror adds the image r -> -r.
-  PREFIX_max_energy.png (--max-energy-shapes) each run's shape at its largest energy.
+  PREFIX_max_energy.png (--max-energy-shapes) each run's shape at its largest energy, and
+                        PREFIX_max_energy_contours.png: their phi = 0 contours in one panel, with
+                        the static equilibrium's (--equilibrium FIELDS.h5, a static run's output)
+                        dashed.
 
 --labels names the main run and then each --compare run (default: their "method" fields).
 Needs Debian's python3-matplotlib, python3-h5py and numpy (call /usr/bin/python3, not a pyenv one).
@@ -205,6 +208,64 @@ def plot_snapshots(snapshots, mirror, path, titles=None):
     save(fig, path)
 
 
+def print_axisymmetric_profile(name, nodes, cells, phi):
+    """Prints the measures of an axisymmetric shape's phi = 0 contour that tell an oblate from a
+    discocyte: the equatorial radius, the thickness on the axis and the largest thickness."""
+    import matplotlib.pyplot as plt
+    import matplotlib.tri as mtri
+    import numpy as np
+
+    cs = plt.tricontour(mtri.Triangulation(nodes[:, 0], nodes[:, 1], cells), phi, levels=[0.0])
+    points = np.vstack([seg for seg in cs.allsegs[0] if len(seg)])
+    plt.close()
+    r, z = points[:, 0], points[:, 1]
+    r_eq = r.max()
+    edges = np.linspace(0.0, r_eq, 41)
+    slab = np.digitize(r, edges) - 1
+    thickness = np.array([np.ptp(z[slab == k]) if np.any(slab == k) else 0.0 for k in range(40)])
+    k = int(np.argmax(thickness))
+    print(f"{name}: equator r {r_eq:.4f}, thickness on the axis {thickness[0]:.4f}, "
+          f"largest thickness {thickness[k]:.4f} at r {0.5 * (edges[k] + edges[k + 1]):.3f}")
+    return points
+
+
+def plot_contours(shapes, names, mirror, path):
+    """The phi = 0 contours of several shapes in one panel (kinetics: the shapes at the energy
+    maxima against the equilibrium); shapes are (nodes, cells, phi) triples, "static ..." dashed."""
+    import matplotlib.pyplot as plt
+    import matplotlib.tri as mtri
+    import numpy as np
+    from matplotlib.lines import Line2D
+
+    fig, ax = plt.subplots(figsize=(6.0, 4.2), layout="constrained")
+    handles = []
+    bounds = []
+    for i, ((nodes, cells, phi), name) in enumerate(zip(shapes, names)):
+        points = print_axisymmetric_profile(name, nodes, cells, phi)
+        bounds.append((points.min(axis=0), points.max(axis=0)))
+        if mirror:
+            nodes, cells, phi = mirrored(nodes, cells, phi)
+        dashed = name.startswith("static")
+        color = "k" if dashed else f"C{i}"
+        style = "--" if dashed else "-"
+        if not phi.min() < 0.0 < phi.max():
+            fail(f"{name}: phi does not change sign, no interface to draw")
+        ax.tricontour(mtri.Triangulation(nodes[:, 0], nodes[:, 1], cells), phi, levels=[0.0],
+                      colors=color, linestyles=style, linewidths=1.4)
+        handles.append(Line2D([], [], color=color, linestyle=style, label=name))
+    low = np.min([b[0] for b in bounds], axis=0)
+    high = np.max([b[1] for b in bounds], axis=0)
+    margin = 0.15 * (high - low).max()
+    ax.set_xlim(-high[0] - margin if mirror else 0.0, high[0] + margin)
+    ax.set_ylim(low[1] - margin, high[1] + 2.5 * margin)  # room for the legend above the shapes
+    ax.set_aspect("equal")
+    ax.set_xlabel("r")
+    ax.set_ylabel("z")
+    ax.legend(handles=handles, fontsize=8, loc="upper center", ncol=2)
+    ax.grid(True, alpha=0.3)
+    save(fig, path)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("history", help="<name>_history.json written by lmeform run")
@@ -217,6 +278,8 @@ def main():
                         help="further history files whose energy curves are overlaid")
     parser.add_argument("--max-energy-shapes", action="store_true",
                         help="also PREFIX_max_energy.png: each run's shape at its largest energy")
+    parser.add_argument("--equilibrium", default=None, metavar="FIELDS.h5",
+                        help="with --max-energy-shapes: a static run's fields, drawn dashed in the contour panel")
     parser.add_argument("--labels", nargs="+", default=None,
                         help="curve labels: the main run, then each --compare run")
     args = parser.parse_args()
@@ -241,6 +304,9 @@ def main():
     snapshots = load_snapshots(runs[0], os.path.dirname(os.path.abspath(args.history)),
                                args.snapshots)
     peaks = load_max_energy_snapshots(runs, [args.history] + args.compare) if args.max_energy_shapes else None
+    if args.equilibrium and not peaks:
+        fail("--equilibrium needs --max-energy-shapes")
+    equilibrium = load_snapshot(args.equilibrium)[:3] if args.equilibrium else None
     folder = os.path.dirname(args.out)
     if folder:
         os.makedirs(folder, exist_ok=True)
@@ -248,6 +314,12 @@ def main():
     plot_snapshots(snapshots, args.mirror, args.out + "_snapshots.png")
     if peaks:
         plot_snapshots(peaks, args.mirror, args.out + "_max_energy.png", titles=names)
+        shapes = [snapshot[:3] for _, snapshot in peaks]
+        labels = [f"{name}, t* = {time:.3g}" for name, (time, _) in zip(names, peaks)]
+        if equilibrium is not None:
+            shapes.append(equilibrium)
+            labels.append("static equilibrium")
+        plot_contours(shapes, labels, args.mirror, args.out + "_max_energy_contours.png")
 
 
 if __name__ == "__main__":

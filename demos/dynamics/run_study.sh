@@ -2,7 +2,7 @@
 # Regenerates the dynamics results of docs/dynamics.md: the oblate relaxation (VTI, adaptive dt) and
 # its static equilibrium on the same grid, the kinetics of deflation at three rates, seed Table 3.3
 # in form (bench_dynamics, full mode), and the plots. Run from the repository root after `make build`.
-#   demos/dynamics/run_study.sh [build-dir]             (about 50 minutes on one core)
+#   demos/dynamics/run_study.sh [build-dir]             (about 90 minutes on one core)
 #   demos/dynamics/run_study.sh build --prolate         also the prolate after C0 R0 = 10 (hours, two ranks)
 set -euo pipefail
 build=${1:-build}
@@ -30,14 +30,18 @@ converged=$($python -c "import json; print(json.load(open('$out/oblate_equilibri
 $python scripts/plot_dynamics.py "$out/oblate_relaxation_long/oblate_relaxation_long_history.json" --out docs/figures/oblate_relaxation_long \
   --reference-energy "$converged" --mirror --snapshots 4
 
-# Kinetics: v = 0.9 -> 0.8 over t* = 0.1, 1 and 10, then relaxation at fixed volume (coarse grid).
+# Kinetics: v = 0.9 -> 0.8 over t* = 0.001 ... 10, then relaxation at fixed volume (eps = 0.025 on
+# an adapted grid), and the static equilibrium at v = 0.8 they relax to.
 "$lmeform" run demos/dynamics/kinetics_start.toml --json "$out/kinetics_start.json"
+"$lmeform" run demos/dynamics/kinetics_equilibrium.toml --json "$out/kinetics_equilibrium.json"
 histories=()
 labels=()
-for until in 0.1 1 10; do
+for until in 0.001 0.01 0.1 1 10; do
   rate=$($python -c "print(-1.0 / 9.0 / $until)")
+  dt=$($python -c "print(min(1e-3, $until / 50))")
   scene=$out/kinetics_$until.toml
-  sed -e "s/^V0 = .*/V0 = { rate = $rate, until = $until }/" -e "s/^name = .*/name = \"kinetics_$until\"/" \
+  sed -e "s/^V0 = .*/V0 = { rate = $rate, until = $until }/" -e "s/^report_times = .*/report_times = [$until]/" \
+      -e "s/^dt = .*/dt = $dt/" -e "s/^name = .*/name = \"kinetics_$until\"/" \
       -e "s#^directory = .*#directory = \"$out/kinetics_$until\"#" \
       -e "s#\"../../build/demo/#\"$PWD/$out/#g" demos/dynamics/kinetics_deflation.toml > "$scene"
   "$lmeform" run "$scene" --json "$out/kinetics_$until.json"
@@ -45,7 +49,9 @@ for until in 0.1 1 10; do
   labels+=("deflation over t* = $until")
 done
 $python scripts/plot_dynamics.py "${histories[0]}" --out docs/figures/kinetics --compare "${histories[@]:1}" \
-  --labels "${labels[@]}" --mirror --snapshots 4 --max-energy-shapes
+  --labels "${labels[@]}" --mirror --snapshots 4 --max-energy-shapes \
+  --equilibrium "$out/kinetics_equilibrium/kinetics_equilibrium.h5" \
+  --reference-energy "$($python -c "import json; print(json.load(open('$out/kinetics_equilibrium.json'))['energy'])")"
 
 "$build"/tests/app/bench_dynamics --out "$build/bench"
 "$build"/tests/app/bench_dynamics --out "$build/bench" -window 0.3 0.4
