@@ -229,27 +229,27 @@ def print_axisymmetric_profile(name, nodes, cells, phi):
     return points
 
 
-def plot_contours(shapes, names, mirror, path):
+def plot_contours(shapes, names, mirror, path, reference=None):
     """The phi = 0 contours of several shapes in one panel (kinetics: the shapes at the energy
-    maxima against the equilibrium); shapes are (nodes, cells, phi) triples, "static ..." dashed."""
+    maxima), with a reference shape (the static equilibrium) dashed; shapes are (nodes, cells, phi)."""
     import matplotlib.pyplot as plt
     import matplotlib.tri as mtri
     import numpy as np
     from matplotlib.lines import Line2D
 
     fig, ax = plt.subplots(figsize=(6.0, 4.2), layout="constrained")
+    curves = [(shape, name, f"C{i}", "-") for i, (shape, name) in enumerate(zip(shapes, names))]
+    if reference is not None:
+        curves.append((reference, "static equilibrium", "k", "--"))
     handles = []
     bounds = []
-    for i, ((nodes, cells, phi), name) in enumerate(zip(shapes, names)):
+    for (nodes, cells, phi), name, color, style in curves:
+        if not phi.min() < 0.0 < phi.max():
+            fail(f"{name}: phi does not change sign, no interface to draw")
         points = print_axisymmetric_profile(name, nodes, cells, phi)
         bounds.append((points.min(axis=0), points.max(axis=0)))
         if mirror:
             nodes, cells, phi = mirrored(nodes, cells, phi)
-        dashed = name.startswith("static")
-        color = "k" if dashed else f"C{i}"
-        style = "--" if dashed else "-"
-        if not phi.min() < 0.0 < phi.max():
-            fail(f"{name}: phi does not change sign, no interface to draw")
         ax.tricontour(mtri.Triangulation(nodes[:, 0], nodes[:, 1], cells), phi, levels=[0.0],
                       colors=color, linestyles=style, linewidths=1.4)
         handles.append(Line2D([], [], color=color, linestyle=style, label=name))
@@ -316,10 +316,7 @@ def main():
         plot_snapshots(peaks, args.mirror, args.out + "_max_energy.png", titles=names)
         shapes = [snapshot[:3] for _, snapshot in peaks]
         labels = [f"{name}, t* = {time:.3g}" for name, (time, _) in zip(names, peaks)]
-        if equilibrium is not None:
-            shapes.append(equilibrium)
-            labels.append("static equilibrium")
-        plot_contours(shapes, labels, args.mirror, args.out + "_max_energy_contours.png")
+        plot_contours(shapes, labels, args.mirror, args.out + "_max_energy_contours.png", reference=equilibrium)
 
 
 if __name__ == "__main__":
