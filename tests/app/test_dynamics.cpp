@@ -150,11 +150,11 @@ TEST(Dynamics, StepsAThousandTimesForwardEulersStableStep) {
   const DynamicsRun stable = euler("4e-3");
   EXPECT_FALSE(rises(stable));
   EXPECT_TRUE(rises(euler("8e-3")));
-  // The integrator takes two steps of 1000 times the stable one (dt* = 4): each converges (the
-  // first in 26 Newton iterations, so the cap is raised from 25), lowers the energy, keeps area and
-  // volume and leaves det F > 0; the first already lands below where Euler's 50 stable steps (to
-  // t* = 0.2) got.
-  const Case big = make("t_end = 8.0\ndt = 4.0\nadaptive = false\n[solver]\nmax_newton_iterations = 60\n");
+  // The integrator takes two steps of dt* = 8, at least 1000 times Euler's largest stable step:
+  // with the Hessian of E refreshed every Newton iteration each converges (11 and 5 iterations
+  // measured), lowers the energy, keeps area and volume and leaves det F > 0; the first already
+  // lands below where Euler's 50 stable steps (to t* = 0.2) got.
+  const Case big = make("t_end = 16.0\ndt = 8.0\nadaptive = false\nhessian = \"iteration\"\n");
   const DynamicsRun run = app::run_dynamics(PETSC_COMM_WORLD, big.scene, big.settings, nullptr, nullptr);
   ASSERT_TRUE(run.failure.empty()) << run.failure;
   ASSERT_EQ(run.accepted, 2);
@@ -164,6 +164,19 @@ TEST(Dynamics, StepsAThousandTimesForwardEulersStableStep) {
   EXPECT_LT(relative_drift(run, 0), 1e-10);
   EXPECT_LT(relative_drift(run, 1), 1e-10);
   for (const auto& step : run.history) EXPECT_GT(step.min_jacobian, 0.05);
+  // With the seed's saving (the Hessian of E once per step) Newton on a step of 8 is damped three
+  // times in a row: the step is rejected and the run goes on at 4 (21 and 22 iterations measured),
+  // to the same end time, its energy still falling.
+  const Case saving = make("t_end = 8.0\ndt = 8.0\nadaptive = false\n");
+  const DynamicsRun halved = app::run_dynamics(PETSC_COMM_WORLD, saving.scene, saving.settings, nullptr, nullptr);
+  ASSERT_TRUE(halved.failure.empty()) << halved.failure;
+  EXPECT_EQ(halved.rejected, 1);
+  ASSERT_EQ(halved.accepted, 2);
+  EXPECT_NEAR(halved.history.back().t_star, 8.0, 1e-12);
+  EXPECT_LT(halved.history[1].energy, stable.history.back().energy);
+  EXPECT_LT(halved.history[2].energy, halved.history[1].energy);
+  EXPECT_LT(relative_drift(halved, 0), 1e-10);
+  EXPECT_LT(relative_drift(halved, 1), 1e-10);
 }
 
 TEST(Dynamics, AStepWhoseNewtonFailsIsRejectedAndRetried) {
