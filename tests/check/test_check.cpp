@@ -448,6 +448,11 @@ TEST(CheckCommand, UsageErrorsExitTwo) {
   o.outputs = {};
   o.form = "no_such_module";
   EXPECT_EQ(lmeform::run_check_command(o), 2);
+  // A scene given to check is named as one, not parsed as a form.
+  o.form = "demos/my_scene.toml";
+  EXPECT_EQ(lmeform::run_check_command(o), 2);
+  EXPECT_NE(err.str().find("demos/my_scene.toml is a scene (TOML)"), std::string::npos) << err.str();
+  EXPECT_NE(err.str().find("lmeform run demos/my_scene.toml"), std::string::npos) << err.str();
 }
 
 TEST(CheckCommand, FormByPathIsCompiledAndChecked) {

@@ -439,7 +439,7 @@ TEST(VesicleScene, InterfaceResolutionKeys) {
   const std::string adapt = "[vesicle.adaptivity]\nband = 2.5\ngrading = 0.3\ncoarsening = 6.0\nmax_nodes = 20000\nstages = [\n"
                             "  { eps = 0.04, resolve = 0.03 },\n"
                             "  { eps = 0.03, lloyd_iterations = 0 },\n"
-                            "  { eps = 0.02, resolve = 0.02, lloyd_iterations = 0 },\n"
+                            "  { eps = 0.02, resolve = 0.02, lloyd_iterations = 1 },\n"
                             "]\n";
   const VesicleModel m = vesicle_of(kVesicle + adapt);
   ASSERT_TRUE(m.adaptivity);
@@ -457,11 +457,14 @@ TEST(VesicleScene, InterfaceResolutionKeys) {
   // Only eps lowered: no resolve, no new grid.
   EXPECT_FALSE(a.stages[1].resolve);
   EXPECT_FALSE(a.stages[1].new_grid());
-  // resolve with no Lloyd iterations still builds a new grid (the density placement alone).
+  // resolve with a single Lloyd iteration builds a new grid.
   ASSERT_TRUE(a.stages[2].resolve);
   EXPECT_EQ(*a.stages[2].resolve, 0.02);  // equal to the stage's eps: allowed
-  EXPECT_EQ(a.stages[2].lloyd_iterations, 0);
+  EXPECT_EQ(a.stages[2].lloyd_iterations, 1);
   EXPECT_TRUE(a.stages[2].new_grid());
+  // Without any, the grid would be the raw density placement: refused, naming the key.
+  expect_error(kVesicle + "[vesicle.adaptivity]\nstages = [ { eps = 0.04, resolve = 0.04, lloyd_iterations = 0 } ]\n",
+               {"stages[0].lloyd_iterations", "must be at least 1 with 'resolve'"});
   // The defaults of InterfaceResolution when the keys are left out.
   const VesicleModel d = vesicle_of(kVesicle + "[vesicle.adaptivity]\nstages = [ { eps = 0.04, resolve = 0.04 } ]\n");
   EXPECT_EQ(d.adaptivity->interface.band, 3.0);

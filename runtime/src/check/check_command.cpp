@@ -118,6 +118,10 @@ int run_check_command(const CheckCommandOptions& options) {
                                       mo, include_dirs);
       check.provenance = "given module table";
     } else {
+      if (fs::path(options.form).extension() == ".toml")
+        throw std::invalid_argument(fmt::format("{} is a scene (TOML); check takes a .form file or a built-in module name. "
+                                                "`lmeform run {}` reads the scene and reports its errors",
+                                                options.form, options.form));
       ensure_mpi();
       FormLoadOptions lo;
       lo.include_dirs = include_dirs;
