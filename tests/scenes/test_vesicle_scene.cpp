@@ -268,7 +268,10 @@ TEST(VesicleScene, InitialShape) {
   t = edit(kVesicle, "semi_axes = [0.4987, 0.2059]", "semi_axes = [0.4987, 0.2059, 0.3]");
   expect_error(t, {"key 'vesicle.initial.semi_axes' must be an array of 2 numbers, found 3 entries"});
   t = kVesicle.substr(0, kVesicle.find("[vesicle.initial]"));
-  expect_error(t, {at_line(t, "[vesicle]"), "key 'vesicle.initial' is missing"});
+  expect_error(t, {at_line(t, "[vesicle]"), "key 'vesicle.initial' is missing", "or from 'phi' given in [initial]"});
+  // A start given in [initial] (a previous run's field, an expression) replaces the shape.
+  const VesicleModel given = vesicle_of(t.substr(0, t.find("[vesicle]")) + "[initial]\nphi = \"-1\"\n" + t.substr(t.find("[vesicle]")));
+  EXPECT_FALSE(given.initial_resolve);
   // The profile's own width, and the profile: +1 inside, 0 on the boundary, -1 outside.
   const VesicleModel m = vesicle_of(kPlanar + "eps = 0.02\n");  // in [vesicle.initial], the last table
   ASSERT_TRUE(m.profile_eps);

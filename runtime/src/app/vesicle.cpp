@@ -191,8 +191,10 @@ std::optional<VesicleModel> read_vesicle(const Scene& s) {
         init->fail_key("resolve", fmt::format("= {} is coarser than the first solve's {} = {}: the first grid must resolve it",
                                               *m.initial_resolve, m.width, m.eps));
     }
-  } else {
-    t->fail_key("initial", "is missing: the vesicle model starts from [vesicle.initial] (shape, center, semi_axes or radius)");
+  } else if (std::none_of(s.initial.begin(), s.initial.end(), [&](const SceneInitialField& f) { return f.unknown == m.field; })) {
+    t->fail_key("initial", fmt::format("is missing: the vesicle model starts from [vesicle.initial] (shape, center, semi_axes or "
+                                       "radius), or from '{}' given in [initial]",
+                                       m.field));
   }
   if (const auto adapt = t->optional_table("adaptivity", {"stages", "lloyd_iterations", "start", "samples_per_node", "band", "grading", "coarsening", "max_nodes", "fit_iterations"})) {
     if (s.dim() != 2) adapt->fail_key("stages", "CVT adaptivity is available in 2D and axisymmetric scenes only");
