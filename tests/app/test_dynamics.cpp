@@ -345,6 +345,32 @@ INSTANTIATE_TEST_SUITE_P(PlainResetsAndReMeshes, DynamicsRestart,
                                            RestartCase{"remesh", "remesh_every = 3\nremesh_factor = 10.0\n"}),
                          [](const ::testing::TestParamInfo<RestartCase>& param) { return param.param.name; });
 
+TEST(Dynamics, ARestartAppliesTheScenesEnergyDecrementTarget) {
+  // Without energy_decrement the target is the first step's decrement, carried by the checkpoint;
+  // a scene that states one (here four times that) has it applied after the restart too.
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / "lmeform_test_dynamics_restart_target";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string dynamics = "t_end = 0.03\ndt = 1e-3\ncheckpoint_every = 4\noutput_every = 0\n";
+  const Case whole = make(dynamics);
+  const DynamicsRun a = app::run_dynamics(PETSC_COMM_WORLD, whole.scene, whole.settings, nullptr, nullptr);
+  ASSERT_TRUE(a.failure.empty()) << a.failure;
+  const Case stopped = make(dynamics + "max_steps = 4\n");
+  app::DynamicsOutput out{dir, "run", false};
+  (void)app::run_dynamics(PETSC_COMM_WORLD, stopped.scene, stopped.settings, &out, nullptr);
+  const double first = a.history[0].energy - a.history[1].energy;
+  ASSERT_GT(first, 0.0);
+  const Case larger = make(dynamics + "energy_decrement = " + std::to_string(4 * first) + "\n");
+  out.restart = true;
+  const DynamicsRun c = app::run_dynamics(PETSC_COMM_WORLD, larger.scene, larger.settings, &out, nullptr);
+  ASSERT_TRUE(c.failure.empty()) << c.failure;
+  ASSERT_GT(c.history.size(), 6u);
+  for (std::size_t s = 0; s <= 4; ++s) EXPECT_EQ(c.history[s].t_star, a.history[s].t_star) << "step " << s;
+  EXPECT_GT(c.history[6].t_star, a.history[6].t_star);
+  EXPECT_LT(c.history.size(), a.history.size());
+  std::filesystem::remove_all(dir);
+}
+
 TEST(Dynamics, AScheduledDeflationMovesTheVolumeTarget) {
   // V0(t) = V0(0) (1 - 2 t*) for t* <= 0.01: 2 % less volume at the end, area kept.
   const Case r = make("t_end = 0.01\ndt = 1e-3\nadaptive = false\n[dynamics.schedule]\nV0 = { rate = -2.0, until = 0.01 }\n",

@@ -1063,7 +1063,10 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     velocity = field("velocity");
     t = std::get<double>(attr(cp, checkpoint_path, "t_star"));
     dt = std::get<double>(attr(cp, checkpoint_path, "dt_star"));
-    target_decrement = std::get<double>(attr(cp, checkpoint_path, "target_decrement"));
+    // A target the scene states is the same at every step of an uninterrupted run: the scene's
+    // wins (a restart with a new target applies it); only the automatic one (the first step's
+    // decrement) is the checkpoint's.
+    if (settings.energy_decrement <= 0) target_decrement = std::get<double>(attr(cp, checkpoint_path, "target_decrement"));
     run.accepted = static_cast<int>(std::get<std::int64_t>(attr(cp, checkpoint_path, "accepted")));
     run.rejected = static_cast<int>(std::get<std::int64_t>(attr(cp, checkpoint_path, "rejected")));
     steps_since_reset = static_cast<int>(std::get<std::int64_t>(attr(cp, checkpoint_path, "steps_since_reset")));
