@@ -17,6 +17,9 @@ field files relative to the JSON's folder. Two figures are written:
                         PREFIX_max_energy_contours.png: their phi = 0 contours in one panel, with
                         the static equilibrium's (--equilibrium FIELDS.h5, a static run's output)
                         dashed.
+  PREFIX_final_contours.png (--equilibrium without --max-energy-shapes) the first and the last
+                        shape of the run with the static equilibrium dashed: where a relaxation
+                        ended against the shape it should reach.
 
 --labels names the main run and then each --compare run (default: their "method" fields).
 Needs Debian's python3-matplotlib, python3-h5py and numpy (call /usr/bin/python3, not a pyenv one).
@@ -279,7 +282,9 @@ def main():
     parser.add_argument("--max-energy-shapes", action="store_true",
                         help="also PREFIX_max_energy.png: each run's shape at its largest energy")
     parser.add_argument("--equilibrium", default=None, metavar="FIELDS.h5",
-                        help="with --max-energy-shapes: a static run's fields, drawn dashed in the contour panel")
+                        help="a static run's fields, drawn dashed in a contour panel: with --max-energy-shapes "
+                             "PREFIX_max_energy_contours.png, else PREFIX_final_contours.png (the first and the last "
+                             "shape of the run)")
     parser.add_argument("--labels", nargs="+", default=None,
                         help="curve labels: the main run, then each --compare run")
     args = parser.parse_args()
@@ -304,8 +309,6 @@ def main():
     snapshots = load_snapshots(runs[0], os.path.dirname(os.path.abspath(args.history)),
                                args.snapshots)
     peaks = load_max_energy_snapshots(runs, [args.history] + args.compare) if args.max_energy_shapes else None
-    if args.equilibrium and not peaks:
-        fail("--equilibrium needs --max-energy-shapes")
     equilibrium = load_snapshot(args.equilibrium)[:3] if args.equilibrium else None
     folder = os.path.dirname(args.out)
     if folder:
@@ -317,6 +320,11 @@ def main():
         shapes = [snapshot[:3] for _, snapshot in peaks]
         labels = [f"{name}, t* = {time:.3g}" for name, (time, _) in zip(names, peaks)]
         plot_contours(shapes, labels, args.mirror, args.out + "_max_energy_contours.png", reference=equilibrium)
+    elif equilibrium is not None:
+        # Where a relaxation ended against the static shape it should reach, and where it began.
+        ends = [snapshots[0], snapshots[-1]]
+        plot_contours([snapshot[:3] for _, snapshot in ends], [f"t* = {time:.3g}" for time, _ in ends], args.mirror,
+                      args.out + "_final_contours.png", reference=equilibrium)
 
 
 if __name__ == "__main__":

@@ -4,6 +4,7 @@
 # in form (bench_dynamics, full mode), and the plots. Run from the repository root after `make build`.
 #   demos/dynamics/run_study.sh [build-dir]             (about 90 minutes on one core)
 #   demos/dynamics/run_study.sh build --prolate         also the prolate after C0 R0 = 10 (hours, two ranks)
+#   demos/dynamics/run_study.sh build --stomatocyte     also the stomatocyte -> discocyte (about 40 minutes, two ranks)
 set -euo pipefail
 build=${1:-build}
 lmeform=$build/lmeform
@@ -58,9 +59,25 @@ $python scripts/plot_dynamics.py "${histories[0]}" --out docs/figures/kinetics -
 
 # The prolate v = 0.8 after a jump of spontaneous curvature to C0 R0 = 10: its static start at
 # eps = 0.01 on an adapted grid, then the dynamics with resets and re-meshes to the budded shape.
-if [[ "${2:-}" == "--prolate" ]]; then
+options=" ${*:2} "
+if [[ "$options" == *" --prolate "* ]]; then
   mpirun -n 2 "$lmeform" run demos/dynamics/prolate_start.toml --json "$out/prolate_start.json"
   mpirun -n 2 "$lmeform" run demos/dynamics/prolate_c0_jump.toml --json "$out/prolate_c0_jump.json"
   $python scripts/plot_dynamics.py "$out/prolate_c0_jump/prolate_c0_jump_history.json" --out docs/figures/prolate_eps01 \
     --snapshots 4 --mirror
+fi
+
+# The stomatocyte at v = 0.6 squeezed along its axis past the barrier and let go; the static
+# stomatocyte it starts from and the static discocyte it should reach.
+if [[ "$options" == *" --stomatocyte "* ]]; then
+  "$lmeform" run demos/dynamics/stomatocyte_start.toml --output "$out/stomatocyte_start" --json "$out/stomatocyte_start.json"
+  "$lmeform" run demos/dynamics/discocyte_v06.toml --output "$out/discocyte_v06" --json "$out/discocyte_v06.json"
+  sed -e "s#\"../../build/demo/#\"$PWD/$out/#g" -e "s#^directory = .*#directory = \"$out/stomatocyte_discocyte\"#" \
+      -e "s#axial_trap_lagrangian_axisymmetric.form#$PWD/demos/dynamics/axial_trap_lagrangian_axisymmetric.form#" \
+      demos/dynamics/stomatocyte_discocyte.toml > "$out/stomatocyte_discocyte.toml"
+  mpirun -n 2 "$lmeform" run "$out/stomatocyte_discocyte.toml" --json "$out/stomatocyte_discocyte.json"
+  $python scripts/plot_dynamics.py "$out/stomatocyte_discocyte/stomatocyte_discocyte_history.json" \
+    --out docs/figures/stomatocyte_discocyte --snapshots 5 --mirror \
+    --equilibrium "$out/discocyte_v06/discocyte_v06.h5" \
+    --reference-energy "$($python -c "import json; print(json.load(open('$out/discocyte_v06.json'))['energy'])")"
 fi
