@@ -4,9 +4,10 @@
     /usr/bin/python3 scripts/plot_dynamics.py RUN_history.json --out PREFIX
         [--reference-energy E] [--snapshots K] [--mirror]
         [--compare OTHER_history.json ...] [--labels LABEL ...]
+        [--max-energy-shapes] [--equilibrium FIELDS.h5]
 
 RUN_history.json is written by `lmeform run` for a dynamics scene; its "series" entries name HDF5
-field files relative to the JSON's folder. Two figures are written:
+field files relative to the JSON's folder. It writes:
 
   PREFIX_energy.png     E* against t* (log t*, with --reference-energy as a dashed "static
                         equilibrium" line, --compare runs overlaid), dt* against t* (log-log), and
@@ -322,7 +323,7 @@ def main():
         plot_contours(shapes, labels, args.mirror, args.out + "_max_energy_contours.png", reference=equilibrium)
     elif equilibrium is not None:
         # Where a relaxation ended against the static shape it should reach, and where it began.
-        ends = [snapshots[0], snapshots[-1]]
+        ends = load_snapshots(runs[0], os.path.dirname(os.path.abspath(args.history)), 2)
         plot_contours([snapshot[:3] for _, snapshot in ends], [f"t* = {time:.3g}" for time, _ in ends], args.mirror,
                       args.out + "_final_contours.png", reference=equilibrium)
 

@@ -4,9 +4,13 @@
 # in form (bench_dynamics, full mode), and the plots. Run from the repository root after `make build`.
 #   demos/dynamics/run_study.sh [build-dir]             (about 90 minutes on one core)
 #   demos/dynamics/run_study.sh build --prolate         also the prolate after C0 R0 = 10 (hours, two ranks)
-#   demos/dynamics/run_study.sh build --stomatocyte     also the stomatocyte -> discocyte (about 40 minutes, two ranks)
+#   demos/dynamics/run_study.sh build --stomatocyte     also the stomatocyte -> discocyte (about 30 minutes, two ranks)
 set -euo pipefail
 build=${1:-build}
+options=" ${*:2} "
+for option in "${@:2}"; do
+  [[ "$option" == --prolate || "$option" == --stomatocyte ]] || { echo "run_study.sh: unknown option '$option' (--prolate, --stomatocyte)" >&2; exit 2; }
+done
 lmeform=$build/lmeform
 out=$build/demo
 mkdir -p "$out" docs/figures
@@ -59,7 +63,6 @@ $python scripts/plot_dynamics.py "${histories[0]}" --out docs/figures/kinetics -
 
 # The prolate v = 0.8 after a jump of spontaneous curvature to C0 R0 = 10: its static start at
 # eps = 0.01 on an adapted grid, then the dynamics with resets and re-meshes to the budded shape.
-options=" ${*:2} "
 if [[ "$options" == *" --prolate "* ]]; then
   mpirun -n 2 "$lmeform" run demos/dynamics/prolate_start.toml --json "$out/prolate_start.json"
   mpirun -n 2 "$lmeform" run demos/dynamics/prolate_c0_jump.toml --json "$out/prolate_c0_jump.json"

@@ -6,6 +6,8 @@
 // moves the volume target; scene errors name the key.
 #include <gtest/gtest.h>
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -331,6 +333,8 @@ TEST_P(DynamicsRestart, ARunResumedFromItsCheckpointEndsLikeTheUninterruptedRun)
     EXPECT_TRUE(std::filesystem::exists(out_parts.directory / "run_checkpoint_quadrature.h5"));
   }
   EXPECT_EQ(c.resets, a.resets);
+  EXPECT_EQ(c.gradient_evaluations, a.gradient_evaluations);
+  EXPECT_EQ(c.hessian_evaluations, a.hessian_evaluations);
   EXPECT_EQ(c.remeshes, a.remeshes);
   EXPECT_EQ(c.remesh_changes, a.remesh_changes);
   if (GetParam().name == "remesh") {
@@ -357,10 +361,11 @@ TEST(Dynamics, ARestartAppliesTheScenesEnergyDecrementTarget) {
   ASSERT_TRUE(a.failure.empty()) << a.failure;
   const Case stopped = make(dynamics + "max_steps = 4\n");
   app::DynamicsOutput out{dir, "run", false};
-  (void)app::run_dynamics(PETSC_COMM_WORLD, stopped.scene, stopped.settings, &out, nullptr);
+  const DynamicsRun b = app::run_dynamics(PETSC_COMM_WORLD, stopped.scene, stopped.settings, &out, nullptr);
+  ASSERT_NE(b.failure.find("max_steps"), std::string::npos) << b.failure;
   const double first = a.history[0].energy - a.history[1].energy;
   ASSERT_GT(first, 0.0);
-  const Case larger = make(dynamics + "energy_decrement = " + std::to_string(4 * first) + "\n");
+  const Case larger = make(dynamics + fmt::format("energy_decrement = {:.17g}\n", 4 * first));
   out.restart = true;
   const DynamicsRun c = app::run_dynamics(PETSC_COMM_WORLD, larger.scene, larger.settings, &out, nullptr);
   ASSERT_TRUE(c.failure.empty()) << c.failure;

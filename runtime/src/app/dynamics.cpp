@@ -612,6 +612,8 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
                                 {"target_decrement", target_decrement},
                                 {"accepted", static_cast<std::int64_t>(run.accepted)},
                                 {"rejected", static_cast<std::int64_t>(run.rejected)},
+                                {"gradient_evaluations", static_cast<std::int64_t>(run.gradient_evaluations)},
+                                {"hessian_evaluations", static_cast<std::int64_t>(run.hessian_evaluations)},
                                 {"resets", static_cast<std::int64_t>(run.resets)},
                                 {"steps_since_reset", static_cast<std::int64_t>(steps_since_reset)},
                                 {"remeshes", static_cast<std::int64_t>(run.remeshes)},
@@ -1069,6 +1071,12 @@ DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettin
     if (settings.energy_decrement <= 0) target_decrement = std::get<double>(attr(cp, checkpoint_path, "target_decrement"));
     run.accepted = static_cast<int>(std::get<std::int64_t>(attr(cp, checkpoint_path, "accepted")));
     run.rejected = static_cast<int>(std::get<std::int64_t>(attr(cp, checkpoint_path, "rejected")));
+    // The evaluation counts carry on from the checkpoint (checkpoints written before they were
+    // stored restart them from 0).
+    for (auto [name, count] : {std::pair{"gradient_evaluations", &run.gradient_evaluations},
+                               std::pair{"hessian_evaluations", &run.hessian_evaluations}})
+      if (const auto it = cp.attributes.find(name); it != cp.attributes.end())
+        *count = static_cast<int>(std::get<std::int64_t>(it->second));
     steps_since_reset = static_cast<int>(std::get<std::int64_t>(attr(cp, checkpoint_path, "steps_since_reset")));
     for (std::size_t i = 0; i < k; ++i) nu[i] = std::get<double>(attr(cp, checkpoint_path, fmt::format("multiplier_{}", i)));
     std::ifstream in(history_path);

@@ -111,8 +111,8 @@ void read_adaptivity(const SceneTable& t, VesicleModel& m) {
       if (st.has("f")) st.fail_key("f", "does not apply to a stage with 'resolve': its grid follows the interface, not 1 + f |grad phi|");
       stage.resolve = st.positive("resolve", st.number("resolve"));
       // Without Lloyd iterations the grid is the raw density placement: its irregular spacing
-      // spoils the LME basis (measured: a cup at eps = 0.00625 converged to E = 43 with phi
-      // reaching 2.2 on it, to 12.6 after 20 iterations).
+      // spoils the LME basis (measured: a stomatocyte stage at eps = 0.00625 converged to E = 43
+      // with phi reaching 2.2 on it; after 20 iterations it runs at E = 12.5-12.6).
       if (stage.lloyd_iterations == 0)
         st.fail_key("lloyd_iterations", "must be at least 1 with 'resolve': the grid without Lloyd iterations is the raw density "
                                         "placement, too irregular for the LME basis");
