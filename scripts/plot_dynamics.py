@@ -311,6 +311,8 @@ def main():
                                args.snapshots)
     peaks = load_max_energy_snapshots(runs, [args.history] + args.compare) if args.max_energy_shapes else None
     equilibrium = load_snapshot(args.equilibrium)[:3] if args.equilibrium else None
+    # Where a relaxation began and ended, against the static shape it should reach.
+    ends = load_snapshots(runs[0], os.path.dirname(os.path.abspath(args.history)), 2) if equilibrium is not None and not peaks else None
     folder = os.path.dirname(args.out)
     if folder:
         os.makedirs(folder, exist_ok=True)
@@ -321,9 +323,7 @@ def main():
         shapes = [snapshot[:3] for _, snapshot in peaks]
         labels = [f"{name}, t* = {time:.3g}" for name, (time, _) in zip(names, peaks)]
         plot_contours(shapes, labels, args.mirror, args.out + "_max_energy_contours.png", reference=equilibrium)
-    elif equilibrium is not None:
-        # Where a relaxation ended against the static shape it should reach, and where it began.
-        ends = load_snapshots(runs[0], os.path.dirname(os.path.abspath(args.history)), 2)
+    elif ends:
         plot_contours([snapshot[:3] for _, snapshot in ends], [f"t* = {time:.3g}" for time, _ in ends], args.mirror,
                       args.out + "_final_contours.png", reference=equilibrium)
 
