@@ -22,7 +22,7 @@ struct Problem {
   std::string u, p, f;              ///< exact velocity and pressure, body force ("zero" or an expression)
 };
 
-inline std::vector<Problem> problems() {
+inline std::vector<Problem> demo_problems() {
   return {
       {"colliding_flow", -1.0, 1.0, "20*x[0]*x[1]^3*e(0) + (5*x[0]^4 - 5*x[1]^4)*e(1)", "60*x[0]^2*x[1] - 20*x[1]^3",
        "zero"},

@@ -13,7 +13,7 @@
 
 #include "lmeform/petsc.hpp"
 #include "lmeform/scene.hpp"
-#include "problem.hpp"
+#include "stationary.hpp"
 
 namespace {
 
@@ -37,12 +37,12 @@ std::string scene(int n, const std::string& coefficients) {
          "[reference.solution]\nu = \"sin(pi*x[0])*sin(pi*x[1])\"\n";
 }
 
-app::ProblemResult solve(const fs::path& path) {
+problems::ProblemResult solve(const fs::path& path) {
   const Scene s = load_scene(path);
-  const app::BoundScene bound = app::bind_scene(s, PETSC_COMM_WORLD, nullptr);
-  app::ProblemInput input;
-  input.nodes = app::initial_nodes(s);
-  return app::solve_problem(PETSC_COMM_WORLD, bound, input);
+  const problems::BoundScene bound = problems::bind_scene(s, PETSC_COMM_WORLD, nullptr);
+  problems::ProblemInput input;
+  input.nodes = problems::initial_nodes(s);
+  return problems::solve_problem(PETSC_COMM_WORLD, bound, input);
 }
 
 TEST(SceneCoefficients, SourceAsCoefficientConverges) {

@@ -17,7 +17,8 @@
 #include <utility>
 
 #include "dynamics.hpp"
-#include "problem.hpp"
+#include "stationary.hpp"
+#include "field_transfer.hpp"
 #include "lmeform/delaunay.hpp"
 #include "lmeform/lme_basis.hpp"
 #include "lmeform/quadrature.hpp"
@@ -28,8 +29,8 @@
 namespace {
 
 using namespace lmeform;
-using app::DynamicsRun;
-using app::DynamicsSettings;
+using problems::DynamicsRun;
+using problems::DynamicsSettings;
 
 // An oblate vesicle (v = 0.9, R0 = 0.4) in the box [0, 1] x [0, 1.5], h = 1/16, eps = 2h.
 std::string scene_text(const std::string& dynamics, const std::string& constraints = "area = \"initial\"\nvolume = \"initial\"\n") {
@@ -84,9 +85,9 @@ struct Case {
 };
 
 Case make(const std::string& dynamics, const std::string& constraints = "area = \"initial\"\nvolume = \"initial\"\n") {
-  const std::string_view extensions[] = {app::kDynamicsExtension};
+  const std::string_view extensions[] = {problems::kDynamicsExtension};
   Case r{parse_scene(scene_text(dynamics, constraints), "dynamics_test.toml", extensions), {}};
-  r.settings = *app::read_dynamics(r.scene);
+  r.settings = *problems::read_dynamics(r.scene);
   return r;
 }
 
@@ -99,7 +100,7 @@ double relative_drift(const DynamicsRun& run, std::size_t constraint) {
 
 TEST(Dynamics, VariationalIntegratorDecreasesTheEnergyAndKeepsAreaAndVolume) {
   const Case r = make("t_end = 0.03\ndt = 1e-3\n");
-  const DynamicsRun run = app::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
+  const DynamicsRun run = problems::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
   ASSERT_TRUE(run.failure.empty()) << run.failure;
   ASSERT_GT(run.history.size(), 5u);
   for (std::size_t s = 1; s < run.history.size(); ++s)
@@ -118,8 +119,8 @@ TEST(Dynamics, VariationalIntegratorDecreasesTheEnergyAndKeepsAreaAndVolume) {
 TEST(Dynamics, ForwardEulerAgreesWithTheVariationalIntegratorAtSmallSteps) {
   Case vti = make("t_end = 0.002\ndt = 1e-4\nadaptive = false\n");
   Case euler = make("method = \"forward_euler\"\nt_end = 0.002\ndt = 2e-5\nadaptive = false\n");
-  const DynamicsRun a = app::run_dynamics(PETSC_COMM_WORLD, vti.scene, vti.settings, nullptr, nullptr);
-  const DynamicsRun b = app::run_dynamics(PETSC_COMM_WORLD, euler.scene, euler.settings, nullptr, nullptr);
+  const DynamicsRun a = problems::run_dynamics(PETSC_COMM_WORLD, vti.scene, vti.settings, nullptr, nullptr);
+  const DynamicsRun b = problems::run_dynamics(PETSC_COMM_WORLD, euler.scene, euler.settings, nullptr, nullptr);
   ASSERT_TRUE(a.failure.empty() && b.failure.empty()) << a.failure << b.failure;
   EXPECT_EQ(a.accepted, 20);
   EXPECT_EQ(b.accepted, 100);
@@ -141,7 +142,7 @@ TEST(Dynamics, StepsAThousandTimesForwardEulersStableStep) {
   auto euler = [](const std::string& dt) {
     const Case c = make("method = \"forward_euler\"\nt_end = " + std::to_string(50 * std::stod(dt)) + "\ndt = " + dt +
                         "\nadaptive = false\nrequire_decrease = false\n");
-    return app::run_dynamics(PETSC_COMM_WORLD, c.scene, c.settings, nullptr, nullptr);
+    return problems::run_dynamics(PETSC_COMM_WORLD, c.scene, c.settings, nullptr, nullptr);
   };
   auto rises = [](const DynamicsRun& run) {
     if (!run.failure.empty()) return true;
@@ -157,7 +158,7 @@ TEST(Dynamics, StepsAThousandTimesForwardEulersStableStep) {
   // measured), lowers the energy, keeps area and volume and leaves det F > 0; the first already
   // lands below where Euler's 50 stable steps (to t* = 0.2) got.
   const Case big = make("t_end = 16.0\ndt = 8.0\nadaptive = false\nhessian = \"iteration\"\n");
-  const DynamicsRun run = app::run_dynamics(PETSC_COMM_WORLD, big.scene, big.settings, nullptr, nullptr);
+  const DynamicsRun run = problems::run_dynamics(PETSC_COMM_WORLD, big.scene, big.settings, nullptr, nullptr);
   ASSERT_TRUE(run.failure.empty()) << run.failure;
   ASSERT_EQ(run.accepted, 2);
   EXPECT_EQ(run.rejected, 0);
@@ -170,7 +171,7 @@ TEST(Dynamics, StepsAThousandTimesForwardEulersStableStep) {
   // times in a row: the step is rejected and the run goes on at 4 (21 and 22 iterations measured),
   // to the same end time, its energy still falling.
   const Case saving = make("t_end = 8.0\ndt = 8.0\nadaptive = false\n");
-  const DynamicsRun halved = app::run_dynamics(PETSC_COMM_WORLD, saving.scene, saving.settings, nullptr, nullptr);
+  const DynamicsRun halved = problems::run_dynamics(PETSC_COMM_WORLD, saving.scene, saving.settings, nullptr, nullptr);
   ASSERT_TRUE(halved.failure.empty()) << halved.failure;
   EXPECT_EQ(halved.rejected, 1);
   ASSERT_EQ(halved.accepted, 2);
@@ -186,7 +187,7 @@ TEST(Dynamics, AStepWhoseNewtonFailsIsRejectedAndRetried) {
   // retried with halved steps until Newton converges; the run then reaches t_end.
   Case r = make("t_end = 0.03\ndt = 0.02\n");
   r.scene.solver.max_newton_iterations = 4;
-  const DynamicsRun run = app::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
+  const DynamicsRun run = problems::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
   ASSERT_TRUE(run.failure.empty()) << run.failure;
   EXPECT_GT(run.rejected, 0);
   EXPECT_GT(run.history[1].rejected, 0);
@@ -201,7 +202,7 @@ TEST(Dynamics, AStepWhoseNewtonFailsIsRejectedAndRetried) {
 TEST(Dynamics, TinyStepsConvergeDespiteRounding) {
   // dt* = 1e-7: the proximal term is 1e7 times the energy's; Newton still meets its tolerance.
   const Case r = make("t_end = 3e-7\ndt = 1e-7\nadaptive = false\n");
-  const DynamicsRun run = app::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
+  const DynamicsRun run = problems::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
   ASSERT_TRUE(run.failure.empty()) << run.failure;
   EXPECT_EQ(run.accepted, 3);
   EXPECT_EQ(run.rejected, 0);
@@ -210,7 +211,7 @@ TEST(Dynamics, TinyStepsConvergeDespiteRounding) {
 
 TEST(Dynamics, AStepThatCannotBeTakenNamesTheQuadraturePointAndLeavesTheState) {
   const Case r = make("t_end = 0.01\ndt = 0.01\nmin_jacobian = 1.5\nmax_retries = 3\n");
-  const DynamicsRun run = app::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
+  const DynamicsRun run = problems::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
   EXPECT_NE(run.failure.find("det F"), std::string::npos) << run.failure;
   EXPECT_NE(run.failure.find("quadrature point"), std::string::npos) << run.failure;
   EXPECT_NE(run.failure.find("failed 4 times"), std::string::npos) << run.failure;
@@ -224,8 +225,8 @@ TEST(Dynamics, AStepThatCannotBeTakenNamesTheQuadraturePointAndLeavesTheState) {
 TEST(Dynamics, AResetOfTheReferenceChangesNothingAndTheRunContinuesTheSame) {
   const Case plain = make("t_end = 0.012\ndt = 1e-3\n");
   const Case with_resets = make("t_end = 0.012\ndt = 1e-3\nreset_every = 3\n");
-  const DynamicsRun a = app::run_dynamics(PETSC_COMM_WORLD, plain.scene, plain.settings, nullptr, nullptr);
-  const DynamicsRun b = app::run_dynamics(PETSC_COMM_WORLD, with_resets.scene, with_resets.settings, nullptr, nullptr);
+  const DynamicsRun a = problems::run_dynamics(PETSC_COMM_WORLD, plain.scene, plain.settings, nullptr, nullptr);
+  const DynamicsRun b = problems::run_dynamics(PETSC_COMM_WORLD, with_resets.scene, with_resets.settings, nullptr, nullptr);
   ASSERT_TRUE(a.failure.empty() && b.failure.empty()) << a.failure << b.failure;
   EXPECT_EQ(a.resets, 0);
   ASSERT_GE(b.resets, 3);
@@ -251,9 +252,11 @@ TEST(Dynamics, AResetKeepsTheMaterialBoundaryWhereACoefficientLeavesTheBox) {
   // part and be held (on the axis, with y_r = 0: the state changed). The Dirichlet node sets of the
   // material nodes are carried instead. Here a free node of the top row is moved onto z_max.
   const Case r = make("t_end = 0.01\ndt = 0.01\n");
-  const app::BoundScene b = app::bind_scene(r.scene, PETSC_COMM_WORLD, nullptr, {}, {}, {r.settings.dissipation});
-  const NodeSet material = app::initial_nodes(r.scene);
-  const std::vector<std::vector<int>> sets = app::dirichlet_nodes(r.scene, material);
+  problems::OutputRoles dissipation;
+  dissipation.auxiliary = {r.settings.dissipation};
+  const problems::BoundScene b = problems::bind_scene(r.scene, PETSC_COMM_WORLD, nullptr, dissipation);
+  const NodeSet material = problems::initial_nodes(r.scene);
+  const std::vector<std::vector<int>> sets = problems::dirichlet_nodes(b, material);
   ASSERT_EQ(sets.size(), 2u);
   std::vector<double> coords = material.coords;
   int moved = -1;
@@ -262,26 +265,26 @@ TEST(Dynamics, AResetKeepsTheMaterialBoundaryWhereACoefficientLeavesTheBox) {
   ASSERT_GE(moved, 0);
   coords[std::size_t(moved) * 2] = 0.53125;  // between two wall nodes
   coords[std::size_t(moved) * 2 + 1] = 1.5;
-  app::ProblemInput input;
+  problems::ProblemInput input;
   input.nodes = NodeSet(2, coords);
   input.initial = coords;  // y = the new node positions, as after a reset
-  auto held = [&](const app::ProblemSpace& space) {
+  auto held = [&](const problems::ProblemSpace& space) {
     return std::count(space.fixed_pairs.begin(), space.fixed_pairs.end(), std::pair<int, int>{moved, 1}) > 0;
   };
-  EXPECT_TRUE(held(app::build_problem_space(PETSC_COMM_WORLD, b, input)));  // the failure mode
+  EXPECT_TRUE(held(problems::build_problem_space(PETSC_COMM_WORLD, b, input)));  // the failure mode
   input.dirichlet_nodes = sets;
-  const app::ProblemSpace carried = app::build_problem_space(PETSC_COMM_WORLD, b, input);
+  const problems::ProblemSpace carried = problems::build_problem_space(PETSC_COMM_WORLD, b, input);
   EXPECT_FALSE(held(carried));
   EXPECT_EQ(carried.fixed_pairs.size(), 2 * sets[0].size() + sets[1].size());  // walls: both components; axis: y_r
   input.dirichlet_nodes.pop_back();
-  EXPECT_THROW((void)app::build_problem_space(PETSC_COMM_WORLD, b, input), std::invalid_argument);
+  EXPECT_THROW((void)problems::build_problem_space(PETSC_COMM_WORLD, b, input), std::invalid_argument);
 }
 
 TEST(Dynamics, AFoldingStepResetsTheReferenceWhenResetsAreOn) {
   // det F may not fall below 0.995 from a reference: with resets on, a step that would cross it
   // resets the reference instead of shrinking the step forever.
   const Case r = make("t_end = 0.02\ndt = 0.002\nmin_jacobian = 0.995\nreset_distortion = 100.0\n");
-  const DynamicsRun run = app::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
+  const DynamicsRun run = problems::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
   ASSERT_TRUE(run.failure.empty()) << run.failure;
   EXPECT_GT(run.resets, 0);
   EXPECT_NEAR(run.history.back().t_star, 0.02, 1e-12);
@@ -302,19 +305,19 @@ TEST_P(DynamicsRestart, ARunResumedFromItsCheckpointEndsLikeTheUninterruptedRun)
   std::filesystem::create_directories(dir);
   const std::string dynamics = "t_end = 0.012\ndt = 1e-3\ncheckpoint_every = 4\noutput_every = 2\n" + GetParam().keys;
   const Case whole = make(dynamics);
-  app::DynamicsOutput out_whole{dir / "whole", "run", false};
+  problems::DynamicsOutput out_whole{dir / "whole", "run", false};
   std::filesystem::create_directories(out_whole.directory);
-  const DynamicsRun a = app::run_dynamics(PETSC_COMM_WORLD, whole.scene, whole.settings, &out_whole, nullptr);
+  const DynamicsRun a = problems::run_dynamics(PETSC_COMM_WORLD, whole.scene, whole.settings, &out_whole, nullptr);
   ASSERT_TRUE(a.failure.empty()) << a.failure;
 
   Case stopped = make(dynamics + "max_steps = 4\n");
-  app::DynamicsOutput out_parts{dir / "parts", "run", false};
+  problems::DynamicsOutput out_parts{dir / "parts", "run", false};
   std::filesystem::create_directories(out_parts.directory);
-  const DynamicsRun b = app::run_dynamics(PETSC_COMM_WORLD, stopped.scene, stopped.settings, &out_parts, nullptr);
+  const DynamicsRun b = problems::run_dynamics(PETSC_COMM_WORLD, stopped.scene, stopped.settings, &out_parts, nullptr);
   EXPECT_NE(b.failure.find("max_steps"), std::string::npos) << b.failure;
   EXPECT_TRUE(std::filesystem::exists(out_parts.directory / "run_checkpoint.h5"));
   out_parts.restart = true;
-  const DynamicsRun c = app::run_dynamics(PETSC_COMM_WORLD, whole.scene, whole.settings, &out_parts, nullptr);
+  const DynamicsRun c = problems::run_dynamics(PETSC_COMM_WORLD, whole.scene, whole.settings, &out_parts, nullptr);
   ASSERT_TRUE(c.failure.empty()) << c.failure;
   ASSERT_EQ(c.history.size(), a.history.size());
   for (std::size_t s = 0; s < a.history.size(); ++s) {
@@ -357,17 +360,17 @@ TEST(Dynamics, ARestartAppliesTheScenesEnergyDecrementTarget) {
   std::filesystem::create_directories(dir);
   const std::string dynamics = "t_end = 0.03\ndt = 1e-3\ncheckpoint_every = 4\noutput_every = 0\n";
   const Case whole = make(dynamics);
-  const DynamicsRun a = app::run_dynamics(PETSC_COMM_WORLD, whole.scene, whole.settings, nullptr, nullptr);
+  const DynamicsRun a = problems::run_dynamics(PETSC_COMM_WORLD, whole.scene, whole.settings, nullptr, nullptr);
   ASSERT_TRUE(a.failure.empty()) << a.failure;
   const Case stopped = make(dynamics + "max_steps = 4\n");
-  app::DynamicsOutput out{dir, "run", false};
-  const DynamicsRun b = app::run_dynamics(PETSC_COMM_WORLD, stopped.scene, stopped.settings, &out, nullptr);
+  problems::DynamicsOutput out{dir, "run", false};
+  const DynamicsRun b = problems::run_dynamics(PETSC_COMM_WORLD, stopped.scene, stopped.settings, &out, nullptr);
   ASSERT_NE(b.failure.find("max_steps"), std::string::npos) << b.failure;
   const double first = a.history[0].energy - a.history[1].energy;
   ASSERT_GT(first, 0.0);
   const Case larger = make(dynamics + fmt::format("energy_decrement = {:.17g}\n", 4 * first));
   out.restart = true;
-  const DynamicsRun c = app::run_dynamics(PETSC_COMM_WORLD, larger.scene, larger.settings, &out, nullptr);
+  const DynamicsRun c = problems::run_dynamics(PETSC_COMM_WORLD, larger.scene, larger.settings, &out, nullptr);
   ASSERT_TRUE(c.failure.empty()) << c.failure;
   ASSERT_GT(c.history.size(), 6u);
   for (std::size_t s = 0; s <= 4; ++s) EXPECT_EQ(c.history[s].t_star, a.history[s].t_star) << "step " << s;
@@ -380,7 +383,7 @@ TEST(Dynamics, AScheduledDeflationMovesTheVolumeTarget) {
   // V0(t) = V0(0) (1 - 2 t*) for t* <= 0.01: 2 % less volume at the end, area kept.
   const Case r = make("t_end = 0.01\ndt = 1e-3\nadaptive = false\n[dynamics.schedule]\nV0 = { rate = -2.0, until = 0.01 }\n",
                      "area = \"initial\"\nvolume = \"initial\"\n");
-  const DynamicsRun run = app::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
+  const DynamicsRun run = problems::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
   ASSERT_TRUE(run.failure.empty()) << run.failure;
   const double v0 = run.history.front().constraints[1], v1 = run.history.back().constraints[1];
   EXPECT_NEAR(v1 / v0, 0.98, 1e-9);
@@ -395,8 +398,8 @@ TEST(Dynamics, AReportTimeIsLandedOnAndWritesTheFieldsThere) {
   std::filesystem::create_directories(dir);
   const Case r = make("t_end = 0.006\ndt = 1e-3\nadaptive = false\noutput_every = 0\nreport_times = [0.0035]\n"
                       "[dynamics.schedule]\nV0 = { rate = -2.0, until = 0.0035 }\n");
-  app::DynamicsOutput out{dir, "run", false};
-  const DynamicsRun run = app::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, &out, nullptr);
+  problems::DynamicsOutput out{dir, "run", false};
+  const DynamicsRun run = problems::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, &out, nullptr);
   ASSERT_TRUE(run.failure.empty()) << run.failure;
   ASSERT_GE(run.history.size(), 5u);
   EXPECT_NEAR(run.history[4].t_star, 0.0035, 1e-14);
@@ -416,7 +419,7 @@ TEST(Dynamics, AScheduleHistoryDeflatesThenReinflatesAndAPulseOfCurvatureEnds) {
                       "V0 = [ { rate = -2.0, from = 0.0, until = 0.005 }, { rate = 2.0, from = 0.005, until = 0.01 } ]\n"
                       "C0 = [ { at = 0.001, value = 3.0 }, { at = 0.003, value = 0.0 } ]\n",
                       "area = \"initial\"\nvolume = \"initial\"\n");
-  const DynamicsRun run = app::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
+  const DynamicsRun run = problems::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
   ASSERT_TRUE(run.failure.empty()) << run.failure;
   ASSERT_EQ(run.history.size(), 11u);
   const double v0 = run.history.front().constraints[1];
@@ -427,7 +430,7 @@ TEST(Dynamics, AScheduleHistoryDeflatesThenReinflatesAndAPulseOfCurvatureEnds) {
   const Case plain = make("t_end = 0.01\ndt = 1e-3\nadaptive = false\n[dynamics.schedule]\n"
                           "V0 = [ { rate = -2.0, from = 0.0, until = 0.005 }, { rate = 2.0, from = 0.005, until = 0.01 } ]\n",
                           "area = \"initial\"\nvolume = \"initial\"\n");
-  const DynamicsRun without = app::run_dynamics(PETSC_COMM_WORLD, plain.scene, plain.settings, nullptr, nullptr);
+  const DynamicsRun without = problems::run_dynamics(PETSC_COMM_WORLD, plain.scene, plain.settings, nullptr, nullptr);
   ASSERT_TRUE(without.failure.empty()) << without.failure;
   EXPECT_NEAR(run.history[0].energy, without.history[0].energy, 1e-12 * without.history[0].energy);
   for (std::size_t s = 1; s < 3; ++s) EXPECT_GT(std::abs(run.history[s].energy - without.history[s].energy), 1e-3) << "step " << s;
@@ -483,9 +486,9 @@ reset_every = 2
 class DynamicsCartesian : public ::testing::TestWithParam<int> {};
 
 TEST_P(DynamicsCartesian, TheEnergyFallsAndAreaAndVolumeHold) {
-  const std::string_view extensions[] = {app::kDynamicsExtension};
+  const std::string_view extensions[] = {problems::kDynamicsExtension};
   const Scene scene = parse_scene(cartesian_scene(GetParam()), "dynamics_cartesian.toml", extensions);
-  const DynamicsRun run = app::run_dynamics(PETSC_COMM_WORLD, scene, *app::read_dynamics(scene), nullptr, nullptr);
+  const DynamicsRun run = problems::run_dynamics(PETSC_COMM_WORLD, scene, *problems::read_dynamics(scene), nullptr, nullptr);
   ASSERT_TRUE(run.failure.empty()) << run.failure;
   EXPECT_EQ(run.accepted, 4);
   EXPECT_EQ(run.resets, 1);
@@ -502,9 +505,9 @@ TEST(Dynamics, AReMeshProjectsTheFieldOntoAnAdaptedGridAndTheRunGoesOn) {
   const Case fitted = make(keys + "remesh_projection = \"nodes\"\n");
   const Case copied = make(keys + "remesh_projection = \"nodes\"\nremesh_fit_iterations = 0\n");
   const Case projected = make(keys);
-  const DynamicsRun a = app::run_dynamics(PETSC_COMM_WORLD, fitted.scene, fitted.settings, nullptr, nullptr);
-  const DynamicsRun b = app::run_dynamics(PETSC_COMM_WORLD, copied.scene, copied.settings, nullptr, nullptr);
-  const DynamicsRun c = app::run_dynamics(PETSC_COMM_WORLD, projected.scene, projected.settings, nullptr, nullptr);
+  const DynamicsRun a = problems::run_dynamics(PETSC_COMM_WORLD, fitted.scene, fitted.settings, nullptr, nullptr);
+  const DynamicsRun b = problems::run_dynamics(PETSC_COMM_WORLD, copied.scene, copied.settings, nullptr, nullptr);
+  const DynamicsRun c = problems::run_dynamics(PETSC_COMM_WORLD, projected.scene, projected.settings, nullptr, nullptr);
   ASSERT_TRUE(a.failure.empty() && b.failure.empty() && c.failure.empty()) << a.failure << b.failure << c.failure;
   std::printf("re-mesh: relative change of E fitted %+.2e, copied %+.2e, L2-projected from the points %+.2e\n", a.remesh_changes[0],
               b.remesh_changes[0], c.remesh_changes[0]);
@@ -526,11 +529,11 @@ TEST(Dynamics, AReMeshProjectsTheFieldOntoAnAdaptedGridAndTheRunGoesOn) {
 TEST(Dynamics, AReMeshCanChangeTheNodeCount) {
   const std::string keys = "t_end = 0.006\ndt = 1e-3\nadaptive = false\nremesh_every = 4\nremesh_factor = 10.0\n";
   const Case same = make(keys);
-  const DynamicsRun a = app::run_dynamics(PETSC_COMM_WORLD, same.scene, same.settings, nullptr, nullptr);
+  const DynamicsRun a = problems::run_dynamics(PETSC_COMM_WORLD, same.scene, same.settings, nullptr, nullptr);
   ASSERT_TRUE(a.failure.empty()) << a.failure;
   const std::size_t n = a.reference_nodes.size(), more = n + n / 2;
   const Case grown = make(keys + "remesh_nodes = " + std::to_string(more) + "\n");
-  const DynamicsRun b = app::run_dynamics(PETSC_COMM_WORLD, grown.scene, grown.settings, nullptr, nullptr);
+  const DynamicsRun b = problems::run_dynamics(PETSC_COMM_WORLD, grown.scene, grown.settings, nullptr, nullptr);
   ASSERT_TRUE(b.failure.empty()) << b.failure;
   ASSERT_EQ(b.remeshes, 1);
   EXPECT_EQ(b.reference_nodes.size(), more);
@@ -544,7 +547,7 @@ TEST(Dynamics, AReMeshCanChangeTheNodeCount) {
   // Fewer nodes than the walls hold is refused with the key's name.
   const Case tiny = make(keys + "remesh_nodes = 5\n");
   try {
-    const DynamicsRun c = app::run_dynamics(PETSC_COMM_WORLD, tiny.scene, tiny.settings, nullptr, nullptr);
+    const DynamicsRun c = problems::run_dynamics(PETSC_COMM_WORLD, tiny.scene, tiny.settings, nullptr, nullptr);
     EXPECT_NE(c.failure.find("remesh_nodes"), std::string::npos) << c.failure;
   } catch (const std::exception& e) {
     EXPECT_NE(std::string(e.what()).find("remesh_nodes = 5"), std::string::npos) << e.what();
@@ -557,9 +560,9 @@ TEST(Dynamics, CarryingAFieldToPointsOutsideTheOldHullFailsOrFallsBackToTheNeare
   std::vector<double> values(old_nodes.size());
   for (std::size_t a = 0; a < old_nodes.size(); ++a) values[a] = 1.0 + 2.0 * old_nodes.point(a)[0] + old_nodes.point(a)[1];
   const NodeSet new_nodes(2, {0.25, 0.5, 0.9, 0.5});
-  EXPECT_THROW((void)app::interpolate_nodal_field(old_nodes, values, 0.8, LmeOptions{}, new_nodes), LmeEvaluationError);
+  EXPECT_THROW((void)problems::interpolate_nodal_field(old_nodes, values, 0.8, LmeOptions{}, new_nodes), LmeEvaluationError);
   std::size_t fallbacks = 0;
-  const std::vector<double> carried = app::interpolate_nodal_field(old_nodes, values, 0.8, LmeOptions{}, new_nodes, &fallbacks);
+  const std::vector<double> carried = problems::interpolate_nodal_field(old_nodes, values, 0.8, LmeOptions{}, new_nodes, &fallbacks);
   EXPECT_EQ(fallbacks, 1u);
   EXPECT_NEAR(carried[0], 1.0 + 0.5 + 0.5, 1e-8);  // affine: reproduced inside
   EXPECT_NEAR(carried[1], 1.0 + 1.0 + 0.5, 1e-12);  // the nearest old node, (0.5, 0.5)
@@ -578,7 +581,7 @@ TEST(Dynamics, TheL2ProjectionFromPointsReproducesAFieldOfTheSpace) {
     values.push_back(affine(cloud.point(q)[0], cloud.point(q)[1]));
   }
   const std::vector<double> start(nodes.size(), 0.0);
-  const app::PointProjection l2 = app::project_point_values(nodes, 0.8, LmeOptions{}, points, weights, values, start, 1e-12);
+  const problems::PointProjection l2 = problems::project_point_values(nodes, 0.8, LmeOptions{}, points, weights, values, start, 1e-12);
   EXPECT_LT(l2.relative_residual, 1e-12);
   double error = 0;
   for (std::size_t a = 0; a < nodes.size(); ++a) error = std::max(error, std::abs(l2.values[a] - affine(nodes.point(a)[0], nodes.point(a)[1])));
@@ -591,7 +594,7 @@ TEST(Dynamics, TheL2ProjectionFromPointsReproducesAFieldOfTheSpace) {
       far_weights.push_back(weights[q]);
       far_values.push_back(values[q]);
     }
-  EXPECT_THROW((void)app::project_point_values(nodes, 0.8, LmeOptions{}, far_points, far_weights, far_values, start), std::runtime_error);
+  EXPECT_THROW((void)problems::project_point_values(nodes, 0.8, LmeOptions{}, far_points, far_weights, far_values, start), std::runtime_error);
 }
 
 TEST(Dynamics, TheProjectionEvaluatesPointsOutsideTheHullOfTheirSupportsThroughTheirCell) {
@@ -621,7 +624,7 @@ TEST(Dynamics, TheProjectionEvaluatesPointsOutsideTheHullOfTheirSupportsThroughT
   std::vector<double> values;
   for (std::size_t q = 0; q < cloud.size(); ++q) values.push_back(affine(cloud.point(q)[0], cloud.point(q)[1]));
   const std::vector<double> start(nodes.size(), 0.0);
-  const app::PointProjection l2 = app::project_point_values(nodes, gamma, LmeOptions{}, cloud.points, cloud.weights, values, start, 1e-12);
+  const problems::PointProjection l2 = problems::project_point_values(nodes, gamma, LmeOptions{}, cloud.points, cloud.weights, values, start, 1e-12);
   EXPECT_LT(l2.relative_residual, 1e-12);
   double error = 0;
   for (std::size_t a = 0; a < nodes.size(); ++a) error = std::max(error, std::abs(l2.values[a] - affine(nodes.point(a)[0], nodes.point(a)[1])));
@@ -642,7 +645,7 @@ TEST(Dynamics, TheH1ProjectionFromPointsFitsGradientsBetterThanL2) {
     affine_values.push_back(0.3 + 2.0 * cloud.point(q)[0] - 1.5 * cloud.point(q)[1]);
     affine_gradients.insert(affine_gradients.end(), {2.0, -1.5});
   }
-  const app::PointProjection affine = app::project_point_values(nodes, 0.8, LmeOptions{}, cloud.coords, weights, affine_values, start,
+  const problems::PointProjection affine = problems::project_point_values(nodes, 0.8, LmeOptions{}, cloud.coords, weights, affine_values, start,
                                                                 1e-12, 5000, {affine_gradients, 0.05});
   double error = 0;
   for (std::size_t a = 0; a < nodes.size(); ++a)
@@ -656,9 +659,9 @@ TEST(Dynamics, TheH1ProjectionFromPointsFitsGradientsBetterThanL2) {
     values.push_back(t);
     gradients.insert(gradients.end(), {(1 - t * t) / width, 0.0});
   }
-  const app::PointProjection l2 = app::project_point_values(nodes, 0.8, LmeOptions{}, cloud.coords, weights, values, start, 1e-10);
-  const app::PointProjection h1 =
-      app::project_point_values(nodes, 0.8, LmeOptions{}, cloud.coords, weights, values, start, 1e-10, 5000, {gradients, width});
+  const problems::PointProjection l2 = problems::project_point_values(nodes, 0.8, LmeOptions{}, cloud.coords, weights, values, start, 1e-10);
+  const problems::PointProjection h1 =
+      problems::project_point_values(nodes, 0.8, LmeOptions{}, cloud.coords, weights, values, start, 1e-10, 5000, {gradients, width});
   auto errors = [&](const std::vector<double>& c) {
     const LmeBasis basis(nodes, std::vector<double>(nodes.size(), 0.8), LmeOptions{});
     double value_error = 0, gradient_error = 0;
@@ -684,7 +687,7 @@ TEST(Dynamics, TheH1ProjectionFromPointsFitsGradientsBetterThanL2) {
   EXPECT_LT(h1_gradient, l2_gradient);               // H1 trades some of it for the gradient
   EXPECT_LT(h1_gradient, 0.9 * l2_gradient) << "L2 " << l2_gradient << ", H1 " << h1_gradient;
   // Gradients that do not match the points are an error.
-  EXPECT_THROW((void)app::project_point_values(nodes, 0.8, LmeOptions{}, cloud.coords, weights, values, start, 1e-8, 10,
+  EXPECT_THROW((void)problems::project_point_values(nodes, 0.8, LmeOptions{}, cloud.coords, weights, values, start, 1e-8, 10,
                                                {std::span<const double>(gradients).first(10), width}),
                std::invalid_argument);
 }
@@ -692,8 +695,8 @@ TEST(Dynamics, TheH1ProjectionFromPointsFitsGradientsBetterThanL2) {
 TEST(Dynamics, AJumpOfSpontaneousCurvatureActsFromItsTime) {
   const Case plain = make("t_end = 0.004\ndt = 1e-3\nadaptive = false\n");
   const Case jump = make("t_end = 0.004\ndt = 1e-3\nadaptive = false\n[dynamics.schedule]\nC0 = { at = 0.002, value = 3.0 }\n");
-  const DynamicsRun a = app::run_dynamics(PETSC_COMM_WORLD, plain.scene, plain.settings, nullptr, nullptr);
-  const DynamicsRun b = app::run_dynamics(PETSC_COMM_WORLD, jump.scene, jump.settings, nullptr, nullptr);
+  const DynamicsRun a = problems::run_dynamics(PETSC_COMM_WORLD, plain.scene, plain.settings, nullptr, nullptr);
+  const DynamicsRun b = problems::run_dynamics(PETSC_COMM_WORLD, jump.scene, jump.settings, nullptr, nullptr);
   ASSERT_TRUE(a.failure.empty() && b.failure.empty()) << a.failure << b.failure;
   ASSERT_EQ(a.history.size(), 5u);
   ASSERT_EQ(b.history.size(), 5u);
@@ -706,7 +709,7 @@ TEST(Dynamics, BadScenesNameTheKey) {
   auto error_of = [](const std::string& dynamics) {
     try {
       const Case r = make(dynamics);
-      (void)app::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
+      (void)problems::run_dynamics(PETSC_COMM_WORLD, r.scene, r.settings, nullptr, nullptr);
     } catch (const SceneError& e) {
       return std::string(e.what());
     }
@@ -718,10 +721,10 @@ TEST(Dynamics, BadScenesNameTheKey) {
   {
     std::string text = scene_text("t_end = 0.01\ndt = 1e-3\n");
     text.replace(text.find("dissipation = \"dissipation\""), 27, "dissipation = \"disipation\"");
-    const std::string_view extensions[] = {app::kDynamicsExtension};
+    const std::string_view extensions[] = {problems::kDynamicsExtension};
     const Scene scene = parse_scene(text, "dynamics_test.toml", extensions);
     try {
-      (void)app::run_dynamics(PETSC_COMM_WORLD, scene, *app::read_dynamics(scene), nullptr, nullptr);
+      (void)problems::run_dynamics(PETSC_COMM_WORLD, scene, *problems::read_dynamics(scene), nullptr, nullptr);
       ADD_FAILURE() << "a misspelt dissipation output was accepted";
     } catch (const SceneError& e) {
       EXPECT_NE(std::string(e.what()).find("disipation"), std::string::npos) << e.what();

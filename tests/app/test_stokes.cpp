@@ -11,7 +11,7 @@
 
 #include "lmeform/petsc.hpp"
 #include "lmeform/scene.hpp"
-#include "problem.hpp"
+#include "stationary.hpp"
 #include "stokes_problems.hpp"
 
 namespace {
@@ -30,11 +30,11 @@ Errors solve(const Problem& pb, int n, double C, double alpha, double beta, bool
   const std::string six = "quadrature_points = 6";
   text.replace(text.find(six), six.size(), "quadrature_points = " + std::to_string(quadrature_points));
   const Scene scene = parse_scene(text, pb.name + ".toml");
-  const app::BoundScene bound = app::bind_scene(scene, PETSC_COMM_WORLD, nullptr);
-  app::ProblemInput input;
+  const problems::BoundScene bound = problems::bind_scene(scene, PETSC_COMM_WORLD, nullptr);
+  problems::ProblemInput input;
   input.nodes = graded ? graded_nodes(pb, n) : uniform_nodes(pb, n);
   input.constants = {{"C", C}, {"alpha", alpha}, {"beta", beta}};
-  const app::ProblemResult r = app::solve_problem(PETSC_COMM_WORLD, bound, input);
+  const problems::ProblemResult r = problems::solve_problem(PETSC_COMM_WORLD, bound, input);
   EXPECT_TRUE(r.converged) << r.message;
   Errors e;
   for (const auto& fe : r.errors) {
@@ -50,7 +50,7 @@ Errors solve(const Problem& pb, int n, double C, double alpha, double beta, bool
 }
 
 Problem problem(const std::string& name) {
-  for (const auto& p : problems())
+  for (const auto& p : demo_problems())
     if (p.name == name) return p;
   throw std::logic_error("no problem " + name);
 }
@@ -94,10 +94,10 @@ TEST(Stokes, ThreeDimensionalPatchTest) {
       "[[dirichlet]]\nboundary = [\"hull\"]\nunknown = \"u\"\nvalue = \"x[0]*e(0) + x[1]*e(1) - 2*x[2]*e(2)\"\n"
       "[reference.solution]\nu = \"x[0]*e(0) + x[1]*e(1) - 2*x[2]*e(2)\"\np = \"x[0] + x[1] + x[2] - 1.5\"\n";
   const Scene scene = parse_scene(text, "patch3d.toml");
-  const app::BoundScene bound = app::bind_scene(scene, PETSC_COMM_WORLD, nullptr);
-  app::ProblemInput input;
-  input.nodes = app::initial_nodes(scene);
-  const app::ProblemResult r = app::solve_problem(PETSC_COMM_WORLD, bound, input);
+  const problems::BoundScene bound = problems::bind_scene(scene, PETSC_COMM_WORLD, nullptr);
+  problems::ProblemInput input;
+  input.nodes = problems::initial_nodes(scene);
+  const problems::ProblemResult r = problems::solve_problem(PETSC_COMM_WORLD, bound, input);
   ASSERT_TRUE(r.converged) << r.message;
   ASSERT_EQ(r.errors.size(), 2u);
   for (const auto& e : r.errors) {
@@ -157,10 +157,10 @@ TEST(Stokes, ZeroMeanByConstraintAndByNullSpaceAgree) {
 void expect_scene_error(const std::string& text, const std::string& expected) {
   try {
     const Scene scene = parse_scene(text, "bad.toml");
-    const app::BoundScene bound = app::bind_scene(scene, PETSC_COMM_WORLD, nullptr);
-    app::ProblemInput input;
+    const problems::BoundScene bound = problems::bind_scene(scene, PETSC_COMM_WORLD, nullptr);
+    problems::ProblemInput input;
     input.nodes = uniform_nodes(problem("poiseuille"), 5);
-    (void)app::solve_problem(PETSC_COMM_WORLD, bound, input);
+    (void)problems::solve_problem(PETSC_COMM_WORLD, bound, input);
     ADD_FAILURE() << "no error; expected: " << expected;
   } catch (const SceneError& e) {
     EXPECT_NE(std::string(e.what()).find(expected), std::string::npos) << e.what();

@@ -45,7 +45,7 @@ struct Record {
   bool stable = true;
   double energy_t2 = 0;
   int steps_to_t2 = 0;  ///< forward Euler trials run on past t2* to show stability
-  app::DynamicsRun run;
+  problems::DynamicsRun run;
 };
 
 }  // namespace
@@ -54,7 +54,7 @@ int main(int argc, char** argv) {
   const bench::BenchOptions options = bench::parse_bench_options(argc, argv);
   PetscSession session(&argc, &argv);
   const int rank = PetscSession::rank();
-  const std::string_view extensions[] = {app::kDynamicsExtension};
+  const std::string_view extensions[] = {problems::kDynamicsExtension};
   // PETSc-style options after --quick/--out: -window T1 T2 (another interval), -scene PATH (another
   // dynamics scene), -vti_divisors D1,D2,... (VTI steps (T2 - T1) / D).
   double t1 = 1e-3, t2 = options.quick ? 3e-3 : 1.1e-2;
@@ -97,7 +97,7 @@ int main(int argc, char** argv) {
     scene.nodes.spacing = 0.0625;
     scene.constants["eps"] = 0.125;
   }
-  app::DynamicsSettings base = *app::read_dynamics(scene);
+  problems::DynamicsSettings base = *problems::read_dynamics(scene);
   base.output_every = 0;
   base.checkpoint_every = 0;
   // A re-mesh projects the field and changes E: the methods are compared on the motion alone.
@@ -105,10 +105,10 @@ int main(int argc, char** argv) {
   base.report_times.clear();
 
   // The common state at t1*: adaptive VTI from the start with small first steps.
-  app::DynamicsSettings lead = base;
+  problems::DynamicsSettings lead = base;
   lead.t_end = t1;
   lead.dt = std::min(t1 / 10, 1e-4);
-  const app::DynamicsRun start = app::run_dynamics(PETSC_COMM_WORLD, scene, lead, nullptr, nullptr);
+  const problems::DynamicsRun start = problems::run_dynamics(PETSC_COMM_WORLD, scene, lead, nullptr, nullptr);
   if (!start.failure.empty()) {
     std::fprintf(stderr, "bench_dynamics: the run to t1* failed: %s\n", start.failure.c_str());
     return 1;
@@ -117,14 +117,14 @@ int main(int argc, char** argv) {
     std::printf("state at t1* = %.1e: E = %.8f after %d adaptive VTI steps (%zu nodes, h_min %.4g)\n", t1,
                 start.history.back().energy, start.accepted, start.reference_nodes.size(), start.h_min);
 
-  auto window = [&](app::DynamicsSettings::Method method, double dt_star) {
-    app::DynamicsSettings s = base;
+  auto window = [&](problems::DynamicsSettings::Method method, double dt_star) {
+    problems::DynamicsSettings s = base;
     s.method = method;
     s.adaptive = false;
     s.dt = dt_star;
     s.t_start = t1;
     s.t_end = t2;
-    if (method == app::DynamicsSettings::Method::forward_euler) {
+    if (method == problems::DynamicsSettings::Method::forward_euler) {
       // Stability shows over many steps: at least 50 of them (beyond t2* if need be), E(t2*) recorded.
       s.t_end = euler_steps > 0 ? t1 + euler_steps * dt_star : std::max(t2, t1 + 50 * dt_star);
       if (s.t_end >= t2 * (1 - 1e-12)) s.report_times = {t2};
@@ -132,12 +132,12 @@ int main(int argc, char** argv) {
     s.start_state = start.final_state;
     s.start_multipliers = start.final_multipliers;
     s.max_retries = 0;  // a constant step: a failure is a failure
-    s.require_decrease = method == app::DynamicsSettings::Method::forward_euler;  // instability ends the trial
+    s.require_decrease = method == problems::DynamicsSettings::Method::forward_euler;  // instability ends the trial
     s.max_steps = static_cast<int>(std::ceil((s.t_end - t1) / dt_star * 1.001)) + 2;
     Record r;
-    r.method = method == app::DynamicsSettings::Method::vti ? "vti" : "forward_euler";
+    r.method = method == problems::DynamicsSettings::Method::vti ? "vti" : "forward_euler";
     r.dt_star = dt_star;
-    r.run = app::run_dynamics(PETSC_COMM_WORLD, scene, s, nullptr, nullptr);
+    r.run = problems::run_dynamics(PETSC_COMM_WORLD, scene, s, nullptr, nullptr);
     r.stable = r.run.failure.empty();
     for (std::size_t i = 1; r.stable && i < r.run.history.size(); ++i)
       if (!(r.run.history[i].energy <= r.run.history[i - 1].energy + 1e-10 * std::abs(r.run.history[i - 1].energy))) r.stable = false;
@@ -155,14 +155,14 @@ int main(int argc, char** argv) {
 
   std::vector<Record> records;
   const double interval = t2 - t1;  // full: 1e-2, the seed's largest VTI step (one step)
-  for (const double divisor : vti_divisors) records.push_back(window(app::DynamicsSettings::Method::vti, interval / divisor));
+  for (const double divisor : vti_divisors) records.push_back(window(problems::DynamicsSettings::Method::vti, interval / divisor));
   // Forward Euler: the largest stable step of a descending ladder.
   std::vector<Record> euler_trials;
   std::vector<double> ladder = euler_dts;
   if (ladder.empty())
     for (const double divisor : {1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1e3, 2e3, 5e3, 1e4}) ladder.push_back(interval / divisor);
   for (const double dt : ladder) {
-    euler_trials.push_back(window(app::DynamicsSettings::Method::forward_euler, dt));
+    euler_trials.push_back(window(problems::DynamicsSettings::Method::forward_euler, dt));
     if (euler_trials.back().stable) break;
   }
   const Record* euler = euler_trials.back().stable ? &euler_trials.back() : nullptr;
@@ -177,7 +177,7 @@ int main(int argc, char** argv) {
   }
   nlohmann::json out = nlohmann::json::array();
   auto add = [&](const Record& r, bool largest_stable) {
-    const app::DynamicsRun& run = r.run;
+    const problems::DynamicsRun& run = r.run;
     // A forward Euler trial runs on past t2* to show stability: its cost up to t2* is its share of
     // the steps (one gradient per step, the same work every step).
     const double share = run.accepted > 0 ? double(r.steps_to_t2) / run.accepted : 1.0;

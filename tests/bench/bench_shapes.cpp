@@ -2,7 +2,7 @@
 // interface-resolving schedule (grids graded from the interface, eps lowered in between) with
 // default solver settings. Per stage: the energy, the grid, the Newton and augmented-Lagrangian
 // iterations, how far the constraint residual rose above its best value during the stage, and the
-// wall time. Runs the scenes through the stage loop of `lmeform run` (app::run_scene); under mpirun
+// wall time. Runs the scenes through the stage loop of `lmeform run` (problems::run_vesicle); under mpirun
 // every scene runs on all ranks. Writes DIR/shapes.json and DIR/shapes.png (energy against eps).
 //   bench_shapes [--quick] [--log] [--out DIR] [--nodes N] [--shape oblate:0.8 ...]
 // --log prints the progress of every stage (the Newton iterates) as `lmeform run` does.
@@ -22,7 +22,8 @@
 #include "lmeform/output.hpp"
 #include "lmeform/petsc.hpp"
 #include "lmeform/scene.hpp"
-#include "run_scene.hpp"
+#include "problem_registry.hpp"
+#include "vesicle.hpp"
 
 namespace {
 
@@ -127,8 +128,8 @@ int main(int argc, char** argv) {
   nlohmann::json records = nlohmann::json::array();
   for (const Shape& shape : shapes) {
     std::printf("== %s start, v = %.2f, %d nodes\n", shape.branch.c_str(), shape.v, nodes);
-    const Scene scene = parse_scene(shape_scene(shape, nodes, last_eps), "bench_shapes " + shape.branch, app::model_extensions());
-    const app::SceneRun run = app::run_scene(PETSC_COMM_WORLD, scene, log ? &std::cout : nullptr);
+    const Scene scene = parse_scene(shape_scene(shape, nodes, last_eps), "bench_shapes " + shape.branch, problems::driver_tables());
+    const problems::VesicleRun run = problems::run_vesicle(PETSC_COMM_WORLD, scene, *problems::read_vesicle(scene), log ? &std::cout : nullptr);
     double cumulative = run.wall_s;
     for (const auto& st : run.stages) cumulative -= st.wall_s;  // the uniform CVT of the start
     const double reference = sharp_reference(shape);
@@ -139,7 +140,7 @@ int main(int argc, char** argv) {
                        {"v", shape.v},
                        {"stage", st.stage},
                        {"grid", st.grid},
-                       {"eps", st.parameter},
+                       {"eps", st.eps},
                        {"nodes", st.nodes},
                        {"h_min", st.h_min},
                        {"energy", st.result.energy},
@@ -154,7 +155,7 @@ int main(int argc, char** argv) {
                        {"cumulative_wall_s", cumulative}};
       if (std::isfinite(reference)) r["relative_error_sharp"] = (st.result.energy - reference) / reference;
       std::printf("%-7s v %.2f  stage %2d %-6s %5d nodes  h_min %.4f  eps %.4f  E %.5f  AL %3d  KKT %2d  rise %.2f  %6.1f s%s\n",
-                  shape.branch.c_str(), shape.v, st.stage, st.grid.c_str(), st.nodes, st.h_min, st.parameter, st.result.energy,
+                  shape.branch.c_str(), shape.v, st.stage, st.grid.c_str(), st.nodes, st.h_min, st.eps, st.result.energy,
                   m.augmented_iterations, m.newton_iterations, constraint_rise(m), st.wall_s,
                   st.result.converged ? "" : "  NOT CONVERGED");
       records.push_back(std::move(r));

@@ -2,7 +2,7 @@
 // eps = 2 h) against one adapted grid that follows the progressive schedule of seed Table B.6
 // down in eps, each point with its error against the sharp-interface energy and the wall time it
 // took (adapted: cumulative over the stages, relocations included). Runs scenes through the same
-// stage loop as `lmeform run` (app::run_scene). Writes DIR/statics.json and DIR/statics.png.
+// stage loop as `lmeform run` (problems::run_vesicle). Writes DIR/statics.json and DIR/statics.png.
 //   bench_statics [--quick] [--out DIR]
 #include <cmath>
 #include <cstdio>
@@ -18,7 +18,8 @@
 #include "lmeform/output.hpp"
 #include "lmeform/petsc.hpp"
 #include "lmeform/scene.hpp"
-#include "run_scene.hpp"
+#include "problem_registry.hpp"
+#include "vesicle.hpp"
 
 namespace {
 
@@ -51,9 +52,9 @@ std::string discocyte_scene(int count, double eps, const std::string& adaptivity
   return s.str();
 }
 
-Record record_of(const app::StageRecord& st, const std::string& grid, double wall) {
+Record record_of(const problems::StageRecord& st, const std::string& grid, double wall) {
   const double e = st.result.energy;
-  Record r{st.parameter, grid, st.nodes, st.h_min, e, (e - kSharp) / kSharp, wall};
+  Record r{st.eps, grid, st.nodes, st.h_min, e, (e - kSharp) / kSharp, wall};
   std::printf("%-8s %6d nodes  h_min %.4f  eps %.4f  E %.5f  rel. error %+7.3f %%  %7.1f s\n", grid.c_str(), r.nodes,
               r.h_min, r.eps, r.energy, 100 * r.relative_error_sharp, r.wall_s);
   return r;
@@ -80,8 +81,8 @@ int main(int argc, char** argv) {
   const std::vector<int> counts = quick ? std::vector<int>{3000, 6124, 12271} : std::vector<int>{3000, 6124, 12271, 24597};
   for (const int n : counts) {
     const double eps = std::ceil(2000.0 * hex_spacing(n)) / 1000.0;
-    const Scene scene = parse_scene(discocyte_scene(n, eps, ""), "bench_statics uniform", app::model_extensions());
-    const app::SceneRun run = app::run_scene(PETSC_COMM_WORLD, scene, nullptr);
+    const Scene scene = parse_scene(discocyte_scene(n, eps, ""), "bench_statics uniform", problems::driver_tables());
+    const problems::VesicleRun run = problems::run_vesicle(PETSC_COMM_WORLD, scene, *problems::read_vesicle(scene), nullptr);
     records.push_back(record_of(run.stages.back(), "uniform", run.wall_s));
   }
 
@@ -98,8 +99,8 @@ int main(int argc, char** argv) {
              << "  { eps = " << e(0.025) << ", f = 1000.0 },\n  { eps = " << e(0.02) << ", lloyd_iterations = 0 },\n"
              << "  { eps = " << e(0.015) << ", lloyd_iterations = 0 },\n  { eps = " << e(quick ? 0.012 : 0.01)
              << ", lloyd_iterations = 0 },\n]\n";
-  const Scene scene = parse_scene(discocyte_scene(n, e(0.04), adaptivity.str()), "bench_statics adapted", app::model_extensions());
-  const app::SceneRun run = app::run_scene(PETSC_COMM_WORLD, scene, quick ? nullptr : &std::cout);
+  const Scene scene = parse_scene(discocyte_scene(n, e(0.04), adaptivity.str()), "bench_statics adapted", problems::driver_tables());
+  const problems::VesicleRun run = problems::run_vesicle(PETSC_COMM_WORLD, scene, *problems::read_vesicle(scene), quick ? nullptr : &std::cout);
   double cumulative = run.wall_s;
   for (const auto& st : run.stages) cumulative -= st.wall_s;  // the uniform CVT of the start
   for (const auto& st : run.stages) {

@@ -17,7 +17,7 @@
 #include "lmeform/output.hpp"
 #include "lmeform/petsc.hpp"
 #include "lmeform/scene.hpp"
-#include "problem.hpp"
+#include "stationary.hpp"
 #include "stokes_problems.hpp"
 
 namespace {
@@ -35,11 +35,11 @@ struct Record {
 
 Record solve(const Problem& pb, const std::string& node_set, int n, const Stabilization& st, double gamma, double C) {
   const Scene scene = parse_scene(scene_text(pb, gamma), pb.name + ".toml");
-  const app::BoundScene bound = app::bind_scene(scene, PETSC_COMM_WORLD, nullptr);
-  app::ProblemInput input;
+  const problems::BoundScene bound = problems::bind_scene(scene, PETSC_COMM_WORLD, nullptr);
+  problems::ProblemInput input;
   input.nodes = node_set == "uniform" ? uniform_nodes(pb, n) : graded_nodes(pb, n);
   input.constants = {{"C", st.name == "none" ? 0.0 : C}, {"alpha", st.alpha}, {"beta", st.beta}};
-  const app::ProblemResult r = app::solve_problem(PETSC_COMM_WORLD, bound, input);
+  const problems::ProblemResult r = problems::solve_problem(PETSC_COMM_WORLD, bound, input);
   Record rec{pb.name, node_set, st.name, static_cast<int>(input.nodes.size()), static_cast<int>(input.nodes.size()) * 3,
              gamma, st.name == "none" ? 0.0 : C};
   for (const auto& e : r.errors) {
@@ -98,7 +98,7 @@ int main(int argc, char** argv) {
     std::vector<Record> records;
     std::printf("%-15s %-8s %6s %-13s %5s %6s\n", "problem", "nodes", "n", "stabilization", "gamma", "C");
     // Convergence: every problem, both node ladders, every stabilization at C = 0.1, gamma = 1.
-    for (const auto& pb : problems())
+    for (const auto& pb : demo_problems())
       for (const std::string node_set : {"uniform", "graded"})
         for (const auto& st : stabilizations()) {
           std::vector<Record> l;
@@ -107,7 +107,7 @@ int main(int argc, char** argv) {
           records.insert(records.end(), l.begin(), l.end());
         }
     // Sensitivity of GLS to C (two decades and beyond) and to gamma, on one uniform grid.
-    for (const auto& pb : problems()) {
+    for (const auto& pb : demo_problems()) {
       for (const double C : {0.003, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0})
         records.push_back(solve(pb, "uniform", fixed_n, stabilizations()[1], 1.0, C));
       for (const double gamma : {0.8, 1.6})

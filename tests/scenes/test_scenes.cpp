@@ -203,7 +203,6 @@ TEST(Scene, FullSceneLoadsEveryField) {
   EXPECT_EQ(s.model.forms[5].name, "scenes/local.form");  // a .form without '/' is a path too
   EXPECT_EQ(s.model.forms[2].where,
             "scenes/full.toml:" + std::to_string(line_of(kFull, "forms = [")) + ": key 'model.forms[2]'");
-  EXPECT_EQ(s.model.kind, ProblemKind::minimization);
   ASSERT_EQ(s.model.energy.size(), 2u);
   EXPECT_EQ(s.model.energy[0].name, "bending");
   EXPECT_EQ(s.model.energy[1].name, "helfrich_axisymmetric.bending");
@@ -264,8 +263,8 @@ TEST(Scene, FullSceneLoadsEveryField) {
   // [qdata]
   ASSERT_EQ(s.qdata.size(), 2u);
   for (const auto& q : s.qdata) {
-    if (q.name == "rho") EXPECT_EQ(q.provider, "support_size");
-    else if (q.name == "reference") EXPECT_EQ(q.provider, "zero");
+    if (q.name == "rho") EXPECT_EQ(q.source, SceneQdata::Source::support_size);
+    else if (q.name == "reference") EXPECT_EQ(q.source, SceneQdata::Source::zero);
     else ADD_FAILURE() << "unexpected qdata " << q.name;
   }
 
@@ -294,7 +293,7 @@ TEST(Scene, FullSceneLoadsEveryField) {
   ASSERT_TRUE(s.output);
   EXPECT_EQ(s.output->directory, "out/full");  // relative to the working directory, not the scene
   EXPECT_FALSE(s.output->hdf5);
-  EXPECT_TRUE(s.output->png);
+  EXPECT_FALSE(s.output->png);  // a figure is drawn only where one is asked for
 
   EXPECT_TRUE(s.extensions.empty());
   EXPECT_TRUE(s.document);
@@ -315,8 +314,8 @@ TEST(Scene, AbsentSectionsTakeDefaults) {
   ASSERT_EQ(s.model.forms.size(), 1u);  // a string: one form
   EXPECT_EQ(s.model.forms[0].name, "poisson.form");
   // No output named: minimization of every energy of the forms (bind_scene collects them).
-  EXPECT_EQ(s.model.kind, ProblemKind::minimization);
   EXPECT_TRUE(s.model.energy.empty());
+  EXPECT_FALSE(s.model.residual || s.model.bilinear || s.model.linear);
   EXPECT_TRUE(s.constants.empty());
   EXPECT_TRUE(s.constraints.empty());
   EXPECT_TRUE(s.dirichlet.empty());
@@ -344,28 +343,27 @@ TEST(Scene, AbsentSectionsTakeDefaults) {
   EXPECT_FALSE(o.solver.monitor);
   ASSERT_TRUE(o.output);
   EXPECT_TRUE(o.output->hdf5);
-  EXPECT_TRUE(o.output->png);
+  EXPECT_FALSE(o.output->png);
   expect_error(kMinimal + "[output]\nhdf5 = true\n", {"missing key 'output.directory' in [output]"});
 }
 
 // ---------------------------------------------------------------------------------------------
 // [model]
 
-TEST(SceneModel, ProblemKindFollowsTheOutputs) {
+TEST(SceneModel, TheOutputsAreReadByTheirKind) {
   const Scene e = parse(kMinimal + "energy = \"heat\"\n");
-  EXPECT_EQ(e.model.kind, ProblemKind::minimization);
+  EXPECT_FALSE(e.model.residual || e.model.bilinear || e.model.linear);
   ASSERT_EQ(e.model.energy.size(), 1u);
   EXPECT_EQ(e.model.energy[0].name, "heat");
 
   const Scene r = parse(kMinimal + "residual = \"R\"\n");
-  EXPECT_EQ(r.model.kind, ProblemKind::residual);
   ASSERT_TRUE(r.model.residual);
   EXPECT_EQ(r.model.residual->name, "R");
   EXPECT_EQ(r.model.residual->where, "scenes/ok.toml:11: key 'model.residual'");
   EXPECT_TRUE(r.model.energy.empty());
 
   const Scene l = parse(kMinimal + "bilinear = \"a\"\nlinear = \"l\"\n");
-  EXPECT_EQ(l.model.kind, ProblemKind::linear);
+  EXPECT_TRUE(l.model.energy.empty() && !l.model.residual);
   ASSERT_TRUE(l.model.bilinear && l.model.linear);
   EXPECT_EQ(l.model.bilinear->name, "a");
   EXPECT_EQ(l.model.linear->name, "l");
@@ -599,7 +597,7 @@ TEST(SceneQdata, Providers) {
   const Scene s = parse(kMinimal + "[qdata]\nrho = \"support_size\"\n");
   ASSERT_EQ(s.qdata.size(), 1u);
   EXPECT_EQ(s.qdata[0].name, "rho");
-  EXPECT_EQ(s.qdata[0].provider, "support_size");
+  EXPECT_EQ(s.qdata[0].source, SceneQdata::Source::support_size);
   EXPECT_EQ(s.qdata[0].where, "scenes/ok.toml:12: key 'qdata.rho'");
   std::string t = kMinimal + "[qdata]\nrho = \"support_sise\"\n";
   expect_error(t, {at_line(t, "rho ="), "key 'qdata.rho' must be one of 'support_size', 'zero', a number or an expression, "
@@ -609,7 +607,7 @@ TEST(SceneQdata, Providers) {
   const Scene values = parse_scene(t, "scenes/ok.toml");
   ASSERT_EQ(values.qdata.size(), 2u);
   for (const auto& q : values.qdata) {
-    EXPECT_EQ(q.provider, "value") << q.name;
+    EXPECT_EQ(q.source, SceneQdata::Source::value) << q.name;
     if (q.name == "rho") EXPECT_EQ(q.value.number(), 0.5);
     else EXPECT_EQ(q.value.expression(), "sin(pi*x[0])");
   }
@@ -677,11 +675,11 @@ TEST(SceneReference, EnergyAndExactSolution) {
 }
 
 TEST(SceneOutput, Keys) {
-  const Scene s = parse(kMinimal + "[output]\ndirectory = \"out/p\"\npng = false\n");
+  const Scene s = parse(kMinimal + "[output]\ndirectory = \"out/p\"\npng = true\n");
   ASSERT_TRUE(s.output);
   EXPECT_EQ(s.output->directory, "out/p");
   EXPECT_TRUE(s.output->hdf5);
-  EXPECT_FALSE(s.output->png);
+  EXPECT_TRUE(s.output->png);
   std::string t = kMinimal + "[output]\ndirectory = \"out\"\nhdf5 = 0\n";
   expect_error(t, {at_line(t, "hdf5"), "key 'output.hdf5' must be a boolean (true or false), found an integer"});
   t = kMinimal + "[output]\ndirectory = \"out\"\npgn = false\n";
@@ -888,7 +886,6 @@ TEST(SceneDemos, LoadWithTheVesicleExtension) {
     EXPECT_EQ(s.nodes.gamma, 0.5);
     ASSERT_EQ(s.model.forms.size(), 4u);
     EXPECT_EQ(s.model.forms[0].name, "helfrich_axisymmetric");
-    EXPECT_EQ(s.model.kind, ProblemKind::minimization);
     ASSERT_EQ(s.model.energy.size(), 1u);
     EXPECT_EQ(s.model.energy[0].name, "bending");
     EXPECT_EQ(s.constants.at("k"), 1.0);

@@ -21,12 +21,13 @@
 #include "lmeform/cvt.hpp"
 #include "lmeform/node_sets.hpp"
 #include "lmeform/scene.hpp"
-#include "run_scene.hpp"
+#include "problem_registry.hpp"
+#include "vesicle.hpp"
 #include "vesicle.hpp"
 
 using namespace lmeform;
-using lmeform::app::read_vesicle;
-using lmeform::app::VesicleModel;
+using lmeform::problems::read_vesicle;
+using lmeform::problems::VesicleModel;
 
 namespace {
 
@@ -108,7 +109,7 @@ std::string at_line(const std::string& text, const std::string& needle) {
 }
 
 Scene load(const std::string& text, const std::string& name = "scenes/ok.toml") {
-  return parse_scene(text, name, app::model_extensions());
+  return parse_scene(text, name, problems::driver_tables());
 }
 
 VesicleModel vesicle_of(const std::string& text) {
@@ -136,7 +137,7 @@ void expect_error(const std::string& text, std::initializer_list<std::string> pa
 }  // namespace
 
 TEST(VesicleScene, ExtensionOfLmeformRun) {
-  const auto ext = app::model_extensions();
+  const auto ext = problems::driver_tables();
   EXPECT_NE(std::find(ext.begin(), ext.end(), std::string_view("vesicle")), ext.end());
   const Scene s = load(kVesicle);
   EXPECT_EQ(s.extensions, (std::vector<std::string>{"vesicle"}));
@@ -209,12 +210,12 @@ TEST(VesicleScene, InfeasibleReducedVolume) {
 
 TEST(VesicleScene, Feasibility) {
   const double A0 = 0.64 * pi;
-  EXPECT_NEAR(app::max_volume_for_area(A0), 4.0 / 3.0 * pi * 0.064, 1e-15);
-  EXPECT_NEAR(app::max_volume_for_area(2 * pi * 0.5, 2), pi * 0.25, 1e-15);
-  EXPECT_NO_THROW(app::check_feasible(A0, 0.8 * app::max_volume_for_area(A0)));
-  EXPECT_NO_THROW(app::check_feasible(A0, app::max_volume_for_area(A0)));  // the sphere itself
+  EXPECT_NEAR(problems::max_volume_for_area(A0), 4.0 / 3.0 * pi * 0.064, 1e-15);
+  EXPECT_NEAR(problems::max_volume_for_area(2 * pi * 0.5, 2), pi * 0.25, 1e-15);
+  EXPECT_NO_THROW(problems::check_feasible(A0, 0.8 * problems::max_volume_for_area(A0)));
+  EXPECT_NO_THROW(problems::check_feasible(A0, problems::max_volume_for_area(A0)));  // the sphere itself
   try {
-    app::check_feasible(A0, 1.1 * app::max_volume_for_area(A0));
+    problems::check_feasible(A0, 1.1 * problems::max_volume_for_area(A0));
     ADD_FAILURE() << "no error";
   } catch (const SceneError& e) {
     const std::string m = e.what();
@@ -222,9 +223,9 @@ TEST(VesicleScene, Feasibility) {
     EXPECT_NE(m.find("V_max = 0.26808"), std::string::npos) << m;
     EXPECT_NE(m.find("(reduced volume 1.1"), std::string::npos) << m;
   }
-  EXPECT_THROW(app::check_feasible(A0, -1.0), SceneError);
-  EXPECT_THROW(app::check_feasible(0.0, 0.1), SceneError);
-  EXPECT_THROW(app::check_feasible(2 * pi * 0.5, 1.01 * pi * 0.25, 2), SceneError);
+  EXPECT_THROW(problems::check_feasible(A0, -1.0), SceneError);
+  EXPECT_THROW(problems::check_feasible(0.0, 0.1), SceneError);
+  EXPECT_THROW(problems::check_feasible(2 * pi * 0.5, 1.01 * pi * 0.25, 2), SceneError);
 }
 
 TEST(VesicleScene, WidthConstant) {
@@ -277,10 +278,10 @@ TEST(VesicleScene, InitialShape) {
   ASSERT_TRUE(m.profile_eps);
   EXPECT_EQ(*m.profile_eps, 0.02);
   const std::array<double, 2> c{0.0, 0.0}, on{0.5, 0.0}, out{0.9, 0.9}, near{0.49, 0.0};
-  EXPECT_GT(app::initial_profile(m, c, 2), 0.99);
-  EXPECT_NEAR(app::initial_profile(m, on, 2), 0.0, 1e-14);
-  EXPECT_LT(app::initial_profile(m, out, 2), -0.99);
-  EXPECT_NEAR(app::initial_profile(m, near, 2), std::tanh(0.01 / (std::numbers::sqrt2 * 0.02)), 1e-12);
+  EXPECT_GT(problems::initial_profile(m, c, 2), 0.99);
+  EXPECT_NEAR(problems::initial_profile(m, on, 2), 0.0, 1e-14);
+  EXPECT_LT(problems::initial_profile(m, out, 2), -0.99);
+  EXPECT_NEAR(problems::initial_profile(m, near, 2), std::tanh(0.01 / (std::numbers::sqrt2 * 0.02)), 1e-12);
 }
 
 TEST(VesicleScene, StomatocyteCup) {
@@ -288,7 +289,7 @@ TEST(VesicleScene, StomatocyteCup) {
   const std::string cup = "shape = \"stomatocyte\"\ncenter = [0.0, 1.0]\nradius = 0.3\nthickness = 0.1\naperture = 60\n";
   const std::string t = edit(kVesicle, "shape = \"ellipsoid\"\ncenter = [0.0, 1.0]\nsemi_axes = [0.4987, 0.2059]\n", cup);
   const VesicleModel m = vesicle_of(t + "eps = 0.02\n");
-  const auto profile = [&](double r, double z) { return app::initial_profile(m, std::array<double, 2>{r, z}, 2); };
+  const auto profile = [&](double r, double z) { return problems::initial_profile(m, std::array<double, 2>{r, z}, 2); };
   const double w = std::tanh(0.05 / (std::numbers::sqrt2 * 0.02));  // the wall's middle
   EXPECT_NEAR(profile(0.0, 0.7), w, 1e-12);                                  // the bottom of the cup, on the axis
   EXPECT_NEAR(profile(0.3, 1.0), w, 1e-12);                                  // its side
@@ -326,13 +327,13 @@ TEST(VesicleScene, BranchSpheroids) {
     for (const bool oblate : {true, false})
       for (const double v : {0.6, 0.7, 0.8, 0.9, 0.95, 0.999}) {
         const double A0 = 2.0;
-        const auto [a, c] = app::spheroid_semi_axes(A0, v, dim, oblate);
+        const auto [a, c] = problems::spheroid_semi_axes(A0, v, dim, oblate);
         EXPECT_EQ(c < a, oblate) << "dim " << dim << " v " << v;
         const auto [area, volume] = measured(a, c, dim);
         EXPECT_NEAR(area / A0, 1.0, 1e-8) << "dim " << dim << " v " << v << (oblate ? " oblate" : " prolate");
-        EXPECT_NEAR(volume / app::max_volume_for_area(area, dim), v, 1e-8) << "dim " << dim << " v " << v;
+        EXPECT_NEAR(volume / problems::max_volume_for_area(area, dim), v, 1e-8) << "dim " << dim << " v " << v;
       }
-  EXPECT_THROW((void)app::spheroid_semi_axes(2.0, 1.2, 3, true), std::invalid_argument);
+  EXPECT_THROW((void)problems::spheroid_semi_axes(2.0, 1.2, 3, true), std::invalid_argument);
   // In a scene: the demos' hand-computed oblate start (0.4987, 0.2059) for R = 0.4, v = 0.8.
   const std::string oblate = edit(kVesicle, "shape = \"ellipsoid\"\ncenter = [0.0, 1.0]\nsemi_axes = [0.4987, 0.2059]",
                                   "shape = \"oblate\"\ncenter = [0.0, 1.0]");
@@ -533,11 +534,11 @@ TEST(VesicleScene, InterfaceSpacing) {
   const NodeSet nodes = circle_grid();
   const std::vector<double> phi = circle_phi(nodes, 0.04);
   const double eps = 0.03, h_i = 0.015;
-  app::InterfaceResolution r;
+  problems::InterfaceResolution r;
   r.band = 2.5;        // 0.075 from the interface at h_i,
   r.grading = 0.3;     // then growing by 0.3 per unit distance,
   r.coarsening = 5.0;  // up to 0.075 (reached at 0.075 + 0.06 / 0.3 = 0.275).
-  const SpacingField field = app::interface_spacing(nodes, phi, eps, h_i, r);
+  const SpacingField field = problems::interface_spacing(nodes, phi, eps, h_i, r);
   EXPECT_EQ(field.h_min, h_i);
   ASSERT_TRUE(field.h);
   // The crossings sample the circle at about the grid step: the distance to the nearest one
@@ -570,26 +571,26 @@ TEST(VesicleScene, InterfaceSpacing) {
 TEST(VesicleScene, InterfaceSpacingRefusesBadInput) {
   const NodeSet nodes = circle_grid();
   const std::vector<double> phi = circle_phi(nodes, 0.04);
-  const app::InterfaceResolution r;
+  const problems::InterfaceResolution r;
   // No sign change: no interface.
   std::vector<double> inside(nodes.size(), 0.7), outside(nodes.size(), -1.0);
   for (const auto* p : {&inside, &outside}) {
     try {
-      (void)app::interface_spacing(nodes, *p, 0.03, 0.015, r);
+      (void)problems::interface_spacing(nodes, *p, 0.03, 0.015, r);
       ADD_FAILURE() << "a phase field without an interface was accepted";
     } catch (const std::invalid_argument& e) {
       EXPECT_NE(std::string(e.what()).find("no sign change"), std::string::npos) << e.what();
     }
   }
-  EXPECT_THROW((void)app::interface_spacing(nodes, std::span<const double>(phi).first(nodes.size() - 1), 0.03, 0.015, r),
+  EXPECT_THROW((void)problems::interface_spacing(nodes, std::span<const double>(phi).first(nodes.size() - 1), 0.03, 0.015, r),
                std::invalid_argument);
-  EXPECT_THROW((void)app::interface_spacing(nodes, phi, 0.03, 0.0, r), std::invalid_argument);
-  EXPECT_THROW((void)app::interface_spacing(nodes, phi, 0.0, 0.015, r), std::invalid_argument);
-  EXPECT_NO_THROW((void)app::interface_spacing(nodes, phi, 0.03, 0.015, r));
+  EXPECT_THROW((void)problems::interface_spacing(nodes, phi, 0.03, 0.0, r), std::invalid_argument);
+  EXPECT_THROW((void)problems::interface_spacing(nodes, phi, 0.0, 0.015, r), std::invalid_argument);
+  EXPECT_NO_THROW((void)problems::interface_spacing(nodes, phi, 0.03, 0.015, r));
 }
 
 TEST(VesicleScene, ResolveInterfaceMeetsTheResolutionRule) {
-  app::ProblemResult solved;
+  problems::ProblemResult solved;
   solved.nodes = circle_grid();
   solved.state = circle_phi(solved.nodes, 0.08);
   Box box;
@@ -597,10 +598,10 @@ TEST(VesicleScene, ResolveInterfaceMeetsTheResolutionRule) {
   box.lo = {-1.0, -1.0, 0.0};
   box.hi = {1.0, 1.0, 0.0};
   const double eps = 0.05, factor = 2.0;
-  app::InterfaceResolution r;
+  problems::InterfaceResolution r;
   CvtOptions cvt;
   cvt.iterations = 20;
-  const NodeSet nodes = app::resolve_interface(solved.nodes, solved.state, box, eps, factor, r, cvt);
+  const NodeSet nodes = problems::resolve_interface(solved.nodes, solved.state, box, eps, factor, r, cvt);
   const SpacingSummary s = spacing_summary(nodes);
   // The resolution rule holds as measured, and the grid is graded: coarse far from the circle.
   EXPECT_LE(factor * s.h_min, eps * (1 + 1e-12));
@@ -617,7 +618,7 @@ TEST(VesicleScene, ResolveInterfaceMeetsTheResolutionRule) {
   EXPECT_LT(2 * nodes.size(), uniform_count);      // far fewer than a uniform grid of the same h_min
   // A budget below the grid's node count is refused.
   r.max_nodes = nodes.size() / 2;
-  EXPECT_THROW((void)app::resolve_interface(solved.nodes, solved.state, box, eps, factor, r, cvt), std::invalid_argument);
+  EXPECT_THROW((void)problems::resolve_interface(solved.nodes, solved.state, box, eps, factor, r, cvt), std::invalid_argument);
 }
 
 TEST(VesicleScene, ResolutionAgainstTheUniformGrid) {
@@ -642,28 +643,30 @@ TEST(VesicleScene, ResolutionAgainstTheUniformGrid) {
 
 TEST(VesicleScene, LmeOptionsAndRescaling) {
   const Scene axi = load(kVesicle);
-  const LmeOptions o = app::vesicle_lme_options(axi);
+  const LmeOptions o = problems::lme_options(axi, problems::AxisParity::even);
   EXPECT_EQ(o.mirror_axis, 0);
   EXPECT_EQ(o.mirror_position, 0.0);
   EXPECT_EQ(o.spacing_smoothing, 5);
-  const LmeOptions p = app::vesicle_lme_options(load(kPlanar));
+  const LmeOptions p = problems::lme_options(load(kPlanar), problems::AxisParity::even);
   EXPECT_EQ(p.mirror_axis, -1);
+  // A motion's radial component is odd in r: no mirror.
+  EXPECT_EQ(problems::lme_options(axi, problems::AxisParity::odd).mirror_axis, -1);
   // tanh(d / (sqrt2 eps_from)) re-profiled to eps_to is tanh(d / (sqrt2 eps_to)).
   std::vector<double> phi, expected;
   for (const double d : {-0.1, -0.02, 0.0, 0.01, 0.05}) {
     phi.push_back(std::tanh(d / (std::numbers::sqrt2 * 0.04)));
     expected.push_back(std::tanh(d / (std::numbers::sqrt2 * 0.02)));
   }
-  const auto out = app::rescale_interface(phi, 0.04, 0.02);
+  const auto out = problems::rescale_interface(phi, 0.04, 0.02);
   for (std::size_t i = 0; i < out.size(); ++i) EXPECT_NEAR(out[i], expected[i], 1e-12) << i;
-  EXPECT_THROW((void)app::rescale_interface(phi, 0.0, 0.02), std::invalid_argument);
+  EXPECT_THROW((void)problems::rescale_interface(phi, 0.0, 0.02), std::invalid_argument);
 }
 
 TEST(VesicleScene, Demos) {
   for (const char* name : {"discocyte", "dumbbell"}) {
     SCOPED_TRACE(name);
     const Scene s = load_scene(std::filesystem::path(LMEFORM_SOURCE_DIR) / "demos" / (std::string(name) + ".toml"),
-                               app::model_extensions());
+                               problems::driver_tables());
     EXPECT_TRUE(s.has_extension("vesicle"));
     const auto m = read_vesicle(s);
     ASSERT_TRUE(m);
@@ -692,7 +695,7 @@ TEST(VesicleScene, InterfaceResolvingDemos) {
   for (const char* name : {"discocyte_resolved", "dumbbell_resolved"}) {
     SCOPED_TRACE(name);
     const Scene s = load_scene(std::filesystem::path(LMEFORM_SOURCE_DIR) / "demos" / "shapes" / (std::string(name) + ".toml"),
-                               app::model_extensions());
+                               problems::driver_tables());
     const auto m = read_vesicle(s);
     ASSERT_TRUE(m && m->adaptivity);
     // The seed's rule eps >= 2 h_min at every stage; the first on the uniform 6124-node grid.

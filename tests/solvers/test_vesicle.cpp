@@ -8,8 +8,9 @@
 #include <numbers>
 #include <string>
 
-#include "problem.hpp"
-#include "run_scene.hpp"
+#include "stationary.hpp"
+#include "problem_registry.hpp"
+#include "vesicle.hpp"
 #include "vesicle.hpp"
 
 namespace lmeform {
@@ -37,7 +38,7 @@ struct SphereBox {
 
   [[nodiscard]] Scene scene() const {
     const std::string text = fmt_scene();
-    return parse_scene(text, "sphere_box.toml", app::model_extensions());
+    return parse_scene(text, "sphere_box.toml", problems::driver_tables());
   }
   [[nodiscard]] std::string fmt_scene() const {
     return "[scene]\nname = \"sphere\"\ncoordinates = \"axisymmetric\"\n"
@@ -71,17 +72,17 @@ SphereBox constrained_ellipsoid(double a, double c, double v) {
 /// The bound scene and the vesicle's initial profile for it.
 struct Problem {
   Scene scene;
-  app::BoundScene bound;
-  explicit Problem(const SphereBox& box) : scene(box.scene()), bound(app::bind_scene(scene, PETSC_COMM_SELF, nullptr)) {}
-  [[nodiscard]] app::ProblemInput input(const SphereBox& box) const {
-    app::ProblemInput in;
-    in.nodes = app::initial_nodes(scene);
-    app::VesicleModel model;
+  problems::BoundScene bound;
+  explicit Problem(const SphereBox& box) : scene(box.scene()), bound(problems::bind_scene(scene, PETSC_COMM_SELF, nullptr)) {}
+  [[nodiscard]] problems::ProblemInput input(const SphereBox& box) const {
+    problems::ProblemInput in;
+    in.nodes = problems::initial_nodes(scene);
+    problems::VesicleModel model;
     model.eps = box.eps;
     model.center = {0.0, 0.6, 0.0};
     model.semi_axes = {box.semi_axes[0], box.semi_axes[1], 0.0};
-    for (std::size_t a = 0; a < in.nodes.size(); ++a) in.initial.push_back(app::initial_profile(model, in.nodes.point(a), 2));
-    in.lme = app::vesicle_lme_options(scene);
+    for (std::size_t a = 0; a < in.nodes.size(); ++a) in.initial.push_back(problems::initial_profile(model, in.nodes.point(a), 2));
+    in.lme = problems::lme_options(scene, problems::AxisParity::even);
     return in;
   }
 };
@@ -95,9 +96,9 @@ Functionals evaluate(const SphereBox& box) {
   all.outer_boundary_fixed = false;
   all.constraints = "area = 0.0\nvolume = 0.0\nmoment = 0.0\n";  // only to load and evaluate them
   const Problem p(all);
-  app::ProblemInput in = p.input(all);
+  problems::ProblemInput in = p.input(all);
   in.evaluate_only = true;
-  const auto r = app::solve_problem(PETSC_COMM_SELF, p.bound, in);
+  const auto r = problems::solve_problem(PETSC_COMM_SELF, p.bound, in);
   return {r.values.at("helfrich_axisymmetric.bending"), r.values.at("area"), r.values.at("volume"), r.values.at("moment")};
 }
 
@@ -136,9 +137,9 @@ TEST(Vesicle, SphereConvergesToTwoPiWithinTheModellingError) {
                   "\nmoment = { target = 0.0, scale = " + num(diffuse.volume) + " }\n";
   s.semi_axes = {1.1 * R, 0.85 * R};  // start away from the sphere: the constraints must bring it back
   const Problem p(s);
-  app::ProblemInput in = p.input(s);
+  problems::ProblemInput in = p.input(s);
   in.log = &std::cout;
-  const auto r = app::solve_problem(PETSC_COMM_SELF, p.bound, in);
+  const auto r = problems::solve_problem(PETSC_COMM_SELF, p.bound, in);
   const auto& result = r.minimization;
   const double error = result.energy / (2 * pi) - 1;
   std::printf("sphere: E = %.6f (2 pi = %.6f, rel %.3e; prescribed tanh profile %.6f), %zu nodes, AL %d, KKT %d, %.1f s, %s\n",
@@ -172,10 +173,10 @@ TEST(Vesicle, RescaledInterfaceIsTheTanhProfileOfTheNewWidth) {
   }
   from.push_back(-1.0);  // a Dirichlet value stays -1
   d.push_back(-1.0);
-  const auto to = app::rescale_interface(from, 0.04, 0.025);
+  const auto to = problems::rescale_interface(from, 0.04, 0.025);
   for (std::size_t i = 0; i + 1 < d.size(); ++i) EXPECT_NEAR(to[i], std::tanh(d[i] / (std::sqrt(2.0) * 0.025)), 1e-12);
   EXPECT_EQ(to.back(), -1.0);
-  EXPECT_THROW((void)app::rescale_interface(from, 0.0, 0.025), std::invalid_argument);
+  EXPECT_THROW((void)problems::rescale_interface(from, 0.0, 0.025), std::invalid_argument);
 }
 
 TEST(Vesicle, WarmStartedMultipliersSaveIterations) {
@@ -185,16 +186,16 @@ TEST(Vesicle, WarmStartedMultipliersSaveIterations) {
   SphereBox s = constrained_ellipsoid(1.1, 0.85, 0.95);
   s.start = "augmented";
   const Problem p(s);
-  app::ProblemInput in = p.input(s);
-  const auto first = app::solve_problem(PETSC_COMM_SELF, p.bound, in);
+  problems::ProblemInput in = p.input(s);
+  const auto first = problems::solve_problem(PETSC_COMM_SELF, p.bound, in);
   ASSERT_TRUE(first.converged) << first.message;
   in.constants["eps"] = 0.09;
   in.nodes = first.nodes;
-  in.initial = app::rescale_interface(first.state, 0.1, 0.09);
+  in.initial = problems::rescale_interface(first.state, 0.1, 0.09);
   in.initial_multipliers.assign(first.minimization.multipliers.size(), 0.0);
-  const auto cold = app::solve_problem(PETSC_COMM_SELF, p.bound, in);
+  const auto cold = problems::solve_problem(PETSC_COMM_SELF, p.bound, in);
   in.initial_multipliers = first.minimization.multipliers;
-  const auto warm = app::solve_problem(PETSC_COMM_SELF, p.bound, in);
+  const auto warm = problems::solve_problem(PETSC_COMM_SELF, p.bound, in);
   std::printf("continuation: cold start %d AL + %d KKT, warm start %d AL + %d KKT; E %.8f vs %.8f\n",
               cold.minimization.augmented_iterations, cold.minimization.newton_iterations,
               warm.minimization.augmented_iterations, warm.minimization.newton_iterations, cold.energy, warm.energy);
@@ -202,7 +203,7 @@ TEST(Vesicle, WarmStartedMultipliersSaveIterations) {
   EXPECT_LT(warm.minimization.augmented_iterations, cold.minimization.augmented_iterations);
   EXPECT_NEAR(warm.energy, cold.energy, 1e-6 * cold.energy);  // the same minimizer
   in.initial_multipliers = {1.0};
-  EXPECT_THROW((void)app::solve_problem(PETSC_COMM_SELF, p.bound, in), std::invalid_argument);
+  EXPECT_THROW((void)problems::solve_problem(PETSC_COMM_SELF, p.bound, in), std::invalid_argument);
 }
 
 TEST(Vesicle, AContinuationStageReusesTheDiscretization) {
@@ -210,17 +211,17 @@ TEST(Vesicle, AContinuationStageReusesTheDiscretization) {
   // (the same object), and the solve gives what a rebuilt one gives.
   const SphereBox s = constrained_ellipsoid(1.1, 0.85, 0.95);
   const Problem p(s);
-  app::ProblemInput in = p.input(s);
-  const auto first = app::solve_problem(PETSC_COMM_SELF, p.bound, in);
+  problems::ProblemInput in = p.input(s);
+  const auto first = problems::solve_problem(PETSC_COMM_SELF, p.bound, in);
   ASSERT_TRUE(first.converged) << first.message;
   ASSERT_TRUE(first.discretization);
   in.constants["eps"] = 0.09;
   in.nodes = first.nodes;
-  in.initial = app::rescale_interface(first.state, 0.1, 0.09);
+  in.initial = problems::rescale_interface(first.state, 0.1, 0.09);
   in.initial_multipliers = first.minimization.multipliers;
-  const auto rebuilt = app::solve_problem(PETSC_COMM_SELF, p.bound, in);
+  const auto rebuilt = problems::solve_problem(PETSC_COMM_SELF, p.bound, in);
   in.discretization = first.discretization;
-  const auto reused = app::solve_problem(PETSC_COMM_SELF, p.bound, in);
+  const auto reused = problems::solve_problem(PETSC_COMM_SELF, p.bound, in);
   ASSERT_TRUE(rebuilt.converged && reused.converged);
   EXPECT_EQ(reused.discretization.get(), first.discretization.get());
   EXPECT_NE(rebuilt.discretization.get(), first.discretization.get());
@@ -230,7 +231,7 @@ TEST(Vesicle, AContinuationStageReusesTheDiscretization) {
   const NodeSet fewer(2, std::vector<double>(first.nodes.coords.begin(), first.nodes.coords.end() - 2));
   in.nodes = fewer;
   in.initial.resize(fewer.size());
-  EXPECT_THROW((void)app::solve_problem(PETSC_COMM_SELF, p.bound, in), std::invalid_argument);
+  EXPECT_THROW((void)problems::solve_problem(PETSC_COMM_SELF, p.bound, in), std::invalid_argument);
 }
 
 TEST(Vesicle, KktFirstFromAnEllipsoidStartNeverRaisesTheConstraintResidual) {
@@ -240,10 +241,10 @@ TEST(Vesicle, KktFirstFromAnEllipsoidStartNeverRaisesTheConstraintResidual) {
   // augmented-Lagrangian start reaches.
   SphereBox s = constrained_ellipsoid(1.2, 0.7, 0.85);
   const Problem kkt(s);
-  const auto a = app::solve_problem(PETSC_COMM_SELF, kkt.bound, kkt.input(s));
+  const auto a = problems::solve_problem(PETSC_COMM_SELF, kkt.bound, kkt.input(s));
   s.start = "augmented";
   const Problem augmented(s);
-  const auto b = app::solve_problem(PETSC_COMM_SELF, augmented.bound, augmented.input(s));
+  const auto b = problems::solve_problem(PETSC_COMM_SELF, augmented.bound, augmented.input(s));
   ASSERT_TRUE(a.converged) << a.message;
   ASSERT_TRUE(b.converged) << b.message;
   std::printf("ellipsoid start: KKT first %d AL + %d KKT, augmented first %d AL + %d KKT; E %.10f vs %.10f\n",
@@ -268,10 +269,10 @@ TEST(Vesicle, InertiaControlLeavesTheSaddlePlainNewtonConvergesTo) {
   s.semi_axes = {0.35, 0.35};
   s.constraints = "area = " + num(4 * pi * 0.35 * 0.35) + "\nvolume = " + num(0.98 * 4.0 / 3 * pi * std::pow(0.35, 3)) + "\n";
   const Problem controlled(s);
-  const auto a = app::solve_problem(PETSC_COMM_SELF, controlled.bound, controlled.input(s));
+  const auto a = problems::solve_problem(PETSC_COMM_SELF, controlled.bound, controlled.input(s));
   s.inertia_correction = false;
   const Problem plain(s);
-  const auto b = app::solve_problem(PETSC_COMM_SELF, plain.bound, plain.input(s));
+  const auto b = problems::solve_problem(PETSC_COMM_SELF, plain.bound, plain.input(s));
   ASSERT_TRUE(a.converged) << a.message;
   ASSERT_TRUE(b.converged) << b.message;
   std::printf("inertia-controlled: E %.8f (%d shifted steps), plain Newton: E %.8f\n", a.energy,
@@ -284,7 +285,7 @@ TEST(Vesicle, InertiaControlLeavesTheSaddlePlainNewtonConvergesTo) {
   s.inertia_correction = true;
   s.start = "augmented";
   const Problem augmented(s);
-  const auto c = app::solve_problem(PETSC_COMM_SELF, augmented.bound, augmented.input(s));
+  const auto c = problems::solve_problem(PETSC_COMM_SELF, augmented.bound, augmented.input(s));
   ASSERT_TRUE(c.converged) << c.message;
   std::printf("augmented Lagrangian first, inertia-controlled: E %.8f (%d AL steps, %d shifted)\n", c.energy,
               c.minimization.augmented_iterations, c.minimization.corrected_steps);
@@ -316,15 +317,15 @@ TEST(Vesicle, InterfaceResolvingScheduleLowersTheEnergyAtEveryStage) {
       "[vesicle.initial]\nshape = \"oblate\"\ncenter = [0.0, 0.6]\n"
       "[vesicle.adaptivity]\nlloyd_iterations = 10\nstages = [\n"
       "  { eps = 0.09, resolve = 0.07 },\n  { eps = 0.08, lloyd_iterations = 0 },\n  { eps = 0.07, lloyd_iterations = 0 },\n]\n";
-  const Scene scene = parse_scene(text, "resolved.toml", app::model_extensions());
-  const app::SceneRun run = app::run_scene(PETSC_COMM_SELF, scene, nullptr);
+  const Scene scene = parse_scene(text, "resolved.toml", problems::driver_tables());
+  const problems::VesicleRun run = problems::run_vesicle(PETSC_COMM_SELF, scene, *problems::read_vesicle(scene), nullptr);
   ASSERT_TRUE(run.failure.empty()) << run.failure;
   ASSERT_EQ(run.stages.size(), 4u);
   for (std::size_t i = 0; i < run.stages.size(); ++i) {
     const auto& st = run.stages[i];
     SCOPED_TRACE("stage " + std::to_string(i));
     EXPECT_TRUE(st.result.converged) << st.result.message;
-    EXPECT_GE(st.parameter, 2.0 * st.h_min);
+    EXPECT_GE(st.eps, 2.0 * st.h_min);
     if (i > 0) {
       EXPECT_LT(st.result.energy, run.stages[i - 1].result.energy);
     }

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <petscksp.h>
+#include <petscsnes.h>
 #include <petscmat.h>
 #include <petscvec.h>
 
@@ -82,6 +83,7 @@ class PetscHandle {
 using PetscMatrix = PetscHandle<Mat, MatDestroy>;
 using PetscVector = PetscHandle<Vec, VecDestroy>;
 using PetscLinearSolver = PetscHandle<KSP, KSPDestroy>;
+using PetscNonlinearSolver = PetscHandle<SNES, SNESDestroy>;
 using PetscIndexSet = PetscHandle<IS, ISDestroy>;
 using PetscScatter = PetscHandle<VecScatter, VecScatterDestroy>;
 

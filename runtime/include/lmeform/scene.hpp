@@ -53,25 +53,19 @@ struct SceneNodes {
   int quadrature_points = 6;           ///< points of the simplex rule per background cell
 };
 
-/// What the problem is, from the outputs the scene names (app::bind_scene checks them).
-enum class ProblemKind {
-  minimization,  ///< Σ energies, subject to the constraints: the constrained Newton minimizer
-  residual,      ///< R(u; v) = 0 for all v: Newton (PETSc SNES)
-  linear,        ///< a(u, v) = l(v) for all v: one linear solve (PETSc KSP)
-};
-
 /// A name as written in the scene, with where it was written (for messages about it).
 struct SceneName {
   std::string name;
   std::string where;                   ///< "FILE:LINE: key 'model.energy[1]'"
 };
 
-/// [model]: the forms and the outputs that make the problem.
+/// [model]: the forms and the outputs that make the problem. At most one kind of output is named
+/// (the reader refuses a residual beside an energy, say); the problem drivers claim a scene by them.
 struct SceneModel {
   /// Built-in module names, or paths of .form files (resolved against the scene's folder).
   std::vector<SceneName> forms;
-  ProblemKind kind = ProblemKind::minimization;
-  /// minimization: energy outputs summed; empty in the file means every energy output of the forms.
+  /// Energy outputs summed; empty (and no residual or bilinear form named) means every energy
+  /// output of the forms.
   std::vector<SceneName> energy;
   std::optional<SceneName> residual;
   std::optional<SceneName> bilinear, linear;
@@ -123,12 +117,18 @@ struct SceneInitialField {
 /// [qdata]: runtime-supplied quadrature data by the name the form declares.
 struct SceneQdata {
   std::string name;
-  /// "support_size": rho-bar, the nodal spacing of the point's LME neighbours weighted by their
-  /// basis values; "zero": zeros (e.g. a reference field to be set by a model); "value": `value`
-  /// (a number, or an expression of x and the constants) at every quadrature point; "field": the
-  /// value, gradient or Hessian of a scalar nodal field of [coefficients] interpolated with the
-  /// LME basis at every quadrature point (a Lagrangian form's reference field φ0, ∇φ0, ∇∇φ0).
-  std::string provider;
+  enum class Source {
+    /// ρ̄, the nodal spacing of the point's LME neighbours weighted by their basis values
+    support_size,
+    /// zeros (e.g. a reference field set by a model)
+    zero,
+    /// `value` (a number, or an expression of x and the constants) at every quadrature point
+    value,
+    /// the value, gradient or Hessian of a scalar nodal field of [coefficients] interpolated with
+    /// the LME basis at every quadrature point (a Lagrangian form's reference field φ0, ∇φ0, ∇∇φ0)
+    field,
+  };
+  Source source = Source::zero;
   SceneValue value;                    ///< provider "value"
   std::string field;                   ///< provider "field": the [coefficients] entry
   int derivative = 0;                  ///< provider "field": 0 value, 1 gradient, 2 Hessian
@@ -163,7 +163,7 @@ struct SceneReference {
 struct SceneOutput {
   std::filesystem::path directory;     ///< relative paths: against the working directory
   bool hdf5 = true;                    ///< HDF5 + XDMF sidecar
-  bool png = true;                     ///< a picture of the first scalar field (2D)
+  bool png = false;                    ///< a figure of the first scalar field (2D; needs Python + matplotlib)
 };
 
 struct SceneDocument;  // the parsed TOML, for model extensions (scene_table.hpp)

@@ -20,6 +20,12 @@
 
 namespace lmeform {
 
+/// The largest magnitude of a number in a scene: squares and products of larger values overflow
+/// double precision in an assembly or a factorization (a Dirichlet value of 1e308 gave NaN pivots).
+inline constexpr double kLargestSceneNumber = 1e100;
+/// The smallest relative tolerance a scene may ask for: about 50 machine epsilons.
+inline constexpr double kSmallestRelativeTolerance = 1e-14;
+
 namespace scene_detail {
 
 inline std::string format_number(double v) {
@@ -209,6 +215,9 @@ class SceneTable {
       wrong_type(key, n, "a number");
     }
     if (!std::isfinite(v)) fail(ctx_, &n, "key '" + key_path(key) + "' must be finite, got " + format_number(v));
+    if (std::abs(v) > kLargestSceneNumber)
+      fail(ctx_, &n, "key '" + key_path(key) + "' = " + format_number(v) + " is too large: scene numbers are at most " +
+                         format_number(kLargestSceneNumber) + " in magnitude (products and squares of larger ones overflow a solve)");
     return v;
   }
 
@@ -322,6 +331,15 @@ class SceneTable {
   // Range checks: the value is returned for chaining.
   double positive(std::string_view key, double v) const {
     if (!(v > 0)) fail_key(key, "must be positive, got " + format_number(v));
+    return v;
+  }
+  /// A relative tolerance: positive, at least kSmallestRelativeTolerance (below it the rounding
+  /// of the residual itself decides convergence, and a solve runs until its iteration limit).
+  double relative_tolerance(std::string_view key, double v) const {
+    positive(key, v);
+    if (v < kSmallestRelativeTolerance)
+      fail_key(key, "= " + format_number(v) + " is below what double precision can reach: give at least " +
+                        format_number(kSmallestRelativeTolerance));
     return v;
   }
   double non_negative(std::string_view key, double v) const {

@@ -1,4 +1,5 @@
 #include "lmeform/assembler.hpp"
+#include "lmeform/stopwatch.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -15,9 +16,6 @@ namespace lmeform {
 
 namespace {
 
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 const char* order_name(int order) {
   return order == 0 ? "values" : order == 1 ? "gradients" : "Hessians";
@@ -144,7 +142,7 @@ PetscVector Assembler::create_coefficient_vector() const {
 }
 
 PetscMatrix Assembler::create_matrix(MatrixInsertion insertion) {
-  const auto start = std::chrono::steady_clock::now();
+  const Stopwatch clock;
   const int bs = form_->dofs_per_node;
   const SparsityPattern& pattern = disc_->pattern();
   PetscMatrix A;
@@ -186,7 +184,7 @@ PetscMatrix Assembler::create_matrix(MatrixInsertion insertion) {
   if (insertion == MatrixInsertion::Direct && (zero_communication || disc_->ranks() == 1)) {
     (void)detail::AijDirectAdd::attach(A);
   }
-  times_.create_matrix = seconds_since(start);
+  times_.create_matrix = clock.seconds();
   return A;
 }
 
@@ -283,12 +281,12 @@ void Assembler::element_loop(Vec u, bool owned_only, int order, PerElement&& per
 
 double Assembler::value(Vec u) {
   if (form_->value == nullptr) throw std::logic_error(describe() + ": has no value kernel (it is not an energy or constraint)");
-  const auto start = std::chrono::steady_clock::now();
+  const Stopwatch clock;
   double local_sum = 0.0;
   element_loop(u, /*owned_only=*/true, [&](int, const kernel::CellInputs& in) { local_sum += form_->value(in); });
   double total = 0.0;
   MPI_Allreduce(&local_sum, &total, 1, MPI_DOUBLE, MPI_SUM, disc_->comm());
-  times_.value = seconds_since(start);
+  times_.value = clock.seconds();
   return total;
 }
 
@@ -312,7 +310,7 @@ double Assembler::add_value_and_vector(Vec u, Vec out, double scale) {
 
 double Assembler::vector_pass(Vec u, Vec out, double scale, bool with_value) {
   if (form_->vector == nullptr) throw std::logic_error(describe() + ": has no vector kernel");
-  const auto start = std::chrono::steady_clock::now();
+  const Stopwatch clock;
   const bool zero_communication = disc_->options().off_process == OffProcessMode::ZeroCommunication;
   const int bs = form_->dofs_per_node;
   LMEFORM_PETSC_CHECK(VecSetOption(out, VEC_IGNORE_OFF_PROC_ENTRIES, zero_communication ? PETSC_TRUE : PETSC_FALSE));
@@ -337,7 +335,7 @@ double Assembler::vector_pass(Vec u, Vec out, double scale, bool with_value) {
   LMEFORM_PETSC_CHECK(VecAssemblyEnd(out));
   double total = 0.0;
   if (with_value) MPI_Allreduce(&local_sum, &total, 1, MPI_DOUBLE, MPI_SUM, disc_->comm());
-  times_.vector = seconds_since(start);
+  times_.vector = clock.seconds();
   return total;
 }
 
@@ -383,7 +381,7 @@ void Assembler::add_matrix_terms(Vec u, std::span<const MatrixTerm> all_terms, M
     if (self != terms.end()) std::iter_swap(terms.begin(), self);
   }
 
-  const auto start = std::chrono::steady_clock::now();
+  const Stopwatch clock;
   const bool zero_communication = disc_->options().off_process == OffProcessMode::ZeroCommunication;
   const int bs = form_->dofs_per_node;
   double kernel_seconds = 0.0;
@@ -395,7 +393,7 @@ void Assembler::add_matrix_terms(Vec u, std::span<const MatrixTerm> all_terms, M
   if (direct != nullptr) fill.emplace(*direct, out);
 
   element_loop(u, /*owned_only=*/!zero_communication, order, [&](int e, const kernel::CellInputs& in) {
-    const auto kernel_start = std::chrono::steady_clock::now();
+    const Stopwatch kernel_clock;
     const auto nodes = disc_->element_nodes(e);
     const std::size_t m = nodes.size() * static_cast<std::size_t>(bs);
     std::fill_n(local_.begin(), m * m, 0.0);
@@ -422,7 +420,7 @@ void Assembler::add_matrix_terms(Vec u, std::span<const MatrixTerm> all_terms, M
       }
       first = false;
     }
-    kernel_seconds += seconds_since(kernel_start);
+    kernel_seconds += kernel_clock.seconds();
     if (fill) {
       for (std::size_t a = 0; a < nodes.size(); ++a) {
         const bool mine = !zero_communication || disc_->owns(nodes[a]);
@@ -448,7 +446,7 @@ void Assembler::add_matrix_terms(Vec u, std::span<const MatrixTerm> all_terms, M
     LMEFORM_PETSC_CHECK(MatAssemblyBegin(out, MAT_FINAL_ASSEMBLY));
     LMEFORM_PETSC_CHECK(MatAssemblyEnd(out, MAT_FINAL_ASSEMBLY));
   }
-  times_.matrix = seconds_since(start);
+  times_.matrix = clock.seconds();
   times_.matrix_kernel = kernel_seconds;
 }
 

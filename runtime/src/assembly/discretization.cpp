@@ -1,4 +1,5 @@
 #include "lmeform/discretization.hpp"
+#include "lmeform/stopwatch.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -23,14 +24,14 @@ namespace {
 
 class StageClock {
  public:
-  explicit StageClock(double& accumulator) : acc_(accumulator), start_(std::chrono::steady_clock::now()) {}
-  ~StageClock() { acc_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count(); }
+  explicit StageClock(double& accumulator) : acc_(accumulator) {}
+  ~StageClock() { acc_ += clock_.seconds(); }
   StageClock(const StageClock&) = delete;
   StageClock& operator=(const StageClock&) = delete;
 
  private:
   double& acc_;
-  std::chrono::steady_clock::time_point start_;
+  Stopwatch clock_;
 };
 
 QuadratureRule rule_for(int dim, int points) {

@@ -12,6 +12,7 @@
 
 #include "builtin_forms.hpp"
 #include "jit_compile.hpp"
+#include "lmeform/stopwatch.hpp"
 
 namespace lmeform {
 
@@ -99,7 +100,7 @@ void share_outcome(MPI_Comm comm, std::string& failure) {
 }
 
 FormModule load_jit(const fs::path& form, const FormLoadOptions& options) {
-  const auto t0 = std::chrono::steady_clock::now();
+  const Stopwatch clock;
   if (!fs::exists(form)) throw FormLoadError(fmt::format("{}: no such form file", form.string()));
   if (!fs::is_regular_file(form)) throw FormLoadError(fmt::format("{}: not a regular file", form.string()));
   int rank = 0;
@@ -146,7 +147,7 @@ FormModule load_jit(const fs::path& form, const FormLoadOptions& options) {
   m.cache_key = entry.key;
   m.generate_seconds = times.generate_seconds;
   m.compile_seconds = times.compile_seconds;
-  m.load_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  m.load_seconds = clock.seconds();
   if (options.log != nullptr && rank == 0) {
     if (m.cache_hit) {
       *options.log << fmt::format("form {}: cache hit ({}) in {:.0f} ms\n", form.string(), entry.library.string(),

@@ -21,6 +21,7 @@
 #include <nlohmann/json.hpp>
 
 #include "jit_config.hpp"
+#include "lmeform/stopwatch.hpp"
 #include "lmeform/output.hpp"
 
 extern char** environ;
@@ -100,43 +101,16 @@ std::string binary_stamp(const fs::path& program) {
   return fmt::format("{} {} {}", resolved.string(), size, time.time_since_epoch().count());
 }
 
-double seconds_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
 
 }  // namespace
 
-ProcessResult run_process(const std::vector<std::string>& argv) {
-  // stdout and stderr go to files (pipes would need a reader for each to avoid a full-pipe stall).
-  const fs::path dir = fs::temp_directory_path();
-  const fs::path out_path = unique_sibling(dir, "lmeform-out"), err_path = unique_sibling(dir, "lmeform-err");
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(&actions, 1, out_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0600);
-  posix_spawn_file_actions_addopen(&actions, 2, err_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0600);
-  std::vector<char*> args;
-  for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
-  args.push_back(nullptr);
-  pid_t pid = 0;
-  const int status = posix_spawnp(&pid, args[0], &actions, nullptr, args.data(), environ);
-  posix_spawn_file_actions_destroy(&actions);
-  if (status != 0) {
-    std::error_code ec;
-    fs::remove(out_path, ec);
-    fs::remove(err_path, ec);
-    throw FormLoadError(fmt::format("cannot run {}: {}", argv[0], std::strerror(status)));
+/// run_process with a program that cannot be started reported as a form that cannot be loaded.
+ProcessResult run_tool(const std::vector<std::string>& argv) {
+  try {
+    return lmeform::run_process(argv);
+  } catch (const std::runtime_error& e) {
+    throw FormLoadError(e.what());
   }
-  int wstatus = 0;
-  while (::waitpid(pid, &wstatus, 0) < 0 && errno == EINTR) {
-  }
-  ProcessResult r;
-  r.exit_code = WIFEXITED(wstatus) ? WEXITSTATUS(wstatus) : 128 + (WIFSIGNALED(wstatus) ? WTERMSIG(wstatus) : 0);
-  r.out = read_file(out_path);
-  r.err = read_file(err_path);
-  std::error_code ec;
-  fs::remove(out_path, ec);
-  fs::remove(err_path, ec);
-  return r;
 }
 
 fs::path find_lmeformc(const FormLoadOptions& options) {
@@ -153,9 +127,7 @@ fs::path find_lmeformc(const FormLoadOptions& options) {
     if (usable(env)) return env;
     throw FormLoadError(fmt::format("lmeformc not found: LMEFORM_LMEFORMC={} is not an executable file", env));
   }
-  std::error_code ec;
-  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
-  if (!ec && usable(self.parent_path() / "lmeformc")) return self.parent_path() / "lmeformc";
+  if (const fs::path dir = executable_directory(); !dir.empty() && usable(dir / "lmeformc")) return dir / "lmeformc";
   if (usable(jit_config::built_lmeformc)) return jit_config::built_lmeformc;
   std::string where;
   for (const auto& p : tried) where += "\n  " + p.string();
@@ -170,9 +142,9 @@ CacheEntry describe_entry(const fs::path& form, const fs::path& lmeformc, const 
     argv.emplace_back("-I");
     argv.push_back(dir.string());
   }
-  const ProcessResult deps = run_process(argv);
+  const ProcessResult deps = run_tool(argv);
   if (deps.exit_code != 0) throw FormLoadError(deps.err.empty() ? "lmeformc --dependencies failed" : deps.err);
-  const ProcessResult version = run_process({lmeformc.string(), "--version"});
+  const ProcessResult version = run_tool({lmeformc.string(), "--version"});
   std::ostringstream material;
   material << "contract " << kernel::kContractVersion << "\n"
            << "lmeformc " << (version.exit_code == 0 ? version.out : "unknown") << "lmeformc-binary "
@@ -218,15 +190,15 @@ BuildTimes ensure_entry(const CacheEntry& entry, const fs::path& form, const fs:
     return ignore ? work : kept;
   };
 
-  auto t0 = std::chrono::steady_clock::now();
+  Stopwatch clock;
   std::vector<std::string> gen{lmeformc.string(), form.string(), "-o", work.string(), "--no-json", "-I",
                                jit_config::forms_dir};
   for (const auto& inc : options.include_dirs) {
     gen.emplace_back("-I");
     gen.push_back(inc.string());
   }
-  const ProcessResult generated = run_process(gen);
-  times.generate_seconds = seconds_since(t0);
+  const ProcessResult generated = run_tool(gen);
+  times.generate_seconds = clock.seconds();
   if (generated.exit_code != 0) {
     std::error_code ignore;
     fs::remove_all(work, ignore);
@@ -242,7 +214,7 @@ BuildTimes ensure_entry(const CacheEntry& entry, const fs::path& form, const fs:
   const fs::path source = work / (entry.module + "_module.cpp");
   write_text_atomically(source, fmt::format("// The JIT entry point of module {}.\n#define LMEFORM_MODULE_ENTRY 1\n#include \"{}\"\n",
                                             entry.module, header.filename().string()));
-  t0 = std::chrono::steady_clock::now();
+  clock.restart();
   const fs::path built = work / "module.so";
   std::vector<std::string> cc{compiler()};
   for (auto& f : compiler_flags()) cc.push_back(std::move(f));
@@ -250,8 +222,8 @@ BuildTimes ensure_entry(const CacheEntry& entry, const fs::path& form, const fs:
   cc.push_back(source.string());
   cc.emplace_back("-o");
   cc.push_back(built.string());
-  const ProcessResult compiled = run_process(cc);
-  times.compile_seconds = seconds_since(t0);
+  const ProcessResult compiled = run_tool(cc);
+  times.compile_seconds = clock.seconds();
   if (compiled.exit_code != 0) {
     const fs::path kept = keep_failed();
     std::string command;

@@ -7,18 +7,9 @@
 #include <vector>
 
 #include "lmeform/form_registry.hpp"
+#include "lmeform/process.hpp"
 
 namespace lmeform::jit {
-
-/// An output of a child process.
-struct ProcessResult {
-  int exit_code = -1;
-  std::string out, err;
-};
-
-/// Runs argv[0] with arguments (no shell), capturing stdout and stderr. Throws only when the
-/// program cannot be started.
-ProcessResult run_process(const std::vector<std::string>& argv);
 
 /// The lmeformc this process uses (FormLoadOptions::lmeformc, $LMEFORM_LMEFORMC, next to the
 /// running executable, the one of this build), or throws FormLoadError naming where it looked.

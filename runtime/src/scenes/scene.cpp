@@ -170,18 +170,15 @@ void read_model(const Section& root, Scene& s) {
     t.fail_key(bilinear ? "bilinear" : "linear", std::string("needs 'model.") + (bilinear ? "linear" : "bilinear") +
                                                      "' too: a linear problem is a(u, v) = l(v)");
   if (residual) {
-    m.kind = ProblemKind::residual;
     m.residual = name_of(t, "residual", t.require("residual"));
   } else if (bilinear) {
-    m.kind = ProblemKind::linear;
     m.bilinear = name_of(t, "bilinear", t.require("bilinear"));
     m.linear = name_of(t, "linear", t.require("linear"));
-  } else {
-    m.kind = ProblemKind::minimization;
-    if (energy) m.energy = names_of(t, "energy");
+  } else if (energy) {
+    m.energy = names_of(t, "energy");
   }
   if (t.has("zero_mean")) {
-    if (m.kind != ProblemKind::linear)
+    if (!bilinear)
       t.fail_key("zero_mean", "is supported for linear problems (model.bilinear + model.linear) only");
     m.zero_mean = names_of(t, "zero_mean");
   }
@@ -335,7 +332,7 @@ void read_qdata(const Section& root, Scene& s) {
     if (node.is_table()) {
       // { field = "phi", jet = "value" | "gradient" | "hessian" }
       const Section ft = t->table_of(name, node, {"field", "jet"});
-      q.provider = "field";
+      q.source = SceneQdata::Source::field;
       q.field = ft.string("field");
       static const std::vector<std::string> jets{"value", "gradient", "hessian"};
       const std::string jet = ft.optional_string("jet").value_or("value");
@@ -355,12 +352,12 @@ void read_qdata(const Section& root, Scene& s) {
       return std::isalnum(c) != 0 || c == '_';
     });
     if (text == "support_size" || text == "zero") {
-      q.provider = text;
+      q.source = text == "zero" ? SceneQdata::Source::zero : SceneQdata::Source::support_size;
     } else if (word && !closest_name(text, providers).empty()) {
       t->fail_key(name, "must be one of 'support_size', 'zero', a number or an expression, got '" + text +
                             "'; did you mean '" + closest_name(text, providers) + "'?");
     } else {
-      q.provider = "value";
+      q.source = SceneQdata::Source::value;
       q.value = value_of(*t, name, node);
     }
     s.qdata.push_back(std::move(q));
@@ -398,13 +395,13 @@ void read_solver(const Section& root, Scene& s) {
   SceneSolver& o = s.solver;
   o.kkt_first = t->choice_of("start", t->optional_string("start").value_or("kkt"), {"kkt", "augmented"}) == "kkt";
   o.penalty = t->positive("penalty", t->number("penalty", o.penalty));
-  o.augmented_tolerance = t->positive("augmented_tolerance", t->number("augmented_tolerance", o.augmented_tolerance));
-  o.inner_tolerance = t->positive("inner_tolerance", t->number("inner_tolerance", o.inner_tolerance));
+  o.augmented_tolerance = t->relative_tolerance("augmented_tolerance", t->number("augmented_tolerance", o.augmented_tolerance));
+  o.inner_tolerance = t->relative_tolerance("inner_tolerance", t->number("inner_tolerance", o.inner_tolerance));
   o.max_outer_iterations = t->at_least("max_outer_iterations", t->integer("max_outer_iterations", o.max_outer_iterations), 1);
   o.max_inner_iterations = t->at_least("max_inner_iterations", t->integer("max_inner_iterations", o.max_inner_iterations), 1);
-  o.newton_tolerance = t->positive("newton_tolerance", t->number("newton_tolerance", o.newton_tolerance));
+  o.newton_tolerance = t->relative_tolerance("newton_tolerance", t->number("newton_tolerance", o.newton_tolerance));
   o.constraint_tolerance =
-      t->positive("constraint_tolerance", t->number("constraint_tolerance", o.constraint_tolerance));
+      t->relative_tolerance("constraint_tolerance", t->number("constraint_tolerance", o.constraint_tolerance));
   o.max_newton_iterations =
       t->at_least("max_newton_iterations", t->integer("max_newton_iterations", o.max_newton_iterations), 0);
   o.inertia_correction = t->boolean("inertia_correction", o.inertia_correction);

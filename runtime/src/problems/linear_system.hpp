@@ -14,18 +14,13 @@
 #include <string>
 #include <vector>
 
-namespace lmeform::app {
+#include "toolkit.hpp"
 
-/// The dofs of one unknown field in a vector of interleaved node dofs.
-struct LinearField {
-  std::string name;
-  int offset = 0;      ///< first component within a node's dofs
-  int components = 1;
-};
+namespace lmeform::problems {
 
 struct LinearSystemLayout {
   int dofs_per_node = 1;
-  std::vector<LinearField> fields;
+  std::vector<UnknownField> fields;
   /// For each zero-mean condition: c with c_i = ∫ N_a dx at the dofs of the field, 0 elsewhere.
   std::vector<Vec> mean_functionals;
   /// For each zero-mean condition: the constant mode (1 at the field's dofs, 0 elsewhere).
@@ -44,4 +39,4 @@ struct LinearSolveReport {
 /// Solves A x = b (x: the start, with any Dirichlet values already in it). Collective.
 [[nodiscard]] LinearSolveReport solve_linear_system(MPI_Comm comm, Mat A, Vec b, Vec x, const LinearSystemLayout& layout);
 
-}  // namespace lmeform::app
+}  // namespace lmeform::problems

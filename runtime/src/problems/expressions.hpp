@@ -16,7 +16,7 @@
 
 #include "lmeform/form_registry.hpp"
 
-namespace lmeform::app {
+namespace lmeform::problems {
 
 /// Point expressions of one scene, compiled together (one JIT module, cached).
 class PointExpressions {
@@ -58,4 +58,4 @@ class PointExpressions {
 /// axisymmetric weight); its gradient is ∫ N_a dx.
 [[nodiscard]] const FormModule& compile_integral_form(int dim, MPI_Comm comm, std::ostream* log);
 
-}  // namespace lmeform::app
+}  // namespace lmeform::problems

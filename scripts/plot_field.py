@@ -1,12 +1,15 @@
 #!/usr/bin/python3
-"""Plot an axisymmetric vesicle from an lmeform field file (docs/output.md).
+"""Draw a scalar nodal field of a 2D lmeform field file (docs/output.md).
 
-    /usr/bin/python3 scripts/plot_vesicle.py FILE.h5 OUT.png [--title T] [--mirror] [--field phi]
+    /usr/bin/python3 plot_field.py FILE.h5 OUT.png [--title T] [--mirror] [--field phi]
 
-The node set is drawn as points coloured by the phase field phi, the phi = 0 contour (the membrane)
-is drawn over it by tricontour on the stored background triangles, with axes r and z at equal aspect
-and a colorbar. --mirror reflects r -> -r to show the full cross-section of the vesicle.
-Needs Debian's python3-matplotlib, python3-h5py and numpy (call /usr/bin/python3, not a pyenv one).
+The node set is drawn as points coloured by the field, its zero contour (a phase field's interface)
+over it by tricontour on the stored background triangles, at equal aspect with a colorbar. --mirror
+reflects r -> -r to show the full cross-section of an axisymmetric field (axes r and z; else x, y).
+`lmeform run` calls it where a scene asks for a figure ([output] png = true) and `lmeform plot`
+on any field file; both find it next to the lmeform binary (share/lmeform/).
+Needs Debian's python3-matplotlib, python3-h5py and numpy (call /usr/bin/python3, not a pyenv one);
+without them it exits with status 3.
 """
 
 import argparse
@@ -14,9 +17,9 @@ import os
 import sys
 
 
-def fail(message):
-    print(f"plot_vesicle.py: {message}", file=sys.stderr)
-    sys.exit(1)
+def fail(message, code=1):
+    print(f"plot_field.py: {message}", file=sys.stderr)
+    sys.exit(code)
 
 
 def load(path, field):
@@ -36,7 +39,7 @@ def load(path, field):
         values = np.asarray(f[f"fields/{field}"][...], dtype=float)
         attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
     if nodes.ndim != 2 or nodes.shape[1] != 2:
-        fail(f"{path}: /nodes is {nodes.shape}; the plot needs 2D (r, z) nodes")
+        fail(f"{path}: /nodes is {nodes.shape}; the plot needs 2D nodes")
     if cells.ndim != 2 or cells.shape[1] != 3:
         fail(f"{path}: /cells is {cells.shape}; expected triangles (M x 3)")
     if values.ndim != 1 or values.shape[0] != nodes.shape[0]:
@@ -88,7 +91,7 @@ def main():
         import numpy as np
         import h5py  # noqa: F401  (checked here, used in load)
     except ImportError as e:
-        fail(f"{e}; run with Debian's /usr/bin/python3 (python3-matplotlib, python3-h5py)")
+        fail(f"{e}; run with Debian's /usr/bin/python3 (python3-matplotlib, python3-h5py)", code=3)
 
     nodes, cells, values, attrs = load(args.file, args.field)
     n_file = len(values)
@@ -121,8 +124,8 @@ def main():
     ax.set_aspect("equal")
     ax.set_xlim(r.min(), r.max())
     ax.set_ylim(z.min(), z.max())
-    ax.set_xlabel("r")
-    ax.set_ylabel("z")
+    ax.set_xlabel("r" if args.mirror else "x")
+    ax.set_ylabel("z" if args.mirror else "y")
     title = args.title if args.title is not None else args.file.rsplit("/", 1)[-1]
     info = subtitle(attrs)
     info = f"{n_file} nodes" + (f",  {info}" if info else "")

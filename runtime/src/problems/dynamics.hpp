@@ -25,8 +25,9 @@
 #include "lmeform/delaunay.hpp"
 #include "lmeform/node_set.hpp"
 #include "lmeform/scene.hpp"
+#include "problem_registry.hpp"
 
-namespace lmeform::app {
+namespace lmeform::problems {
 
 inline constexpr std::string_view kDynamicsExtension = "dynamics";
 
@@ -145,8 +146,7 @@ struct DynamicsOutput {
 [[nodiscard]] DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettings& settings,
                                        const DynamicsOutput* output, std::ostream* log);
 
-/// `lmeform run` of a scene with [dynamics]: the run, its files, the closing table; the exit code.
-int run_dynamics_command(MPI_Comm comm, const Scene& scene, const std::filesystem::path& out_dir,
-                         const std::string& json_path, bool restart);
+/// The driver of scenes with a [dynamics] table.
+[[nodiscard]] const ProblemDriver& dynamics_driver();
 
-}  // namespace lmeform::app
+}  // namespace lmeform::problems

@@ -22,9 +22,10 @@
 #include "lmeform/lme_basis.hpp"
 #include "lmeform/node_set.hpp"
 #include "lmeform/scene.hpp"
-#include "problem.hpp"
+#include "problem_registry.hpp"
+#include "stationary.hpp"
 
-namespace lmeform::app {
+namespace lmeform::problems {
 
 /// One stage of the progressive CVT schedule: relocate the nodes by Lloyd iterations for the
 /// density ρ = 1 + f |∇φ| of the current solution, then solve at eps. lloyd_iterations = 0: no
@@ -112,14 +113,44 @@ void check_feasible(double A0, double V0, int dim = 3);
 /// (phi clamped into (-1, 1)). Exact for a tanh profile; the start of a continuation in eps.
 [[nodiscard]] std::vector<double> rescale_interface(std::span<const double> phi, double eps_from, double eps_to);
 
-/// The LME options of a vesicle scene: mirror symmetry across the axis r = 0 when axisymmetric,
-/// and `spacing_smoothing` passes on the nodal spacing.
-[[nodiscard]] LmeOptions vesicle_lme_options(const Scene& scene);
+/// One solve of the schedule.
+struct StageRecord {
+  int stage = 0;
+  double eps = 0;      ///< the interface width of the stage
+  std::string grid;    ///< "uniform" / "file", then "cvt-1", "cvt-2", ... per relocation
+  int generation = 0;  ///< relocations along the chain of stages that led here
+  std::string label;   ///< " (branch)" for a side solve
+  int nodes = 0;
+  double h_min = 0;    ///< SpacingSummary::h_min of the stage's grid
+  ProblemResult result;
+  double wall_s = 0;   ///< this stage: relocation + setup + solve
+  double adapt_s = 0;  ///< of which the relocation
+};
+
+struct VesicleRun {
+  std::vector<StageRecord> stages;  ///< the finished stages, in order
+  /// Empty when every stage ran; else "stage k: <why>" for the stage that could not run. A stage
+  /// whose solver did not converge is the last one, with its result's message.
+  std::string failure;
+  double wall_s = 0;                ///< the whole run, node set generation included
+  StateLayout layout;               ///< the layout of every stage's state
+};
 
 /// Runs a vesicle scene: binds it with the model's targets filled in, then solves the first stage
 /// and every adaptivity stage (relocation, resolution check, continuation in eps from the previous
-/// stage, multipliers warm-started). A stage that cannot run ends the schedule (SceneRun::failure).
-[[nodiscard]] SceneRun run_vesicle(MPI_Comm comm, const Scene& scene, const VesicleModel& model, std::ostream* log);
+/// stage, multipliers warm-started). A stage that cannot run ends the schedule (VesicleRun::failure).
+[[nodiscard]] VesicleRun run_vesicle(MPI_Comm comm, const Scene& scene, const VesicleModel& model, std::ostream* log);
+
+/// The scene with what the model derives: the area and volume targets of its sphere, and the
+/// moment's natural size (the volume times the vesicle's half-height, ~ V0).
+[[nodiscard]] Scene with_vesicle_targets(const Scene& scene, const VesicleModel& model);
+
+/// Binds a scene completed with the model's targets; throws SceneError unless its problem minimizes
+/// energies of the model's one scalar field.
+[[nodiscard]] BoundScene bind_vesicle(const Scene& completed, MPI_Comm comm, std::ostream* log, const VesicleModel& model);
+
+/// The driver of scenes with a [vesicle] table.
+[[nodiscard]] const ProblemDriver& vesicle_driver();
 
 /// The spacing field of an interface-resolving grid: h(x) = min(coarsening · h_interface,
 /// h_interface + grading · max(0, d(x) − band · eps_resolve)), d the distance to the zero level set
@@ -140,4 +171,4 @@ void check_feasible(double A0, double V0, int dim = 3);
 [[nodiscard]] NodeSet adapt_nodes(const ProblemResult& solved, const Box& box, double f, const CvtOptions& cvt,
                                   CvtReport* report = nullptr);
 
-}  // namespace lmeform::app
+}  // namespace lmeform::problems

@@ -1,7 +1,6 @@
 #include "vesicle.hpp"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <memory>
 #include <numbers>
@@ -15,8 +14,10 @@
 #include "lmeform/neighbour_search.hpp"
 #include "lmeform/node_sets.hpp"
 #include "lmeform/scene_table.hpp"
+#include "lmeform/stopwatch.hpp"
+#include "field_transfer.hpp"
 
-namespace lmeform::app {
+namespace lmeform::problems {
 
 namespace {
 
@@ -136,6 +137,28 @@ void read_adaptivity(const SceneTable& t, VesicleModel& m) {
   m.adaptivity = std::move(a);
 }
 
+/// The measure of the domain (axisymmetric: the volume of revolution).
+double domain_measure(const Scene& s) {
+  const Box& b = s.domain;
+  if (s.axisymmetric()) return std::numbers::pi * b.hi[0] * b.hi[0] * (b.hi[1] - b.lo[1]);
+  double m = 1;
+  for (int i = 0; i < s.dim(); ++i) m *= b.hi[std::size_t(i)] - b.lo[std::size_t(i)];
+  return m;
+}
+
+/// The targets must fit the domain: the volume inside it, and the membrane, a diffuse layer of
+/// width ε over the area A0, too (a radius of 1e8 in a unit box ran 40 multiplier updates and
+/// then stopped on its tolerance).
+void check_fits_domain(const Scene& s, const SceneTable& t, const VesicleModel& m) {
+  const double measure = domain_measure(s);
+  if (m.volume && *m.volume > measure)
+    t.fail_key("radius", fmt::format("gives a target volume {} larger than the domain's {}", *m.volume, measure));
+  if (*m.area * m.eps > measure)
+    t.fail_key("radius", fmt::format("gives a target area {} whose interface layer (area x {} = {}) cannot fit in the domain's "
+                                     "measure {}",
+                                     *m.area, m.width, *m.area * m.eps, measure));
+}
+
 }  // namespace
 
 std::optional<VesicleModel> read_vesicle(const Scene& s) {
@@ -177,6 +200,7 @@ std::optional<VesicleModel> read_vesicle(const Scene& s) {
   } else if (t->has("reduced_volume")) {
     t->fail_key("reduced_volume", "needs the sphere it refers to: add 'vesicle.radius'");
   }
+  if (m.area) check_fits_domain(s, *t, m);
   for (const auto& c : s.constraints) {
     if ((c.name == "area" && m.area && c.target) || (c.name == "volume" && m.volume && c.target))
       throw SceneError(fmt::format("{}: the target is already set by [vesicle] (radius / reduced_volume); give it once",
@@ -304,155 +328,148 @@ std::vector<double> rescale_interface(std::span<const double> phi, double eps_fr
   return out;
 }
 
-LmeOptions vesicle_lme_options(const Scene& scene) {
-  LmeOptions o;
-  if (scene.axisymmetric()) {
-    // φ of a body of revolution is even in r: the basis is mirrored across the axis r = 0, so
-    // φ_r = 0 there exactly and φ_r / r stays finite (without it φ_r(0, z) ≠ 0 and the bending
-    // density ε² φ_r² / r grows without bound as quadrature points approach the axis).
-    o.mirror_axis = 0;
-    o.mirror_position = 0.0;
-  }
-  // On CVT-graded node sets the distance to the few nearest nodes scatters from node to node; a
-  // smooth h_a keeps β_a = γ / h_a², and so the basis, regular (measured: the discocyte at
-  // ε = 0.04 on a graded 6124-node grid, +0.36 % from the converged energy with the raw spacing,
-  // +0.10 % with 5 passes; neutral on uniform grids).
-  o.spacing_smoothing = scene.nodes.spacing_smoothing;
-  return o;
-}
-
-
 namespace {
 
-double seconds_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+/// The grid of a stage that builds one: an interface-resolving grid, or a CVT relocation with the
+/// density 1 + f |∇φ| of the solution it continues from.
+NodeSet relocated_nodes(const Scene& scene, const VesicleModel& model, const AdaptivityStage& st, const StageRecord& from,
+                        std::ostream* log) {
+  CvtOptions cvt;
+  cvt.iterations = st.lloyd_iterations;
+  cvt.samples_per_node = model.adaptivity->samples_per_node;
+  if (st.resolve)
+    return resolve_interface(from.result.nodes, from.result.state, scene.domain, *st.resolve, model.resolution_factor,
+                             model.adaptivity->interface, cvt, log);
+  cvt.start = model.adaptivity->start_from_density ? CvtStart::density : CvtStart::given;
+  CvtReport report;
+  NodeSet nodes = adapt_nodes(from.result, scene.domain, st.f, cvt, &report);
+  if (log != nullptr)
+    *log << "CVT with rho = 1 + " << st.f << " |grad phi|: " << report.iterations.size() << " Lloyd iterations"
+         << (cvt.start == CvtStart::density ? " from the density's node placement" : " from the current nodes") << ", " << report.samples
+         << (cvt.centroids == CvtCentroids::voronoi ? " density evaluations per iteration\n" : " samples\n");
+  return nodes;
 }
 
-/// One stage of the vesicle schedule: the relocation (if any), the resolution check and the solve,
-/// starting from stage `from` of `stages` (none for stage 0). Throws when the stage cannot run.
-StageRecord run_vesicle_stage(MPI_Comm comm, const BoundScene& bound, const VesicleModel& model, std::ostream* log,
-                              int stage, const std::vector<StageRecord>& stages, std::size_t main_stage, NodeSet& nodes) {
+/// The first grid resolving the initial profile's interface (initial_resolve).
+NodeSet initially_resolved_nodes(const Scene& scene, const VesicleModel& model, const NodeSet& nodes, std::ostream* log) {
+  std::vector<double> profile(nodes.size());
+  for (std::size_t a = 0; a < nodes.size(); ++a) profile[a] = initial_profile(model, nodes.point(a), scene.dim());
+  CvtOptions cvt;
+  cvt.iterations = AdaptivityStage{}.lloyd_iterations;
+  cvt.samples_per_node = model.adaptivity ? model.adaptivity->samples_per_node : VesicleAdaptivity{}.samples_per_node;
+  return resolve_interface(nodes, profile, scene.domain, *model.initial_resolve, model.resolution_factor,
+                           model.adaptivity ? model.adaptivity->interface : InterfaceResolution{}, cvt, log);
+}
+
+/// The start of a later stage: the previous field (on the same grid its coefficients, else its
+/// values at the new nodes), re-profiled to a narrower interface, and the previous multipliers.
+void continue_from(const BoundScene& bound, const VesicleModel& model, const AdaptivityStage& st, const StageRecord& from, double eps,
+                   ProblemInput& input) {
+  const auto& previous = from.result;
+  const double gamma = bound.discretization.gamma;
+  // With fit_iterations > 0 the start is the previous field's values at the nodes, re-profiled,
+  // with coefficients fitted so that the LME field takes them (LME is not interpolating). Measured,
+  // fitted against not: the discocyte's eps 0.015 -> 0.01 stage starts at E = 9.42 against 20.07
+  // and needs 11 KKT steps against 13, but the dumbbell's stages at eps = 0.02 and 0.015 crawl for
+  // 25 damped steps against 9 and 12, so fitting is not the default.
+  const int fit = model.adaptivity->fit_iterations;
+  if (fit > 0 && (st.new_grid() || eps != from.eps)) {
+    std::vector<double> values = interpolate_nodal_field(previous.nodes, previous.state, gamma, input.lme, input.nodes);
+    if (eps < from.eps) values = rescale_interface(values, from.eps, eps);
+    input.initial = fit_nodal_values(input.nodes, values, gamma, input.lme, fit);
+  } else {
+    input.initial = !st.new_grid() ? previous.state : interpolate_nodal_field(previous.nodes, previous.state, gamma, input.lme, input.nodes);
+    if (eps < from.eps) input.initial = rescale_interface(input.initial, from.eps, eps);
+  }
+  // The multipliers (tension, pressure) change little between stages: start from the last ones.
+  if (previous.converged) input.initial_multipliers = previous.minimization.multipliers;
+  // Only eps changes: the nodes, cells, quadrature and basis are those of the stage before.
+  if (!st.new_grid()) input.discretization = previous.discretization;
+}
+
+/// The start of the first stage: the scene's [initial], else the model's profile.
+std::vector<double> first_start(const BoundScene& bound, const VesicleModel& model, const NodeSet& nodes) {
+  std::vector<double> start = initial_state(bound, nodes);
+  if (std::none_of(bound.initial.begin(), bound.initial.end(), [&](const BoundNodalField& f) { return f.name == model.field; }))
+    for (std::size_t a = 0; a < nodes.size(); ++a) start[a] = initial_profile(model, nodes.point(a), bound.dim);
+  return start;
+}
+
+/// One stage of the schedule: the relocation (if any), the resolution check and the solve,
+/// continuing from stage `from` of `stages` (none for stage 0). Throws when the stage cannot run.
+StageRecord run_vesicle_stage(MPI_Comm comm, const BoundScene& bound, const VesicleModel& model, std::ostream* log, int stage,
+                              const std::vector<StageRecord>& stages, std::size_t main_stage, NodeSet& nodes) {
   const Scene& scene = *bound.scene;
+  const Stopwatch clock;
   StageRecord rec;
-  const auto t0 = std::chrono::steady_clock::now();
-  rec.parameter = stage == 0 ? model.eps : model.adaptivity->stages[static_cast<std::size_t>(stage - 1)].eps;
+  rec.stage = stage;
+  rec.eps = stage == 0 ? model.eps : model.adaptivity->stages[static_cast<std::size_t>(stage - 1)].eps;
   rec.grid = scene.nodes.kind == SceneNodes::Kind::file ? "file" : "uniform";
-  const LmeOptions lme = vesicle_lme_options(scene);
-  std::size_t from = 0;
-  if (stage > 0) {
-    const auto& st = model.adaptivity->stages[static_cast<std::size_t>(stage - 1)];
-    from = st.branch ? stages.size() - 1 : main_stage;
+  const AdaptivityStage* st = stage > 0 ? &model.adaptivity->stages[static_cast<std::size_t>(stage - 1)] : nullptr;
+  const std::size_t from = st == nullptr ? 0 : st->branch ? stages.size() - 1 : main_stage;
+  if (st != nullptr) {
     nodes = stages[from].result.nodes;
-    rec.generation = stages[from].generation + (st.new_grid() ? 1 : 0);
+    rec.generation = stages[from].generation + (st->new_grid() ? 1 : 0);
     rec.grid = rec.generation == 0 ? stages[from].grid : "cvt-" + std::to_string(rec.generation);
-    if (st.branch) rec.label = " (branch)";
-    if (st.resolve) {
-      CvtOptions cvt;
-      cvt.iterations = st.lloyd_iterations;
-      cvt.samples_per_node = model.adaptivity->samples_per_node;
-      nodes = resolve_interface(stages[from].result.nodes, stages[from].result.state, scene.domain, *st.resolve, model.resolution_factor,
-                                model.adaptivity->interface, cvt, log);
-    } else if (st.lloyd_iterations > 0) {
-      CvtOptions cvt;
-      cvt.iterations = st.lloyd_iterations;
-      cvt.start = model.adaptivity->start_from_density ? CvtStart::density : CvtStart::given;
-      cvt.samples_per_node = model.adaptivity->samples_per_node;
-      CvtReport report;
-      nodes = adapt_nodes(stages[from].result, scene.domain, st.f, cvt, &report);
-      if (log != nullptr) {
-        *log << "CVT with rho = 1 + " << st.f << " |grad phi|: " << report.iterations.size() << " Lloyd iterations"
-             << (cvt.start == CvtStart::density ? " from the density's node placement" : " from the current nodes")
-             << ", " << report.samples
-             << (cvt.centroids == CvtCentroids::voronoi ? " density evaluations per iteration\n" : " samples\n");
-      }
-    }
-    rec.adapt_s = seconds_since(t0);
+    if (st->branch) rec.label = " (branch)";
+    if (st->new_grid()) nodes = relocated_nodes(scene, model, *st, stages[from], log);
+    rec.adapt_s = clock.seconds();
   } else if (model.initial_resolve) {
-    std::vector<double> profile(nodes.size());
-    for (std::size_t a = 0; a < nodes.size(); ++a) profile[a] = initial_profile(model, nodes.point(a), scene.dim());
-    CvtOptions cvt;
-    cvt.iterations = AdaptivityStage{}.lloyd_iterations;
-    cvt.samples_per_node = model.adaptivity ? model.adaptivity->samples_per_node : VesicleAdaptivity{}.samples_per_node;
-    nodes = resolve_interface(nodes, profile, scene.domain, *model.initial_resolve, model.resolution_factor,
-                              model.adaptivity ? model.adaptivity->interface : InterfaceResolution{}, cvt, log);
+    nodes = initially_resolved_nodes(scene, model, nodes, log);
     rec.grid = "interface";
-    rec.adapt_s = seconds_since(t0);
+    rec.adapt_s = clock.seconds();
   }
   const SpacingSummary spacing = spacing_summary(nodes);
   rec.h_min = spacing.h_min;
   // An under-resolved interface is refused before any work (seed App. B: ε ≥ 2 h_min).
-  check_resolution(rec.parameter, spacing, model.resolution_factor, rec.grid + " grid");
-  rec.stage = stage;
+  check_resolution(rec.eps, spacing, model.resolution_factor, rec.grid + " grid");
 
   ProblemInput input;
   input.nodes = nodes;
-  input.lme = lme;
+  input.lme = bound.lme(AxisParity::even);
   input.log = log;
-  input.constants[model.width] = rec.parameter;
-  if (stage == 0) {
-    input.initial = initial_state(bound, nodes);
-    const bool given = std::any_of(scene.initial.begin(), scene.initial.end(),
-                                   [&](const SceneInitialField& f) { return f.unknown == model.field; });
-    if (!given)
-      for (std::size_t a = 0; a < nodes.size(); ++a) input.initial[a] = initial_profile(model, nodes.point(a), scene.dim());
-  } else {
-    // The previous field: on the same grid its coefficients, else its values at the new nodes; a
-    // narrower interface: the same level sets with the new width. With fit_iterations > 0 the
-    // start is instead the previous field's values at the nodes, re-profiled, with coefficients
-    // fitted so that the LME field takes them (LME is not interpolating). Measured, fitted against
-    // not: the discocyte's eps 0.015 -> 0.01 stage starts at E = 9.42 against 20.07 and needs 11
-    // KKT steps against 13, but the dumbbell's stages at eps = 0.02 and 0.015 crawl for 25 damped
-    // steps against 9 and 12, so fitting is not the default.
-    const auto& st = model.adaptivity->stages[static_cast<std::size_t>(stage - 1)];
-    const auto& previous = stages[from].result;
-    const int fit = model.adaptivity->fit_iterations;
-    if (fit > 0 && (st.new_grid() || rec.parameter != stages[from].parameter)) {
-      std::vector<double> values = interpolate_nodal_field(previous.nodes, previous.state, scene.nodes.gamma, lme, nodes);
-      if (rec.parameter < stages[from].parameter) values = rescale_interface(values, stages[from].parameter, rec.parameter);
-      input.initial = fit_nodal_values(nodes, values, scene.nodes.gamma, lme, fit);
-    } else {
-      input.initial = !st.new_grid() ? previous.state
-                                     : interpolate_nodal_field(previous.nodes, previous.state, scene.nodes.gamma, lme, nodes);
-      if (rec.parameter < stages[from].parameter) input.initial = rescale_interface(input.initial, stages[from].parameter, rec.parameter);
-    }
-    // The multipliers (tension, pressure) change little between stages: start from the last ones.
-    if (stages[from].result.converged) input.initial_multipliers = stages[from].result.minimization.multipliers;
-    // Only eps changes: the nodes, cells, quadrature and basis are those of the stage before.
-    if (!st.new_grid()) input.discretization = stages[from].result.discretization;
-  }
-  if (log != nullptr) {
-    *log << "== stage " << stage << " (" << rec.grid << rec.label << "): " << nodes.size() << " nodes, eps " << rec.parameter
-         << ", h_min " << rec.h_min << "\n";
-  }
+  input.constants[model.width] = rec.eps;
+  if (st == nullptr) input.initial = first_start(bound, model, nodes);
+  else continue_from(bound, model, *st, stages[from], rec.eps, input);
+  if (log != nullptr)
+    *log << "== stage " << stage << " (" << rec.grid << rec.label << "): " << nodes.size() << " nodes, eps " << rec.eps << ", h_min "
+         << rec.h_min << "\n";
   rec.result = solve_problem(comm, bound, input);
   rec.nodes = static_cast<int>(nodes.size());
-  rec.wall_s = seconds_since(t0);
+  rec.wall_s = clock.seconds();
   return rec;
 }
 
 }  // namespace
 
-SceneRun run_vesicle(MPI_Comm comm, const Scene& scene, const VesicleModel& model, std::ostream* log) {
-  const auto t_start = std::chrono::steady_clock::now();
-  // The model fills in what it derives: the area and volume targets of its sphere, and the
-  // moment's natural size (the volume times the vesicle's half-height, ~ V0).
+Scene with_vesicle_targets(const Scene& scene, const VesicleModel& model) {
   Scene completed = scene;
   for (auto& c : completed.constraints) {
     if (c.name == "area" && model.area) c.target = *model.area;
     if (c.name == "volume" && model.volume) c.target = *model.volume;
     if (c.name == "moment" && model.volume && !c.scale) c.scale = std::abs(*model.volume);
   }
-  const BoundScene bound = bind_scene(completed, comm, log, {model.width});
-  if (bound.kind != ProblemKind::minimization || bound.unknowns.size() != 1 || bound.unknowns.front().components != 1 ||
-      bound.unknowns.front().name != model.field)
-    throw SceneError(fmt::format("{}: [vesicle] minimizes an energy of one scalar phase field '{}'; the scene's problem "
-                                 "has other unknowns",
-                                 scene.source, model.field));
-  SceneRun run;
-  run.parameter = model.width;
-  run.unknowns = bound.unknowns;
-  // The area multiplier is the membrane tension, the volume multiplier the pressure difference.
-  run.multiplier_meanings = {{"area", "tension"}, {"volume", "pressure"}};
+  return completed;
+}
+
+BoundScene bind_vesicle(const Scene& completed, MPI_Comm comm, std::ostream* log, const VesicleModel& model) {
+  OutputRoles extra;
+  extra.provided_constants = {model.width};
+  BoundScene bound = bind_scene(completed, comm, log, extra);
+  if (bound.energy.empty() || bound.layout.fields.size() != 1 || bound.layout.fields.front().components != 1 ||
+      bound.layout.fields.front().name != model.field)
+    throw SceneError(fmt::format("{}: [vesicle] minimizes an energy of one scalar phase field '{}'; the scene's problem has other "
+                                 "unknowns or outputs",
+                                 completed.source, model.field));
+  return bound;
+}
+
+VesicleRun run_vesicle(MPI_Comm comm, const Scene& scene, const VesicleModel& model, std::ostream* log) {
+  const Stopwatch clock;
+  const Scene completed = with_vesicle_targets(scene, model);
+  const BoundScene bound = bind_vesicle(completed, comm, log, model);
+  VesicleRun run;
+  run.layout = bound.layout;
   NodeSet nodes = initial_nodes(scene, log);
   std::size_t main_stage = 0;
   const int n_stages = 1 + (model.adaptivity ? static_cast<int>(model.adaptivity->stages.size()) : 0);
@@ -472,10 +489,9 @@ SceneRun run_vesicle(MPI_Comm comm, const Scene& scene, const VesicleModel& mode
       if (i != main_stage) run.stages[i].result.discretization.reset();
     if (!run.stages.back().result.converged) break;
   }
-  run.wall_s = seconds_since(t_start);
+  run.wall_s = clock.seconds();
   return run;
 }
-
 
 SpacingField interface_spacing(const NodeSet& nodes, std::span<const double> phi, double eps_resolve, double h_interface,
                                const InterfaceResolution& resolution) {
@@ -521,7 +537,7 @@ SpacingField interface_spacing(const NodeSet& nodes, std::span<const double> phi
 
 NodeSet resolve_interface(const NodeSet& sampled, std::span<const double> phi, const Box& box, double eps_resolve, double resolution_factor,
                           const InterfaceResolution& resolution, const CvtOptions& cvt, std::ostream* log) {
-  const auto t0 = std::chrono::steady_clock::now();
+  const Stopwatch clock;
   double h_interface = eps_resolve / resolution_factor;
   for (int attempt = 0;; ++attempt) {
     const SpacingField field = interface_spacing(sampled, phi, eps_resolve, h_interface, resolution);
@@ -533,7 +549,7 @@ NodeSet resolve_interface(const NodeSet& sampled, std::span<const double> phi, c
       *log << fmt::format("interface grid for eps >= {}: h {:.4g} within {:.4g} of the interface, grading {}, {} nodes, "
                           "{} Lloyd iterations, h_min {:.4g} ({:.1f} s)\n",
                           eps_resolve, h_interface, resolution.band * eps_resolve, resolution.grading, nodes.size(),
-                          report.iterations.size(), spacing.h_min, seconds_since(t0));
+                          report.iterations.size(), spacing.h_min, clock.seconds());
     }
     // The measured h_min (a low quantile of the Voronoi-ring spacing) lies a little below the
     // target spacing of a CVT: refine by the ratio until the resolution rule holds.
@@ -550,4 +566,4 @@ NodeSet adapt_nodes(const ProblemResult& solved, const Box& box, double f, const
   return cvt_relocate(solved.nodes, box, density, cvt, report);
 }
 
-}  // namespace lmeform::app
+}  // namespace lmeform::problems

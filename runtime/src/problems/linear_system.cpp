@@ -1,15 +1,16 @@
-#include "linear_solve.hpp"
+#include "linear_system.hpp"
 
 #include <mpi.h>
 
-#include <chrono>
 #include <string_view>
 
 #include <fmt/format.h>
 
 #include "lmeform/petsc.hpp"
+#include "lmeform/stopwatch.hpp"
+#include "toolkit.hpp"
 
-namespace lmeform::app {
+namespace lmeform::problems {
 namespace {
 
 bool direct_preconditioner(PC pc) {
@@ -133,17 +134,14 @@ double relative_residual(Mat A, Vec x, Vec b) {
 }  // namespace
 
 LinearSolveReport solve_linear_system(MPI_Comm comm, Mat A, Vec b, Vec x, const LinearSystemLayout& layout) {
-  const auto t0 = std::chrono::steady_clock::now();
+  const Stopwatch clock;
   LinearSolveReport report;
   PetscLinearSolver ksp;
   LMEFORM_PETSC_CHECK(KSPCreate(comm, ksp.out()));
-  // MUMPS LU by default (direct, robust for the indefinite saddle points of mixed problems).
-  LMEFORM_PETSC_CHECK(KSPSetType(ksp, KSPPREONLY));
+  configure_direct_solver(ksp);
+  LMEFORM_PETSC_CHECK(KSPSetFromOptions(ksp));
   PC pc = nullptr;
   LMEFORM_PETSC_CHECK(KSPGetPC(ksp, &pc));
-  LMEFORM_PETSC_CHECK(PCSetType(pc, PCLU));
-  LMEFORM_PETSC_CHECK(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
-  LMEFORM_PETSC_CHECK(KSPSetFromOptions(ksp));
 
   const auto k = static_cast<PetscInt>(layout.mean_functionals.size());
   const bool bordered = k > 0 && direct_preconditioner(pc);
@@ -208,8 +206,8 @@ LinearSolveReport solve_linear_system(MPI_Comm comm, Mat A, Vec b, Vec x, const 
   report.message = fmt::format("KSP {} in {} iterations, |Au - b| / |b| = {:.2e}{}", KSPConvergedReasons[reason], its,
                                report.relative_residual,
                                report.zero_mean_method.empty() ? "" : " (zero mean by " + report.zero_mean_method + ")");
-  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  report.seconds = clock.seconds();
   return report;
 }
 
-}  // namespace lmeform::app
+}  // namespace lmeform::problems

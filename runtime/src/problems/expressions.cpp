@@ -9,7 +9,7 @@
 #include "lmeform/output.hpp"
 #include "lmeform/scene.hpp"
 
-namespace lmeform::app {
+namespace lmeform::problems {
 
 namespace fs = std::filesystem;
 
@@ -146,4 +146,4 @@ const FormModule& compile_integral_form(int dim, MPI_Comm comm, std::ostream* lo
   return load_generated("scene_integral", body.str(), comm, log);
 }
 
-}  // namespace lmeform::app
+}  // namespace lmeform::problems

@@ -1,0 +1,25 @@
+// Figures of field files, drawn by the plotting script installed next to the lmeform binary
+// (share/lmeform/plot_field.py) with Debian's /usr/bin/python3. A figure is an extra: without
+// Python or matplotlib, or on any failure of the script, the caller gets a warning, not an error.
+#pragma once
+
+#include <filesystem>
+#include <string>
+
+namespace lmeform::app {
+
+/// What drawing a figure gave: the PNG written, or why none was.
+struct FigureResult {
+  bool written = false;
+  std::string warning;  ///< empty when written
+};
+
+/// Draws scalar field `field` of an HDF5 field file as a PNG (the zero contour over the nodes;
+/// `mirror` reflects an axisymmetric field across the axis). Never throws.
+[[nodiscard]] FigureResult plot_field(const std::filesystem::path& h5, const std::filesystem::path& png, const std::string& field,
+                                      bool mirror);
+
+/// The installed plotting script, or empty when it cannot be found.
+[[nodiscard]] std::filesystem::path plot_script();
+
+}  // namespace lmeform::app

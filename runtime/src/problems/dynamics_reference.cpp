@@ -1,0 +1,193 @@
+#include "dynamics_reference.hpp"
+
+#include <Eigen/Dense>
+
+#include <algorithm>
+
+#include <fmt/format.h>
+
+#include "lmeform/kernel.hpp"
+
+namespace lmeform::problems {
+
+ReferenceConfiguration::ReferenceConfiguration(MPI_Comm comm, const BoundScene& b, const ProblemInput& input,
+                                               const ConstrainedMinimizerOptions& options, bool forward_euler, const std::string& deformation)
+    : space(build_problem_space(comm, b, input)), nodes(input.nodes), deformation_offset(b.unknown(deformation).offset) {
+  minimizer = std::make_unique<ConstrainedMinimizer>(space.energy_terms, space.constraints, options);
+  minimizer->set_fixed_dofs(space.fixed);
+  Assembler& primary = *space.primary;
+  u = primary.create_vector();
+  yn = primary.create_vector();
+  trial = primary.create_vector();
+  gradient = primary.create_vector();
+  w = primary.create_vector();
+  for (std::size_t i = 0; i < space.constraints.size(); ++i) {
+    G.push_back(primary.create_vector());
+    Z.push_back(primary.create_vector());
+  }
+  set_from_original(*space.disc, space.state, b.layout.dofs_per_node, u);
+  Assembler& dissipation = *space.auxiliary.front();
+  K = dissipation.create_matrix();
+  dissipation_coefficients = space.coefficient_vectors.at(b.auxiliary.front().label);
+  const kernel::FormKernels& k = dissipation.form();
+  for (int i = 0; i < k.n_coefficients; ++i) {
+    if (k.coefficients[i].name == deformation) coefficient_offset = coefficients_per_node;
+    coefficients_per_node += k.coefficients[i].components;
+  }
+  if (forward_euler) {
+    LMEFORM_PETSC_CHECK(KSPCreate(comm, euler_ksp.out()));
+    configure_direct_solver(euler_ksp);
+  }
+}
+
+std::vector<PointKinematics> point_kinematics(const ReferenceConfiguration& ref, const std::vector<double>& y_original, int order) {
+  const Discretization& disc = *ref.space.disc;
+  const int dim = disc.dim();
+  const int J = kernel::jet_size(dim, order);
+  const auto bs = std::size_t(ref.space.primary->block_size());
+  const auto offset = std::size_t(ref.deformation_offset);
+  std::vector<double> tab(static_cast<std::size_t>(disc.max_element_points() * J * disc.max_element_nodes()));
+  LmeWorkspace ws;
+  const auto original = disc.original_index();
+  std::vector<PointKinematics> out;
+  for (int e = 0; e < disc.n_elements(); ++e) {
+    if (!disc.element_owned(e)) continue;
+    const auto nodes = disc.element_nodes(e);
+    const auto n = nodes.size();
+    disc.tabulate(e, order, tab, ws);
+    auto y = [&](std::size_t a, int k) { return y_original[std::size_t(original[std::size_t(nodes[a])]) * bs + offset + std::size_t(k)]; };
+    for (int q = 0; q < disc.element_point_count(e); ++q) {
+      PointKinematics p;
+      p.point = disc.element_first_point(e) + q;
+      for (int k = 0; k < dim; ++k) {
+        for (std::size_t a = 0; a < n; ++a) p.position[std::size_t(k)] += tab[std::size_t(q * J) * n + a] * y(a, k);
+        for (int I = 0; I < dim; ++I) {
+          double f = 0;
+          for (std::size_t a = 0; a < n; ++a) f += tab[std::size_t(q * J + 1 + I) * n + a] * y(a, k);
+          p.F[std::size_t(k * dim + I)] = f;
+          if (order < 2) continue;
+          for (int K = I; K < dim; ++K) {
+            const auto slot = std::size_t(kernel::hessian_slot(I, K, dim));
+            double h = 0;
+            for (std::size_t a = 0; a < n; ++a) h += tab[(std::size_t(q * J) + slot) * n + a] * y(a, k);
+            p.H[std::size_t((k * dim + I) * dim + K)] = p.H[std::size_t((k * dim + K) * dim + I)] = h;
+          }
+        }
+      }
+      out.push_back(p);
+    }
+  }
+  return out;
+}
+
+namespace {
+
+Eigen::MatrixXd matrix_of(const std::array<double, 9>& F, int dim) {
+  Eigen::MatrixXd M(dim, dim);
+  for (int i = 0; i < dim; ++i)
+    for (int j = 0; j < dim; ++j) M(i, j) = F[std::size_t(i * dim + j)];
+  return M;
+}
+
+void sum_over_ranks(std::vector<double>& v, MPI_Comm comm) {
+  MPI_Allreduce(MPI_IN_PLACE, v.data(), static_cast<int>(v.size()), MPI_DOUBLE, MPI_SUM, comm);
+}
+
+}  // namespace
+
+DeformationMeasures deformation_measures(const ReferenceConfiguration& ref, const std::vector<double>& y, bool axisymmetric) {
+  const Discretization& disc = *ref.space.disc;
+  const int dim = disc.dim();
+  DeformationMeasures local;
+  for (const PointKinematics& p : point_kinematics(ref, y, 1)) {
+    const Eigen::MatrixXd M = matrix_of(p.F, dim);
+    double det = M.determinant();
+    const Eigen::VectorXd sv = Eigen::JacobiSVD<Eigen::MatrixXd>(M).singularValues();
+    double largest = sv.maxCoeff(), smallest = sv.minCoeff();
+    const double R = disc.quadrature().point(std::size_t(p.point))[0];
+    if (axisymmetric && R > 0) {
+      const double hoop = p.position[0] / R;
+      det *= hoop;
+      largest = std::max(largest, std::abs(hoop));
+      smallest = std::min(smallest, std::abs(hoop));
+    }
+    if (det < local.min_jacobian) {
+      local.min_jacobian = det;
+      local.point = p.point;
+    }
+    if (smallest > 0) local.max_distortion = std::max(local.max_distortion, largest / smallest);
+  }
+  struct {
+    double value;
+    int point;
+  } in{local.min_jacobian, local.point}, out{};
+  MPI_Allreduce(&in, &out, 1, MPI_DOUBLE_INT, MPI_MINLOC, disc.comm());
+  double distortion = local.max_distortion;
+  MPI_Allreduce(MPI_IN_PLACE, &distortion, 1, MPI_DOUBLE, MPI_MAX, disc.comm());
+  return {out.value, out.point, distortion};
+}
+
+CarriedReference carry_reference(const ReferenceConfiguration& ref, const BackgroundCells& cells, const std::vector<double>& y,
+                                 const std::map<std::string, FieldJets>& jets) {
+  const Discretization& disc = *ref.space.disc;
+  const int dim = disc.dim();
+  const auto d = std::size_t(dim);
+  const CellQuadrature& quad = disc.quadrature();
+  const std::size_t Q = quad.size();
+  const auto& qdata = ref.space.qdata;
+  CarriedReference out;
+  out.quadrature.cells = cells;
+  out.quadrature.quadrature.dim = dim;
+  out.quadrature.quadrature.points_per_cell = quad.points_per_cell;
+  out.quadrature.quadrature.points.assign(Q * d, 0.0);
+  out.quadrature.quadrature.weights.assign(Q, 0.0);
+  // Jets no assembler reads are not carried (a field's Hessian needs its gradient: checked at the start).
+  std::map<std::string, FieldJets> carried;
+  for (const auto& [field, j] : jets) {
+    FieldJets c;
+    if (qdata.contains(j.value)) c.value = j.value;
+    if (qdata.contains(j.gradient)) c.gradient = j.gradient;
+    if (qdata.contains(j.hessian) && !c.gradient.empty()) c.hessian = j.hessian;
+    if (!c.value.empty()) out.jets[c.value] = qdata.at(c.value);  // material: unchanged
+    if (!c.gradient.empty()) out.jets[c.gradient].assign(Q * d, 0.0);
+    if (!c.hessian.empty()) out.jets[c.hessian].assign(Q * d * d, 0.0);
+    carried[field] = c;
+  }
+  // D²y only where a Hessian is pushed forward (positions and F need the gradients alone).
+  const bool hessians = std::any_of(carried.begin(), carried.end(), [](const auto& c) { return !c.second.hessian.empty(); });
+  for (const PointKinematics& k : point_kinematics(ref, y, hessians ? 2 : 1)) {
+    const auto p = std::size_t(k.point);
+    for (std::size_t i = 0; i < d; ++i) out.quadrature.quadrature.points[p * d + i] = k.position[i];
+    const Eigen::MatrixXd F = matrix_of(k.F, dim);
+    out.quadrature.quadrature.weights[p] = quad.weights[p] * F.determinant();
+    const Eigen::MatrixXd Fi = F.inverse();  // Fi(I, i) = ∂X_I / ∂y_i
+    for (const auto& [field, j] : carried) {
+      if (j.gradient.empty()) continue;
+      const Eigen::VectorXd g = Fi.transpose() * Eigen::Map<const Eigen::VectorXd>(qdata.at(j.gradient).data() + p * d, dim);
+      for (std::size_t i = 0; i < d; ++i) out.jets[j.gradient][p * d + i] = g[Eigen::Index(i)];
+      if (j.hessian.empty()) continue;
+      // ∂²φ/∂y_i∂y_j = Fi_Ii Fi_Jj (∂²φ0/∂X_I∂X_J − Σ_k ∂φ/∂y_k ∂²y_k/∂X_I∂X_J)
+      const auto& h0 = qdata.at(j.hessian);
+      Eigen::MatrixXd M(dim, dim);
+      for (std::size_t I = 0; I < d; ++I)
+        for (std::size_t K = 0; K < d; ++K) {
+          double m = h0[p * d * d + I * d + K];
+          for (std::size_t kk = 0; kk < d; ++kk) m -= g[Eigen::Index(kk)] * k.H[(kk * d + I) * d + K];
+          M(Eigen::Index(I), Eigen::Index(K)) = m;
+        }
+      const Eigen::MatrixXd h = Fi.transpose() * M * Fi;
+      for (std::size_t i = 0; i < d; ++i)
+        for (std::size_t jj = 0; jj < d; ++jj) out.jets[j.hessian][p * d * d + i * d + jj] = h(Eigen::Index(i), Eigen::Index(jj));
+    }
+  }
+  // Each point was computed on the rank owning its element.
+  sum_over_ranks(out.quadrature.quadrature.points, disc.comm());
+  sum_over_ranks(out.quadrature.quadrature.weights, disc.comm());
+  for (const auto& [field, j] : carried) {
+    if (!j.gradient.empty()) sum_over_ranks(out.jets[j.gradient], disc.comm());
+    if (!j.hessian.empty()) sum_over_ranks(out.jets[j.hessian], disc.comm());
+  }
+  return out;
+}
+
+}  // namespace lmeform::problems

@@ -1,0 +1,79 @@
+#include "minimization.hpp"
+
+#include <fmt/format.h>
+
+#include "lmeform/constrained_minimizer.hpp"
+
+namespace lmeform::problems {
+
+namespace {
+
+class MinimizationDriver final : public StationaryDriver {
+ public:
+  [[nodiscard]] std::string_view name() const override { return "minimization"; }
+  [[nodiscard]] bool claims(const Scene& scene) const override {
+    return !scene.model.residual && !scene.model.bilinear && !scene.model.linear;
+  }
+  [[nodiscard]] OutputRoles roles(const Scene& scene) const override {
+    OutputRoles r;
+    r.energies = scene.model.energy;
+    r.all_energies = scene.model.energy.empty();
+    r.constraints = true;
+    return r;
+  }
+  void solve(MPI_Comm, const BoundScene& b, ProblemSpace& space, const ProblemInput& input, Vec u, ProblemResult& result) const override {
+    ConstrainedMinimizer minimizer(space.energy_terms, space.constraints, minimizer_options(b.scene->solver, input.log));
+    minimizer.set_fixed_dofs(space.fixed);
+    std::vector<double> nu;  // the minimizer works with multipliers of the scaled constraints
+    if (!input.initial_multipliers.empty()) {
+      if (input.initial_multipliers.size() != space.constraints.size())
+        throw std::invalid_argument(fmt::format("solve_problem: {} starting multipliers for {} constraints", input.initial_multipliers.size(),
+                                                space.constraints.size()));
+      for (std::size_t i = 0; i < space.constraints.size(); ++i) nu.push_back(input.initial_multipliers[i] * space.constraints[i].scale);
+    }
+    result.minimization = minimizer.minimize(u, nu);
+    result.converged = result.minimization.converged;
+    result.message = result.minimization.message;
+    result.energy = result.minimization.energy;
+    result.iterations = result.minimization.augmented_iterations + result.minimization.newton_iterations;
+  }
+  void describe(const BoundScene& b, const ProblemResult& r, RunReport& report) const override {
+    describe_minimization(b.scene->reference.energy, r, report);
+  }
+};
+
+}  // namespace
+
+void describe_minimization(const std::optional<double>& reference, const ProblemResult& r, RunReport& report,
+                           const MultiplierMeanings& meanings) {
+  const double relative = reference ? (r.energy - *reference) / *reference : std::nan("");
+  report.row("energy", fmt::format("{:.6f}", r.energy));
+  if (reference) report.row("reference energy", fmt::format("{:.6f} (relative error {:+.3f} %)", *reference, 100 * relative));
+  report.json["energy"] = json_number(r.energy);
+  report.json["relative_error_reference"] = json_number(relative);
+  report.json["iterations"] = r.iterations;
+  report.json["residual_norm"] = json_number(r.residual_norm);
+  report.json["newton_iterations"] = r.minimization.newton_iterations;
+  report.json["augmented_iterations"] = r.minimization.augmented_iterations;
+  report.json["multipliers"] = nlohmann::json::object();
+  report.json["constraint_residuals"] = nlohmann::json::object();
+  const ConstrainedResult& m = r.minimization;
+  for (std::size_t i = 0; i < r.constraint_names.size() && i < m.multipliers.size(); ++i) {
+    const std::string& c = r.constraint_names[i];
+    const auto named = meanings.find(c);
+    const std::string meaning = named == meanings.end() ? "" : " (" + named->second + ")";
+    report.row(c + " constraint", fmt::format("{:.6g} (relative residual {:.1e}), multiplier{} {:.6g}", m.constraint_values[i],
+                                              m.relative_residuals[i], meaning, m.multipliers[i]));
+    report.json["multipliers"][c] = json_number(m.multipliers[i]);
+    report.json["constraint_residuals"][c] = json_number(m.relative_residuals[i]);
+  }
+  report.row("Newton iterations", fmt::format("{} augmented Lagrangian + {} KKT", m.augmented_iterations, m.newton_iterations));
+  if (report.fields) report.fields->attributes.emplace("energy", r.energy);
+}
+
+const StationaryDriver& minimization_driver() {
+  static const MinimizationDriver driver;
+  return driver;
+}
+
+}  // namespace lmeform::problems

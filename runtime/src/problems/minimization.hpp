@@ -1,0 +1,24 @@
+// Minimization of a sum of energies under the scene's constraints (the constrained Newton
+// minimizer): the stationary driver of scenes that name energies, or no output at all.
+#pragma once
+
+#include <map>
+#include <optional>
+#include <string>
+
+#include "problem_registry.hpp"
+#include "stationary.hpp"
+
+namespace lmeform::problems {
+
+/// What the constraint multipliers mean physically (e.g. "tension"), by constraint name.
+using MultiplierMeanings = std::map<std::string, std::string, std::less<>>;
+
+/// The closing rows and JSON keys of a minimization: energy against the reference, constraints with
+/// their multipliers, Newton iterations.
+void describe_minimization(const std::optional<double>& reference_energy, const ProblemResult& result, RunReport& report,
+                           const MultiplierMeanings& meanings = {});
+
+[[nodiscard]] const StationaryDriver& minimization_driver();
+
+}  // namespace lmeform::problems

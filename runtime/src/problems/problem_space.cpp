@@ -1,0 +1,191 @@
+#include "problem_space.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include <fmt/format.h>
+
+#include "quadrature_data.hpp"
+
+namespace lmeform::problems {
+
+namespace {
+
+std::shared_ptr<Discretization> discretization_of(MPI_Comm comm, const BoundScene& b, const ProblemInput& input) {
+  if (input.discretization) {
+    if (input.carried || input.discretization->n_nodes() != static_cast<int>(input.nodes.size()))
+      throw std::invalid_argument(fmt::format("build_problem_space: a reused discretization of {} nodes for {} nodes{}",
+                                              input.discretization->n_nodes(), input.nodes.size(),
+                                              input.carried ? " with carried quadrature" : ""));
+    return input.discretization;
+  }
+  DiscretizationOptions options;
+  options.gamma = {b.discretization.gamma};
+  options.lme = input.lme;
+  options.quadrature_points = b.discretization.quadrature_points;
+  options.basis_order = std::max(b.basis_order, 1);  // |∇u| at the nodes and H1 errors need gradients
+  options.carried = input.carried;
+  return std::make_shared<Discretization>(comm, input.nodes, options);
+}
+
+/// The bound constants, the input's overrides and the constraint targets; the constraints' targets
+/// and scales (ScalarConstraint order).
+void resolve_constants(const BoundScene& b, const ProblemInput& input, ProblemSpace& space, std::vector<double>& targets,
+                       std::vector<double>& scales) {
+  space.constants = b.constants;
+  for (const auto& [name, value] : input.constants) space.constants[name] = value;
+  for (const auto& c : b.constraints) {
+    double target = c.target;
+    if (!c.target_constant.empty() && input.constants.contains(c.target_constant)) target = input.constants.at(c.target_constant);
+    if (const auto it = input.targets.find(c.name); it != input.targets.end()) target = it->second;
+    if (!c.target_constant.empty()) space.constants[c.target_constant] = target;
+    const auto s = input.scales.find(c.name);
+    targets.push_back(target);
+    scales.push_back(s != input.scales.end() ? s->second : c.scale);
+  }
+}
+
+/// An assembler of one output with its coefficients, constants and quadrature data set.
+std::unique_ptr<Assembler> make_assembler(const BoundScene& b, const BoundOutput& output, const ProblemInput& input,
+                                          QuadratureData& qdata, ProblemSpace& space) {
+  const Discretization& disc = *space.disc;
+  const kernel::FormKernels& k = output.first();
+  auto a = std::make_unique<Assembler>(disc, k);
+  if (k.n_coefficients > 0) {
+    const std::vector<double> values = kernel_coefficient_values(b, k, input.nodes, input.coefficient_values);
+    PetscVector& c = space.coefficient_vectors[output.label] = a->create_coefficient_vector();
+    set_from_original(disc, values, k.coefficient_components_per_node, c);
+    a->set_coefficients(c);
+  }
+  for (int i = 0; i < k.n_constants; ++i) {
+    const bool initial_target = std::any_of(b.constraints.begin(), b.constraints.end(), [&](const BoundConstraint& c) {
+      return c.initial && c.target_constant == k.constants[i];
+    });
+    const double v = initial_target ? 0.0 : space.constants.at(k.constants[i]);  // an initial target: set from the start
+    if (std::isnan(v)) throw SceneError(fmt::format("{}: the constant '{}' of {} has no value", b.source, k.constants[i], output.label));
+    a->set_constant(k.constants[i], v);
+  }
+  if (k.qdata_per_point > 0) {
+    const auto per_point = std::size_t(k.qdata_per_point);
+    std::vector<double> data(disc.quadrature().size() * per_point, 0.0);
+    std::size_t offset = 0;
+    for (int i = 0; i < k.n_qdata; ++i) {
+      const auto size = std::size_t(k.qdata[i].size);
+      const auto source = std::find_if(b.qdata.begin(), b.qdata.end(), [&](const BoundQdata& q) { return q.name == k.qdata[i].name; });
+      const std::vector<double>& values = qdata.values(*source);
+      for (std::size_t q = 0; q < disc.quadrature().size(); ++q)
+        std::copy_n(values.begin() + std::ptrdiff_t(q * size), size, data.begin() + std::ptrdiff_t(q * per_point + offset));
+      offset += size;
+    }
+    a->set_qdata(data);
+  }
+  return a;
+}
+
+/// Owned global (renumbered) dofs of (original node, component) pairs.
+std::vector<PetscInt> owned_dofs(const Discretization& disc, const std::vector<std::pair<int, int>>& node_components, int bs) {
+  std::vector<PetscInt> dofs;
+  const auto renumbered = disc.renumbered_index();
+  for (const auto& [node, comp] : node_components) {
+    const int r = renumbered[static_cast<std::size_t>(node)];
+    if (disc.owns(r)) dofs.push_back(static_cast<PetscInt>(r) * bs + comp);
+  }
+  std::sort(dofs.begin(), dofs.end());
+  dofs.erase(std::unique(dofs.begin(), dofs.end()), dofs.end());
+  return dofs;
+}
+
+/// The start (the input's, else the scene's [initial]) with the Dirichlet values imposed.
+void impose_dirichlet(const BoundScene& b, const ProblemInput& input, ProblemSpace& space) {
+  const NodeSet& nodes = input.nodes;
+  const int bs = b.layout.dofs_per_node;
+  std::vector<double>& state = space.state;
+  state = input.initial.empty() ? initial_state(b, nodes) : input.initial;
+  if (state.size() != nodes.size() * std::size_t(bs))
+    throw std::invalid_argument(fmt::format("build_problem_space: the initial state has {} values for {} nodes x {} dofs", state.size(),
+                                            nodes.size(), bs));
+  const std::vector<std::vector<int>> on_boundary = input.dirichlet_nodes.empty() ? dirichlet_nodes(b, nodes) : input.dirichlet_nodes;
+  if (on_boundary.size() != b.dirichlet.size())
+    throw std::invalid_argument(fmt::format("build_problem_space: node sets for {} Dirichlet entries, the scene has {}", on_boundary.size(),
+                                            b.dirichlet.size()));
+  std::vector<double> value(3);
+  for (std::size_t i = 0; i < b.dirichlet.size(); ++i) {
+    const BoundDirichlet& d = b.dirichlet[i];
+    for (const int n : on_boundary[i]) {
+      if (d.value.is_expression()) b.expressions->evaluate(d.value.expression, nodes.point(std::size_t(n)), value);
+      else std::fill(value.begin(), value.end(), d.value.number);
+      for (const int c : d.components) {
+        state[std::size_t(n) * std::size_t(bs) + std::size_t(d.field.offset + c)] = value[d.field.components == 1 ? 0 : std::size_t(c)];
+        space.fixed_pairs.emplace_back(n, d.field.offset + c);
+      }
+    }
+  }
+  space.fixed = owned_dofs(*space.disc, space.fixed_pairs, bs);
+}
+
+void make_assemblers(const BoundScene& b, const ProblemInput& input, const std::vector<double>& targets, const std::vector<double>& scales,
+                     ProblemSpace& space) {
+  QuadratureData qdata(b, *space.disc, input);
+  auto add = [&](const BoundOutput& o) {
+    auto& slot = space.assemblers[o.label];
+    if (!slot) slot = make_assembler(b, o, input, qdata, space);
+    return slot.get();
+  };
+  for (const auto& e : b.energy) space.energy_terms.push_back(add(e));
+  for (std::size_t i = 0; i < b.constraints.size(); ++i)
+    space.constraints.push_back({b.constraints[i].name, add(b.constraints[i].output), targets[i], scales[i]});
+  if (b.residual) space.residual = add(*b.residual);
+  if (b.bilinear) space.bilinear = add(*b.bilinear);
+  if (b.linear) space.linear = add(*b.linear);
+  for (const auto& a : b.auxiliary) space.auxiliary.push_back(add(a));
+  space.primary = space.assemblers.at(b.primary->label).get();
+  space.qdata = qdata.field_data();
+}
+
+/// Targets given as "initial": the constraint's value at the start (the scale follows unless given).
+void set_initial_targets(const BoundScene& b, const ProblemInput& input, ProblemSpace& space) {
+  if (std::none_of(b.constraints.begin(), b.constraints.end(), [](const BoundConstraint& c) { return c.initial; })) return;
+  PetscVector u = space.primary->create_vector();
+  set_from_original(*space.disc, space.state, b.layout.dofs_per_node, u);
+  for (std::size_t i = 0; i < b.constraints.size(); ++i) {
+    if (!b.constraints[i].initial || input.targets.contains(b.constraints[i].name)) continue;
+    ScalarConstraint& c = space.constraints[i];
+    c.target = c.functional->value(u);
+    if (!input.scales.contains(c.name) && !b.constraints[i].scale_given) c.scale = std::abs(c.target) > 0 ? std::abs(c.target) : 1.0;
+    if (!b.constraints[i].target_constant.empty()) space.set_constant(b.constraints[i].target_constant, c.target);
+  }
+}
+
+}  // namespace
+
+void ProblemSpace::set_constant(const std::string& name, double value) {
+  constants[name] = value;
+  for (auto& [label, a] : assemblers)
+    for (int j = 0; j < a->form().n_constants; ++j)
+      if (a->form().constants[j] == name) a->set_constant(name, value);
+}
+
+double ProblemSpace::energy(Vec u) const {
+  double e = 0;
+  for (Assembler* term : energy_terms) e += term->value(u);
+  return e;
+}
+
+std::vector<double> ProblemSpace::constraint_values(Vec u) const {
+  std::vector<double> v;
+  for (const auto& c : constraints) v.push_back(c.functional->value(u));
+  return v;
+}
+
+ProblemSpace build_problem_space(MPI_Comm comm, const BoundScene& b, const ProblemInput& input) {
+  ProblemSpace space;
+  space.disc = discretization_of(comm, b, input);
+  std::vector<double> targets, scales;
+  resolve_constants(b, input, space, targets, scales);
+  impose_dirichlet(b, input, space);
+  make_assemblers(b, input, targets, scales, space);
+  set_initial_targets(b, input, space);
+  return space;
+}
+
+}  // namespace lmeform::problems

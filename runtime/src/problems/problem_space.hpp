@@ -1,0 +1,109 @@
+// The assembly side of a bound problem on one node set: the discretization, one Assembler per
+// output (constants, coefficients and quadrature data set; an output's integrals over its domains
+// inside it), the Dirichlet dofs and the start. What a stationary solve solves once, and what a
+// time integrator or a load-stepping driver steps.
+#pragma once
+
+#include <mpi.h>
+
+#include <iosfwd>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "bound_scene.hpp"
+#include "lmeform/assembler.hpp"
+#include "lmeform/constrained_minimizer.hpp"
+#include "lmeform/discretization.hpp"
+#include "lmeform/node_set.hpp"
+
+namespace lmeform::problems {
+
+/// What one problem space is built from; empty members take the scene's choice.
+struct ProblemInput {
+  NodeSet nodes;
+  std::map<std::string, double, std::less<>> constants;  ///< overrides (e.g. eps of a continuation stage)
+  std::map<std::string, double, std::less<>> targets;    ///< constraint targets, by constraint name
+  std::map<std::string, double, std::less<>> scales;     ///< constraint scales, by constraint name
+  std::vector<double> initial;               ///< original node order, dofs interleaved; empty: the scene's [initial]
+  std::vector<double> initial_multipliers;   ///< physical units, one per constraint; empty: zero
+  LmeOptions lme;                            ///< mirror symmetry, spacing smoothing
+  std::ostream* log = nullptr;
+  /// Only evaluate the energies and constraints at the start (ProblemResult::values), no solve.
+  bool evaluate_only = false;
+  /// Cells and quadrature points carried from a previous reference configuration (a reset).
+  std::optional<CarriedQuadrature> carried;
+  /// Quadrature data given by value, by name (every global point, the datum's size each): they
+  /// replace the scene's source (a reset's pushed-forward reference field).
+  std::map<std::string, std::vector<double>, std::less<>> qdata_values;
+  /// Nodal values of scalar [coefficients] fields, by name (input.nodes order): they replace the
+  /// scene's (a re-mesh's projected reference field).
+  std::map<std::string, std::vector<double>, std::less<>> coefficient_values;
+  /// The nodes (original numbering) of each [[dirichlet]] entry, in scene order, in place of the
+  /// nodes found on its boundary parts: a moving node set keeps its material boundary.
+  std::vector<std::vector<int>> dirichlet_nodes;
+  /// A discretization of these nodes built by an earlier solve of the same scene: reused, not
+  /// rebuilt (a continuation stage that changes a constant only).
+  std::shared_ptr<Discretization> discretization;
+};
+
+struct ProblemSpace {
+  std::shared_ptr<Discretization> disc;
+  std::map<std::string, double, std::less<>> constants;  ///< every constant, resolved (targets included)
+  /// One assembler per output of the problem, by its label "module.output".
+  std::map<std::string, std::unique_ptr<Assembler>, std::less<>> assemblers;
+  /// The coefficient fields of each output that reads some, by label: alive as long as the
+  /// assemblers reading them (a driver may change them and set them again).
+  std::map<std::string, PetscVector, std::less<>> coefficient_vectors;
+  std::vector<Assembler*> energy_terms;                  ///< BoundScene::energy, in order
+  std::vector<ScalarConstraint> constraints;             ///< BoundScene::constraints, targets and scales set
+  std::vector<Assembler*> auxiliary;                     ///< BoundScene::auxiliary, in order
+  Assembler* residual = nullptr;
+  Assembler* bilinear = nullptr;
+  Assembler* linear = nullptr;
+  Assembler* primary = nullptr;                          ///< owns the dof layout (first energy, residual, bilinear)
+  std::vector<std::pair<int, int>> fixed_pairs;          ///< (original node, dof within the node) with Dirichlet values
+  std::vector<PetscInt> fixed;                           ///< the same as owned global dofs
+  std::vector<double> state;                             ///< the start (original order), Dirichlet values imposed
+  /// Every quadrature datum the assemblers read, by name: all global points, the datum's size each.
+  std::map<std::string, std::vector<double>, std::less<>> qdata;
+
+  /// Sets a constant in every assembler that reads it.
+  void set_constant(const std::string& name, double value);
+  /// Σ energies at u.
+  [[nodiscard]] double energy(Vec u) const;
+  /// The constraints' values at u, in order.
+  [[nodiscard]] std::vector<double> constraint_values(Vec u) const;
+};
+
+/// Builds the ProblemSpace of input.nodes (collective over comm). Throws SceneError for a constant
+/// without a value or quadrature data of the wrong shape.
+[[nodiscard]] ProblemSpace build_problem_space(MPI_Comm comm, const BoundScene& b, const ProblemInput& input);
+
+/// The nodes (original numbering) on the boundary parts of each [[dirichlet]] entry, in scene
+/// order; throws SceneError for an entry whose parts hold no node.
+[[nodiscard]] std::vector<std::vector<int>> dirichlet_nodes(const BoundScene& b, const NodeSet& nodes);
+
+/// The original indices of the nodes on a named boundary part (box sides, "hull", "axis").
+[[nodiscard]] std::vector<int> boundary_nodes(const Box& domain, bool axisymmetric, const NodeSet& nodes, const std::string& part);
+
+/// Values at the nodes (original order, dofs interleaved) of the scene's [initial] fields (unknowns
+/// without an entry start at 0).
+[[nodiscard]] std::vector<double> initial_state(const BoundScene& b, const NodeSet& nodes);
+
+/// Values at the nodes (original order) of one [coefficients] field (components interleaved).
+/// Throws SceneError when the scene gives no such field.
+[[nodiscard]] std::vector<double> coefficient_values(const BoundScene& b, const std::string& name, int components, const NodeSet& nodes);
+
+/// Values at the nodes (original order) of the coefficient fields kernel `k` reads, in its layout
+/// (coefficient_components_per_node per node): from [coefficients], or from `given` for scalar fields.
+[[nodiscard]] std::vector<double> kernel_coefficient_values(const BoundScene& b, const kernel::FormKernels& k, const NodeSet& nodes,
+                                                            const std::map<std::string, std::vector<double>, std::less<>>& given);
+
+/// The scene's initial node set (uniform grid, uniform CVT of a node count, or a point file whose
+/// points must lie in the domain).
+[[nodiscard]] NodeSet initial_nodes(const Scene& scene, std::ostream* log = nullptr);
+
+}  // namespace lmeform::problems

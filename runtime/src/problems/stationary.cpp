@@ -1,0 +1,168 @@
+#include "stationary.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numeric>
+
+#include <fmt/format.h>
+
+#include "expressions.hpp"
+#include "lmeform/node_sets.hpp"
+#include "lmeform/cvt.hpp"
+#include "lmeform/stopwatch.hpp"
+#include "problem_registry.hpp"
+
+namespace lmeform::problems {
+
+namespace {
+
+/// L2 and H1 errors of each unknown with an exact solution.
+std::vector<FieldError> field_errors(MPI_Comm comm, const BoundScene& b, const ProblemSpace& space, const std::vector<double>& state,
+                                     std::ostream* log) {
+  std::vector<FieldError> out;
+  const Discretization& disc = *space.disc;
+  for (const BoundExactSolution& exact : b.exact) {
+    const UnknownField& field = exact.field;
+    const FormModule& errors = compile_error_form(b.dim, field.name, field.components, exact.expression, b.constants, exact.where, comm, log);
+    const auto& l2 = errors.at("l2", b.dim);
+    const auto& h1 = errors.at("h1", b.dim);
+    Assembler l2_form(disc, l2), h1_form(disc, h1);
+    for (int i = 0; i < l2.n_constants; ++i) {
+      const double v = space.constants.at(l2.constants[i]);
+      l2_form.set_constant(l2.constants[i], std::isnan(v) ? 0.0 : v);
+      h1_form.set_constant(h1.constants[i], std::isnan(v) ? 0.0 : v);
+    }
+    // The error form has this unknown alone: its state is the unknown's components.
+    PetscVector v = l2_form.create_vector();
+    set_from_original(disc, b.layout.values(state, field), field.components, v);
+    out.push_back({field.name, std::sqrt(std::max(0.0, l2_form.value(v))), std::sqrt(std::max(0.0, h1_form.value(v)))});
+  }
+  return out;
+}
+
+/// |∇u| of the first scalar unknown at the nodes (0 where it is prescribed): adaptivity indicators.
+std::vector<double> gradient_norm_at_nodes(const BoundScene& b, const ProblemSpace& space, const std::vector<double>& state) {
+  if (b.layout.fields.empty() || b.layout.fields.front().components != 1) return {};
+  const Discretization& disc = *space.disc;
+  const std::size_t n = disc.nodes().size();
+  const auto bs = std::size_t(b.layout.dofs_per_node);
+  std::vector<char> prescribed(n, 0);
+  for (const auto& [node, dof] : space.fixed_pairs)
+    if (dof == 0) prescribed[std::size_t(node)] = 1;
+  std::vector<double> out(n, 0.0);
+  for (std::size_t r = 0; r < n; ++r) {
+    const auto o = static_cast<std::size_t>(disc.original_index()[r]);
+    if (prescribed[o] != 0) continue;
+    const auto x = disc.nodes().point(r);
+    const auto list = disc.basis().neighbours(x);
+    const auto jet = disc.basis().evaluate(x, list, 1);
+    double g2 = 0;
+    for (int i = 0; i < disc.dim(); ++i) {
+      double g = 0;
+      for (std::size_t m = 0; m < list.size(); ++m)
+        g += jet[std::size_t(1 + i) * list.size() + m] * state[std::size_t(disc.original_index()[std::size_t(list[m])]) * bs];
+      g2 += g * g;
+    }
+    out[o] = std::sqrt(g2);
+  }
+  return out;
+}
+
+/// The value of every energy term and constraint at u.
+void record_values(const BoundScene& b, const ProblemSpace& space, Vec u, ProblemResult& result) {
+  for (std::size_t i = 0; i < space.energy_terms.size(); ++i) result.values[b.energy[i].label] = space.energy_terms[i]->value(u);
+  for (const auto& c : space.constraints) result.values[c.name] = c.functional->value(u);
+}
+
+}  // namespace
+
+ProblemResult solve_problem(MPI_Comm comm, const BoundScene& b, const ProblemInput& input) {
+  const Stopwatch clock;
+  const ScopedPetscOptions petsc_options(b.scene->solver.petsc_options);
+  ProblemResult result;
+  result.nodes = input.nodes;
+  const int bs = b.layout.dofs_per_node;
+  ProblemSpace space = build_problem_space(comm, b, input);
+  const Discretization& disc = *space.disc;
+  result.discretization = space.disc;
+  const auto h = disc.basis().spacing();
+  result.h_min = *std::min_element(h.begin(), h.end());
+  result.h_mean = std::accumulate(h.begin(), h.end(), 0.0) / static_cast<double>(h.size());
+  for (const auto& c : b.constraints) result.constraint_names.push_back(c.name);
+  PetscVector u = space.primary->create_vector();
+  set_from_original(disc, space.state, bs, u);
+  result.seconds_setup = clock.seconds();
+  if (input.evaluate_only) {
+    record_values(b, space, u, result);
+    result.state = to_original(disc, u, bs);
+    result.energy = std::numeric_limits<double>::quiet_NaN();
+    result.message = "evaluated, not solved";
+    return result;
+  }
+  const Stopwatch solve_clock;
+  b.solver->solve(comm, b, space, input, u, result);
+  result.seconds_solve = solve_clock.seconds();
+  if (space.energy_terms.size() > 1) record_values(b, space, u, result);
+  result.state = to_original(disc, u, bs);
+  result.errors = field_errors(comm, b, space, result.state, input.log);
+  result.gradient_norm = gradient_norm_at_nodes(b, space, result.state);
+  result.cells = delaunay(result.nodes);
+  return result;
+}
+
+ReportFields state_fields(const StateLayout& layout, bool axisymmetric, const ProblemResult& r) {
+  ReportFields out;
+  out.nodes = r.nodes;
+  out.cells = r.cells;
+  for (const auto& u : layout.fields) out.fields.push_back({u.name, u.components, layout.values(r.state, u)});
+  if (!r.gradient_norm.empty()) out.fields.push_back({"grad_" + layout.fields.front().name + "_norm", 1, r.gradient_norm});
+  if (!layout.fields.empty() && layout.fields.front().components == 1) out.figure_field = layout.fields.front().name;
+  out.mirror = axisymmetric;
+  return out;
+}
+
+void describe_equation_solve(const ProblemResult& r, RunReport& report) {
+  report.row("solver", r.message);
+  report.json["energy"] = nullptr;
+  report.json["iterations"] = r.iterations;
+  report.json["residual_norm"] = json_number(r.residual_norm);
+}
+
+void describe_errors(const ProblemResult& r, RunReport& report) {
+  report.json["errors"] = nlohmann::json::array();
+  for (const auto& e : r.errors) {
+    report.row("error of " + e.unknown, fmt::format("L2 {:.6e}, H1 semi-norm {:.6e}", e.l2, e.h1));
+    report.json["errors"].push_back({{"unknown", e.unknown}, {"l2", json_number(e.l2)}, {"h1", json_number(e.h1)}});
+  }
+}
+
+void StationaryDriver::check(const DriverContext& ctx) const { (void)bind_scene(*ctx.scene, ctx.comm, ctx.log, *this); }
+
+RunReport StationaryDriver::run(const DriverContext& ctx) const {
+  const Scene& scene = *ctx.scene;
+  const BoundScene bound = bind_scene(scene, ctx.comm, ctx.log, *this);
+  ProblemInput input;
+  input.nodes = initial_nodes(scene, ctx.log);
+  input.log = ctx.log;
+  input.lme = bound.lme(AxisParity::even);
+  const double h_min = spacing_summary(input.nodes).h_min;
+  if (ctx.log != nullptr) *ctx.log << "== solve: " << input.nodes.size() << " nodes, h_min " << h_min << "\n";
+  const ProblemResult r = solve_problem(ctx.comm, bound, input);
+  RunReport report;
+  report.problem = std::string(name());
+  report.success = r.converged;
+  report.status = r.converged ? "converged" : "FAILED: " + r.message;
+  report.fields = state_fields(bound.layout, bound.axisymmetric, r);
+  describe(bound, r, report);
+  describe_errors(r, report);
+  report.row("nodes", fmt::format("{} (h_min {:.4g}, h_mean {:.4g})", r.nodes.size(), r.h_min, r.h_mean));
+  report.row("times", fmt::format("setup {:.2f} s, solve {:.2f} s", r.seconds_setup, r.seconds_solve));
+  report.json["nodes"] = r.nodes.size();
+  report.json["h_min"] = json_number(r.h_min);
+  report.json["setup_s"] = json_number(r.seconds_setup);
+  report.json["solve_s"] = json_number(r.seconds_solve);
+  return report;
+}
+
+}  // namespace lmeform::problems

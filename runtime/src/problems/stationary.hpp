@@ -1,0 +1,70 @@
+// One stationary solve of a bound problem on a node set: the problem space is built, the bound
+// scene's stationary driver solves it (the constrained minimizer, SNES or KSP), and the errors
+// against the scene's exact solutions are measured.
+#pragma once
+
+#include <mpi.h>
+
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "bound_scene.hpp"
+#include "lmeform/constrained_minimizer.hpp"
+#include "lmeform/delaunay.hpp"
+#include "problem_space.hpp"
+#include "report.hpp"
+
+namespace lmeform::problems {
+
+/// Error of one unknown against the scene's exact solution.
+struct FieldError {
+  std::string unknown;
+  double l2 = 0;
+  double h1 = 0;                             ///< semi-norm |∇(u − u_exact)|
+};
+
+struct ProblemResult {
+  bool converged = false;
+  std::string message;
+  ConstrainedResult minimization;            ///< minimization problems (energy, multipliers, ...)
+  double energy = 0;                         ///< Σ energies at the solution (NaN for other problems)
+  double residual_norm = 0;                  ///< final |R| (residual problems) or |Au − b| / |b| (linear)
+  int iterations = 0;                        ///< Newton / Krylov iterations
+  NodeSet nodes;                             ///< original order
+  BackgroundCells cells;                     ///< original numbering
+  std::vector<double> state;                 ///< original order, dofs interleaved
+  std::vector<double> gradient_norm;         ///< |∇u| of the first scalar unknown at the nodes (0 where fixed)
+  std::vector<std::string> constraint_names;
+  std::vector<FieldError> errors;
+  /// Each energy term ("module.output") and constraint (by name) at the state: filled by
+  /// evaluate_only, and after a solve whose energy has several terms.
+  std::map<std::string, double, std::less<>> values;
+  double h_min = 0, h_mean = 0;
+  double seconds_setup = 0, seconds_solve = 0;
+  double seconds_assembly = 0;               ///< linear problems: assembly of A and b (in seconds_solve)
+  /// Linear problems with zero-mean unknowns: how the level was fixed ("constraint": a bordered
+  /// system, "null space": the Krylov method's null space + the mean removed afterwards).
+  std::string zero_mean_method;
+  /// The solve's discretization, for a later solve on the same nodes (ProblemInput::discretization).
+  std::shared_ptr<Discretization> discretization;
+};
+
+/// One solve on input.nodes. Collective over comm. Throws for what cannot run (an LME evaluation
+/// that fails, a linear solve that breaks down); a solver that does not converge is reported in the
+/// result instead.
+[[nodiscard]] ProblemResult solve_problem(MPI_Comm comm, const BoundScene& bound, const ProblemInput& input);
+
+/// The fields of a solved state for output: each unknown, and |∇u| of the first scalar unknown;
+/// a figure of that unknown when it is scalar.
+[[nodiscard]] ReportFields state_fields(const StateLayout& layout, bool axisymmetric, const ProblemResult& result);
+
+/// The closing rows and JSON keys of a solve of equations (residual, linear): the solver's message,
+/// iterations and residual.
+void describe_equation_solve(const ProblemResult& result, RunReport& report);
+
+/// The closing rows and JSON keys of the errors against exact solutions.
+void describe_errors(const ProblemResult& result, RunReport& report);
+
+}  // namespace lmeform::problems
