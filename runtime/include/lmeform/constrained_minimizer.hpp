@@ -8,6 +8,8 @@
 // multiplier block, both reusing one sparse LU factorization of ∇²E − Σ σ_i ∇²C_i per iteration.
 #pragma once
 
+#include <Eigen/Core>
+
 #include <functional>
 #include <iosfwd>
 #include <string>
@@ -137,6 +139,28 @@ class ConstrainedMinimizer {
   void solve(Vec b, Vec x);
   void zero_fixed(Vec v);
   void log_iterate(const ConstrainedIterate& it);
+
+  // One minimize(): its state, the augmented Lagrangian stage and the KKT Newton stage.
+  struct Run;
+  struct KktOutcome;
+  struct KktState;
+  [[nodiscard]] double relative_residual(const Evaluation& e) const;
+  void lagrangian_gradient(const Evaluation& e, const std::vector<double>& sigma, Vec out) const;
+  [[nodiscard]] Eigen::MatrixXd inverse_gram(const std::vector<PetscVector>& g, std::vector<PetscVector>& z);
+  [[nodiscard]] double augmented_value(const Run& run, const Evaluation& e) const;
+  void record(Run& run, const char* stage, int iteration, const Evaluation& e, double gradient_norm);
+  void start_multipliers(Run& run);
+  [[nodiscard]] bool augmented_newton_step(Run& run);
+  [[nodiscard]] bool augmented_stage(Run& run);
+  [[nodiscard]] double proximal_noise(Vec u) const;
+  [[nodiscard]] Eigen::VectorXd kkt_step(Run& run, const Eigen::MatrixXd& S);
+  [[nodiscard]] bool residual_line_search(Run& run, const Eigen::VectorXd& dnu, double gnorm, double scale, int tries,
+                                          std::vector<double>& nu_trial, double& alpha);
+  [[nodiscard]] bool penalty_line_search(Run& run, KktState& kkt, const Eigen::VectorXd& dnu, double shift, std::vector<double>& nu_trial,
+                                         double& alpha);
+  void second_order_corrections(Run& run, const std::vector<double>& nu_trial);
+  [[nodiscard]] std::string kkt_divergence(const Run& run, const KktState& kkt, int it, double gnorm, double merit, double scale) const;
+  [[nodiscard]] KktOutcome kkt_stage(Run& run);
 
   Assembler* energy_;                   // the first term: owns the layout (vectors, matrix)
   std::vector<Assembler*> energy_terms_;

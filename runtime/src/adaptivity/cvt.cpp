@@ -275,54 +275,214 @@ void voronoi_cell_2d(const NodeSet& nodes, std::size_t a, std::span<const int> n
 // ---------------------------------------------------------------------------------------------
 // CVT
 
-NodeSet cvt_relocate(const NodeSet& nodes, const Box& box, const Density& density, const CvtOptions& options,
-                     CvtReport* report) {
-  const char* who = "cvt_relocate";
+namespace {
+
+/// Exact Voronoi centroids (2D) or sampled ones.
+bool exact_voronoi(int dim, const CvtOptions& options) { return dim == 2 && options.centroids == CvtCentroids::voronoi; }
+
+void check_cvt_inputs(const NodeSet& nodes, const Box& box, const Density& density, const CvtOptions& options, const char* who) {
   box.validate(who);
-  const int d = nodes.dim;
-  if (d != box.dim) {
-    throw std::invalid_argument(std::string(who) + ": node dimension " + std::to_string(d) +
-                                " differs from box dimension " + std::to_string(box.dim));
+  if (nodes.dim != box.dim) {
+    throw std::invalid_argument(std::string(who) + ": node dimension " + std::to_string(nodes.dim) + " differs from box dimension " +
+                                std::to_string(box.dim));
   }
   if (!density) throw std::invalid_argument(std::string(who) + ": no density given");
   if (options.iterations < 0) throw std::invalid_argument(std::string(who) + ": iterations must be >= 0");
   if (!(options.samples_per_node >= 1.0) || !std::isfinite(options.samples_per_node)) {
-    throw std::invalid_argument(std::string(who) + ": samples_per_node must be >= 1, got " +
-                                fmt(options.samples_per_node));
+    throw std::invalid_argument(std::string(who) + ": samples_per_node must be >= 1, got " + fmt(options.samples_per_node));
   }
   if (!(options.tolerance >= 0.0)) throw std::invalid_argument(std::string(who) + ": tolerance must be >= 0");
-  const std::size_t n = nodes.size();
-  if (n < 2) throw std::invalid_argument(std::string(who) + ": need at least 2 nodes, got " + std::to_string(n));
-  const auto du = static_cast<std::size_t>(d);
-
-  double volume = 1.0, diag2 = 0.0;
-  for (std::size_t i = 0; i < du; ++i) {
-    const double L = box.hi[i] - box.lo[i];
-    volume *= L;
-    diag2 += L * L;
+  if (nodes.size() < 2) throw std::invalid_argument(std::string(who) + ": need at least 2 nodes, got " + std::to_string(nodes.size()));
+  if (exact_voronoi(nodes.dim, options) && options.voronoi_subdivision < 1) {
+    throw std::invalid_argument(std::string(who) + ": voronoi_subdivision must be >= 1, got " + std::to_string(options.voronoi_subdivision));
   }
-  const double btol = options.boundary_tolerance * std::sqrt(diag2);
+}
 
-  // Boundary membership: fixed[a*d+i] is true when coordinate i of node a lies on a face.
-  std::vector<char> fixed(n * du, 0);
-  NodeSet current = nodes;
+/// The state of a Lloyd iteration: the nodes, which of their coordinates lie on a face of the box
+/// (fixed), and the mass and first moment of each node's region.
+struct LloydState {
+  NodeSet current;
+  std::vector<char> fixed;  ///< fixed[a*d+i]: coordinate i of node a lies on a face
+  std::vector<double> wsum, xsum;
+  CvtReport report;
+};
+
+/// Nodes within the boundary tolerance of a face are put on it and keep that coordinate.
+LloydState start_state(const NodeSet& nodes, const Box& box, const CvtOptions& options, const char* who) {
+  const auto du = static_cast<std::size_t>(nodes.dim);
+  const std::size_t n = nodes.size();
+  double diag2 = 0.0;
+  for (std::size_t i = 0; i < du; ++i) diag2 += (box.hi[i] - box.lo[i]) * (box.hi[i] - box.lo[i]);
+  const double btol = options.boundary_tolerance * std::sqrt(diag2);
+  LloydState s{nodes, std::vector<char>(n * du, 0), std::vector<double>(n), std::vector<double>(n * du), {}};
   for (std::size_t a = 0; a < n; ++a) {
     for (std::size_t i = 0; i < du; ++i) {
-      double& x = current.coords[a * du + i];
+      double& x = s.current.coords[a * du + i];
       if (!(x >= box.lo[i] - btol && x <= box.hi[i] + btol)) {
         throw std::invalid_argument(std::string(who) + ": node " + std::to_string(a) + " lies outside the box (coordinate " +
                                     std::to_string(i) + " = " + fmt(x) + ")");
       }
       if (std::abs(x - box.lo[i]) <= btol) {
-        fixed[a * du + i] = 1;
+        s.fixed[a * du + i] = 1;
         x = box.lo[i];
       } else if (std::abs(x - box.hi[i]) <= btol) {
-        fixed[a * du + i] = 1;
+        s.fixed[a * du + i] = 1;
         x = box.hi[i];
       }
     }
   }
-  check_coincident(KdTree(current), who);
+  check_coincident(KdTree(s.current), who);
+  return s;
+}
+
+/// Moves every node to its centroid (free coordinates only, clamped to the box); records the
+/// iteration and returns true when the displacement tolerance is met.
+bool move_to_centroids(LloydState& s, const Box& box, const CvtOptions& options) {
+  const auto du = static_cast<std::size_t>(s.current.dim);
+  const std::size_t n = s.current.size();
+  CvtIteration rec;
+  double total = 0.0;
+  for (std::size_t a = 0; a < n; ++a) {
+    if (!(s.wsum[a] > 0.0)) {
+      ++rec.empty_cells;
+      continue;
+    }
+    double d2 = 0.0;
+    for (std::size_t i = 0; i < du; ++i) {
+      if (s.fixed[a * du + i]) continue;
+      double& xi = s.current.coords[a * du + i];
+      const double c = std::clamp(s.xsum[a * du + i] / s.wsum[a], box.lo[i], box.hi[i]);
+      d2 += (c - xi) * (c - xi);
+      xi = c;
+    }
+    const double disp = std::sqrt(d2);
+    total += disp;
+    rec.max_displacement = std::max(rec.max_displacement, disp);
+  }
+  rec.mean_displacement = total / static_cast<double>(n);
+  s.report.iterations.push_back(rec);
+  return options.tolerance > 0.0 && rec.mean_displacement < options.tolerance * s.report.h_bar;
+}
+
+/// The mass and first moment of ρ over one 2D Voronoi cell `poly`: a fan from vertex 0, each fan
+/// triangle split into s² similar triangles with a degree-7 rule on each.
+void voronoi_cell_moments(const std::vector<std::array<double, 2>>& poly, const Density& density, const QuadratureRule& rule, int s,
+                          const char* who, double& w, double& wx, double& wy, std::size_t& evaluations) {
+  std::array<double, 3> x{};
+  w = wx = wy = 0.0;
+  for (std::size_t k = 1; k + 1 < poly.size(); ++k) {
+    const auto& p0 = poly[0];
+    const std::array<double, 2> e1{(poly[k][0] - p0[0]) / s, (poly[k][1] - p0[1]) / s};
+    const std::array<double, 2> e2{(poly[k + 1][0] - p0[0]) / s, (poly[k + 1][1] - p0[1]) / s};
+    const double jac = std::abs(e1[0] * e2[1] - e1[1] * e2[0]);
+    for (int i = 0; i < s; ++i)
+      for (int j = 0; i + j < s; ++j)
+        for (int flip = 0; flip < (i + j + 1 < s ? 2 : 1); ++flip) {
+          // Sub-triangle with corner (i, j) in the e1/e2 lattice; flip: the inverted one.
+          for (std::size_t q = 0; q < rule.size(); ++q) {
+            const double u = rule.points[2 * q], v = rule.points[2 * q + 1];
+            const double ci = flip == 1 ? i + 1 - u : i + u, cj = flip == 1 ? j + 1 - v : j + v;
+            x[0] = p0[0] + ci * e1[0] + cj * e2[0];
+            x[1] = p0[1] + ci * e1[1] + cj * e2[1];
+            const double wq = rule.weights[q] * jac * checked_density(density, x, 2, who);
+            w += wq;
+            wx += wq * x[0];
+            wy += wq * x[1];
+            ++evaluations;
+          }
+        }
+  }
+}
+
+/// 2D Lloyd iterations with the exact Voronoi cells of the nodes (clipped to the box).
+void lloyd_voronoi(LloydState& s, const Box& box, const Density& density, const CvtOptions& options, const char* who) {
+  const std::size_t n = s.current.size();
+  const QuadratureRule rule = triangle_rule(7);
+  std::vector<std::array<double, 2>> poly, scratch;
+  std::vector<std::vector<int>> adjacency(n);
+  std::size_t evaluations = 0;
+  for (int it = 0; it < options.iterations; ++it) {
+    const BackgroundCells cells = delaunay(s.current);
+    for (auto& list : adjacency) list.clear();
+    for (std::size_t c = 0; c < cells.size(); ++c) {
+      const auto v = cells.cell(c);
+      for (std::size_t i = 0; i < 3; ++i)
+        for (std::size_t j = 0; j < 3; ++j)
+          if (i != j) adjacency[static_cast<std::size_t>(v[i])].push_back(v[j]);
+    }
+    evaluations = 0;
+    for (std::size_t a = 0; a < n; ++a) {
+      auto& list = adjacency[a];
+      std::sort(list.begin(), list.end());
+      list.erase(std::unique(list.begin(), list.end()), list.end());
+      voronoi_cell_2d(s.current, a, list, box, poly, scratch);
+      voronoi_cell_moments(poly, density, rule, options.voronoi_subdivision, who, s.wsum[a], s.xsum[2 * a], s.xsum[2 * a + 1], evaluations);
+    }
+    if (move_to_centroids(s, box, options)) {
+      s.report.converged = true;
+      break;
+    }
+  }
+  s.report.samples = evaluations;
+}
+
+/// Samples: systematic sampling of the lattice cells along Morton order with probability
+/// proportional to the proposal, one uniform point in the cell per draw, importance weight
+/// ρ(x) / proposal density. Drawn once: each Lloyd step is a fixed-point step of one sampled CVT
+/// energy, and the run is deterministic.
+void draw_samples(const Lattice& lattice, const std::vector<double>& proposal, const Density& density, std::size_t m, std::size_t du,
+                  SplitMix64& rng, const char* who, std::vector<double>& samples, std::vector<double>& weight) {
+  samples.reserve(m * du);
+  weight.reserve(m);
+  const double total = std::accumulate(proposal.begin(), proposal.end(), 0.0);
+  const double step = total / static_cast<double>(m);
+  double next = rng.uniform() * step, cumulative = 0.0;
+  std::array<double, 3> x{};
+  for (const std::size_t c : lattice.morton_order()) {
+    cumulative += proposal[c];
+    while (next < cumulative && weight.size() < m) {
+      lattice.random_point(c, rng, x);
+      const double rho = checked_density(density, x, du, who);
+      // Expected draws in cell c are proposal[c] / step; the cell's mass is rho * volume.
+      weight.push_back(rho * lattice.cell_volume() * step / proposal[c]);
+      for (std::size_t i = 0; i < du; ++i) samples.push_back(x[i]);
+      next += step;
+    }
+  }
+}
+
+/// Lloyd iterations with the regions' moments estimated from weighted samples (any dimension).
+void lloyd_sampled(LloydState& s, const Box& box, const std::vector<double>& samples, const std::vector<double>& weight,
+                   const CvtOptions& options) {
+  const auto du = static_cast<std::size_t>(s.current.dim);
+  s.report.samples = weight.size();
+  std::vector<int> idx;
+  for (int it = 0; it < options.iterations; ++it) {
+    const KdTree tree(s.current);
+    std::fill(s.wsum.begin(), s.wsum.end(), 0.0);
+    std::fill(s.xsum.begin(), s.xsum.end(), 0.0);
+    for (std::size_t q = 0; q < weight.size(); ++q) {
+      tree.knn(std::span<const double>(samples.data() + q * du, du), 1, idx);
+      const auto a = static_cast<std::size_t>(idx[0]);
+      s.wsum[a] += weight[q];
+      for (std::size_t i = 0; i < du; ++i) s.xsum[a * du + i] += weight[q] * samples[q * du + i];
+    }
+    if (move_to_centroids(s, box, options)) {
+      s.report.converged = true;
+      break;
+    }
+  }
+}
+
+}  // namespace
+
+NodeSet cvt_relocate(const NodeSet& nodes, const Box& box, const Density& density, const CvtOptions& options, CvtReport* report) {
+  const char* who = "cvt_relocate";
+  check_cvt_inputs(nodes, box, density, options, who);
+  const int d = nodes.dim;
+  const auto du = static_cast<std::size_t>(d);
+  const std::size_t n = nodes.size();
+  LloydState s = start_state(nodes, box, options, who);
 
   // The lattice: about samples_per_node * n cells over the box.
   const double target = options.samples_per_node * static_cast<double>(n);
@@ -331,172 +491,30 @@ NodeSet cvt_relocate(const NodeSet& nodes, const Box& box, const Density& densit
 
   // The proposal: rho^(dim/(dim+2)) at the cell centres, the node density of a CVT of rho.
   const double node_exponent = static_cast<double>(d) / static_cast<double>(d + 2);
-  const bool exact_centroids = d == 2 && options.centroids == CvtCentroids::voronoi;
+  const bool exact_centroids = exact_voronoi(d, options);
   std::vector<double> proposal(options.start == CvtStart::density || !exact_centroids ? lattice.size() : 0);
-  if (!proposal.empty()) {
-    std::array<double, 3> x{};
-    for (std::size_t c = 0; c < lattice.size(); ++c) {
-      lattice.centre(c, x);
-      proposal[c] = std::pow(checked_density(density, x, du, who), node_exponent);
-    }
+  std::array<double, 3> x{};
+  for (std::size_t c = 0; c < proposal.size(); ++c) {
+    lattice.centre(c, x);
+    proposal[c] = std::pow(checked_density(density, x, du, who), node_exponent);
   }
-
-  CvtReport local;
   if (options.start == CvtStart::density) {
-    local.replaced = place_by_density(current, fixed, box, lattice, proposal, density, rng, who);
-    check_coincident(KdTree(current), who);
+    s.report.replaced = place_by_density(s.current, s.fixed, box, lattice, proposal, density, rng, who);
+    check_coincident(KdTree(s.current), who);
   }
-
-  local.h_bar = std::pow(volume / static_cast<double>(n), 1.0 / d);
-  std::vector<double> wsum(n), xsum(n * du);
-
-  // Moves every node to its centroid (free coordinates only, clamped to the box); records the
-  // iteration and returns true when the displacement tolerance is met.
-  auto move_to_centroids = [&]() {
-    CvtIteration rec;
-    double total = 0.0;
-    for (std::size_t a = 0; a < n; ++a) {
-      if (!(wsum[a] > 0.0)) {
-        ++rec.empty_cells;
-        continue;
-      }
-      double d2 = 0.0;
-      for (std::size_t i = 0; i < du; ++i) {
-        if (fixed[a * du + i]) continue;
-        double& xi = current.coords[a * du + i];
-        const double c = std::clamp(xsum[a * du + i] / wsum[a], box.lo[i], box.hi[i]);
-        d2 += (c - xi) * (c - xi);
-        xi = c;
-      }
-      const double disp = std::sqrt(d2);
-      total += disp;
-      rec.max_displacement = std::max(rec.max_displacement, disp);
-    }
-    rec.mean_displacement = total / static_cast<double>(n);
-    local.iterations.push_back(rec);
-    return options.tolerance > 0.0 && rec.mean_displacement < options.tolerance * local.h_bar;
-  };
+  double volume = 1.0;
+  for (std::size_t i = 0; i < du; ++i) volume *= box.hi[i] - box.lo[i];
+  s.report.h_bar = std::pow(volume / static_cast<double>(n), 1.0 / d);
 
   if (exact_centroids) {
-    if (options.voronoi_subdivision < 1) {
-      throw std::invalid_argument(std::string(who) + ": voronoi_subdivision must be >= 1, got " +
-                                  std::to_string(options.voronoi_subdivision));
-    }
-    const QuadratureRule rule = triangle_rule(7);
-    const int s = options.voronoi_subdivision;
-    std::vector<std::array<double, 2>> poly, scratch;
-    std::vector<std::vector<int>> adjacency(n);
-    std::size_t evaluations = 0;
-    for (int it = 0; it < options.iterations; ++it) {
-      const BackgroundCells cells = delaunay(current);
-      for (auto& list : adjacency) list.clear();
-      for (std::size_t c = 0; c < cells.size(); ++c) {
-        const auto v = cells.cell(c);
-        for (std::size_t i = 0; i < 3; ++i) {
-          for (std::size_t j = 0; j < 3; ++j) {
-            if (i != j) adjacency[static_cast<std::size_t>(v[i])].push_back(v[j]);
-          }
-        }
-      }
-      evaluations = 0;
-      std::array<double, 3> x{};
-      for (std::size_t a = 0; a < n; ++a) {
-        auto& list = adjacency[a];
-        std::sort(list.begin(), list.end());
-        list.erase(std::unique(list.begin(), list.end()), list.end());
-        voronoi_cell_2d(current, a, list, box, poly, scratch);
-        double w = 0.0, wx = 0.0, wy = 0.0;
-        // Fan from vertex 0; each fan triangle (p0, p1, p2) split into s^2 similar triangles.
-        for (std::size_t k = 1; k + 1 < poly.size(); ++k) {
-          const auto& p0 = poly[0];
-          const std::array<double, 2> e1{(poly[k][0] - p0[0]) / s, (poly[k][1] - p0[1]) / s};
-          const std::array<double, 2> e2{(poly[k + 1][0] - p0[0]) / s, (poly[k + 1][1] - p0[1]) / s};
-          const double jac = std::abs(e1[0] * e2[1] - e1[1] * e2[0]);
-          for (int i = 0; i < s; ++i) {
-            for (int j = 0; i + j < s; ++j) {
-              for (int flip = 0; flip < (i + j + 1 < s ? 2 : 1); ++flip) {
-                // Sub-triangle with corner (i, j) in the e1/e2 lattice; flip: the inverted one.
-                for (std::size_t q = 0; q < rule.size(); ++q) {
-                  double u = rule.points[2 * q], v = rule.points[2 * q + 1];
-                  double ci = i + u, cj = j + v;
-                  if (flip == 1) {
-                    ci = i + 1 - u;
-                    cj = j + 1 - v;
-                  }
-                  x[0] = p0[0] + ci * e1[0] + cj * e2[0];
-                  x[1] = p0[1] + ci * e1[1] + cj * e2[1];
-                  const double rho = checked_density(density, x, du, who);
-                  const double wq = rule.weights[q] * jac * rho;
-                  w += wq;
-                  wx += wq * x[0];
-                  wy += wq * x[1];
-                  ++evaluations;
-                }
-              }
-            }
-          }
-        }
-        wsum[a] = w;
-        xsum[2 * a] = wx;
-        xsum[2 * a + 1] = wy;
-      }
-      if (move_to_centroids()) {
-        local.converged = true;
-        break;
-      }
-    }
-    local.samples = evaluations;
-    if (report) *report = std::move(local);
-    return current;
+    lloyd_voronoi(s, box, density, options, who);
+  } else {
+    std::vector<double> samples, weight;
+    draw_samples(lattice, proposal, density, static_cast<std::size_t>(std::ceil(target)), du, rng, who, samples, weight);
+    lloyd_sampled(s, box, samples, weight, options);
   }
-
-  // Samples: systematic sampling of the lattice cells along Morton order with probability
-  // proportional to the proposal, one uniform point in the cell per draw, importance weight
-  // rho(x) / proposal density. Computed once: each Lloyd step is a fixed-point step of one
-  // sampled CVT energy, and the run is deterministic.
-  const std::size_t m = static_cast<std::size_t>(std::ceil(target));
-  std::vector<double> samples;
-  std::vector<double> weight;
-  samples.reserve(m * du);
-  weight.reserve(m);
-  {
-    const double total = std::accumulate(proposal.begin(), proposal.end(), 0.0);
-    const double step = total / static_cast<double>(m);
-    double next = rng.uniform() * step, cumulative = 0.0;
-    std::array<double, 3> x{};
-    for (const std::size_t c : lattice.morton_order()) {
-      cumulative += proposal[c];
-      while (next < cumulative && weight.size() < m) {
-        lattice.random_point(c, rng, x);
-        const double rho = checked_density(density, x, du, who);
-        // Expected draws in cell c are proposal[c] / step; the cell's mass is rho * volume.
-        weight.push_back(rho * lattice.cell_volume() * step / proposal[c]);
-        for (std::size_t i = 0; i < du; ++i) samples.push_back(x[i]);
-        next += step;
-      }
-    }
-  }
-  const std::size_t samples_drawn = weight.size();
-
-  local.samples = samples_drawn;
-  std::vector<int> idx;
-  for (int it = 0; it < options.iterations; ++it) {
-    const KdTree tree(current);
-    std::fill(wsum.begin(), wsum.end(), 0.0);
-    std::fill(xsum.begin(), xsum.end(), 0.0);
-    for (std::size_t q = 0; q < samples_drawn; ++q) {
-      tree.knn(std::span<const double>(samples.data() + q * du, du), 1, idx);
-      const auto a = static_cast<std::size_t>(idx[0]);
-      wsum[a] += weight[q];
-      for (std::size_t i = 0; i < du; ++i) xsum[a * du + i] += weight[q] * samples[q * du + i];
-    }
-    if (move_to_centroids()) {
-      local.converged = true;
-      break;
-    }
-  }
-  if (report) *report = std::move(local);
-  return current;
+  if (report) *report = std::move(s.report);
+  return std::move(s.current);
 }
 
 NodeSet uniform_cvt(const Box& box, std::size_t count, const CvtOptions& options, CvtReport* report) {
