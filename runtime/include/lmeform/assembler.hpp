@@ -35,9 +35,20 @@ struct AssemblyTimes {
 
 class Assembler {
  public:
+  /// One form output: its kernels, one per integration domain (the cells, a boundary part), all
+  /// generated from one form (same unknowns, coefficients, constants and quadrature data), summed
+  /// by every assembly. The first kernel's metadata describes the output.
+  Assembler(const Discretization& discretization, std::span<const kernel::FormKernels* const> integrals);
   Assembler(const Discretization& discretization, const kernel::FormKernels& form);
 
   [[nodiscard]] const kernel::FormKernels& form() const noexcept { return *form_; }
+  /// The integrals: each kernel with the domain it integrates over.
+  struct Integral {
+    const kernel::FormKernels* kernel = nullptr;
+    const ElementSet* domain = nullptr;
+    std::vector<double> qdata;   ///< at every point of the domain, qdata_per_point each
+  };
+  [[nodiscard]] std::span<const Integral> integrals() const noexcept { return integrals_; }
   [[nodiscard]] const Discretization& discretization() const noexcept { return *disc_; }
   [[nodiscard]] int block_size() const noexcept { return form_->dofs_per_node; }
   /// "module/name (dim D)" for messages.
@@ -49,8 +60,10 @@ class Assembler {
   /// Known nodal fields, a vector with coefficient_components_per_node entries per node, in the
   /// renumbered node order (create it with create_coefficient_vector()).
   void set_coefficients(Vec coefficients);
-  /// Quadrature-point data for every global quadrature point, qdata_per_point values each.
+  /// Quadrature-point data for every point of the cells, qdata_per_point values each.
   void set_qdata(std::span<const double> values);
+  /// ... for every point of an integration domain (the cells or a boundary part).
+  void set_qdata(const ElementSet& domain, std::span<const double> values);
 
   [[nodiscard]] PetscVector create_vector() const;
   [[nodiscard]] PetscVector create_coefficient_vector() const;
@@ -96,19 +109,25 @@ class Assembler {
 
  private:
   void check_ready() const;  // constants, coefficients and data set
+  /// Runs per_element(e, inputs) over the elements of `domain`, with the element's unknowns,
+  /// coefficients, points, weights, normals and basis tabulation to `order` set in the inputs.
   template <class PerElement>
-  void element_loop(Vec u, bool owned_only, PerElement&& per_element);
+  void element_loop(const ElementSet& domain, Vec u, bool owned_only, int order, PerElement&& per_element);
+  /// The same over every integral of this form, with its kernel and data.
   template <class PerElement>
-  void element_loop(Vec u, bool owned_only, int order, PerElement&& per_element);
+  void integral_loop(Vec u, bool owned_only, PerElement&& per_element);
   void add_matrix_terms(Vec u, std::span<const MatrixTerm> terms, Mat out);
+  /// The terms' element blocks over one domain, each summed and handed to insert(nodes, block).
+  template <class Insert>
+  void add_domain_matrix(const ElementSet& domain, Vec u, std::span<const MatrixTerm> terms, Insert&& insert, double& kernel_seconds);
   // out += scale * vector; with_value: also the value (summed over ranks), else 0.
   double vector_pass(Vec u, Vec out, double scale, bool with_value);
   void gather_ghosted(Vec source, Vec ghosted);
 
   const Discretization* disc_;
   const kernel::FormKernels* form_;
+  std::vector<Integral> integrals_;
   std::vector<double> constants_;
-  std::vector<double> qdata_;
   std::vector<PetscInt> ghost_blocks_;
   PetscVector u_ghosted_;
   PetscVector c_ghosted_;

@@ -21,11 +21,14 @@
 #include <mpi.h>
 
 #include <optional>
+#include <string>
+#include <string_view>
 #include <span>
 #include <variant>
 #include <vector>
 
 #include "lmeform/delaunay.hpp"
+#include "lmeform/domain.hpp"
 #include "lmeform/lme_basis.hpp"
 #include "lmeform/lme_storage.hpp"
 #include "lmeform/neighbour_search.hpp"
@@ -73,6 +76,9 @@ struct DiscretizationOptions {
   OffProcessMode off_process = OffProcessMode::ZeroCommunication;
   bool use_metis = true;           ///< false: contiguous blocks of the original numbering
   std::optional<CarriedQuadrature> carried;  ///< set: these cells and points, no triangulation
+  /// Boundary parts that forms integrate over (ds(part)): their quadrature, facet vertices in the
+  /// original node numbering. Each becomes an integration domain of its own.
+  std::vector<BoundaryQuadrature> boundary;
 };
 
 /// Wall-clock seconds of each stage (this rank).
@@ -83,10 +89,82 @@ struct StageTimes {
   double structure = 0;         ///< local elements, ghosts, sparsity pattern
 };
 
+/// The elements of one integration domain on this rank, what an assembly loops over: the
+/// background cells (or their single points), or the facets of a boundary part. Every point is
+/// evaluated against its own primal list, and an element's list is the union of its points'.
+class ElementSet {
+ public:
+  /// "cells", or the boundary part's name ("" for the whole boundary).
+  [[nodiscard]] const std::string& name() const noexcept { return name_; }
+  [[nodiscard]] bool boundary() const noexcept { return boundary_; }
+
+  /// Every point of the domain (global numbering, the same on every rank).
+  [[nodiscard]] std::size_t n_points() const noexcept { return weights_.size(); }
+  [[nodiscard]] std::span<const double> points() const noexcept { return points_; }
+  [[nodiscard]] std::span<const double> weights() const noexcept { return weights_; }
+  /// Outward unit normals (boundary domains; empty for the cells).
+  [[nodiscard]] std::span<const double> normals() const noexcept { return normals_; }
+  [[nodiscard]] std::span<const double> point(std::size_t q) const noexcept {
+    return {points_.data() + q * static_cast<std::size_t>(dim_), static_cast<std::size_t>(dim_)};
+  }
+  [[nodiscard]] const CsrLists& point_lists() const noexcept { return *point_lists_; }
+
+  /// This rank's elements.
+  [[nodiscard]] int n_elements() const noexcept { return static_cast<int>(element_nodes_.size()); }
+  /// Renumbered global nodes of element e, sorted.
+  [[nodiscard]] std::span<const int> element_nodes(int e) const noexcept { return element_nodes_[static_cast<std::size_t>(e)]; }
+  /// The same nodes as positions in the local (owned + ghost) numbering.
+  [[nodiscard]] std::span<const int> element_local_nodes(int e) const noexcept { return element_local_[static_cast<std::size_t>(e)]; }
+  /// Points of element e: [first, first + count).
+  [[nodiscard]] int element_first_point(int e) const noexcept { return element_first_point_[static_cast<std::size_t>(e)]; }
+  [[nodiscard]] int element_point_count(int e) const noexcept { return element_point_count_[static_cast<std::size_t>(e)]; }
+  /// True on exactly one rank per element: that rank counts it for energies and, in
+  /// PetscExchange mode, is the only one to compute it.
+  [[nodiscard]] bool element_owned(int e) const noexcept { return element_owned_[static_cast<std::size_t>(e)] != 0; }
+  [[nodiscard]] int max_element_nodes() const noexcept { return max_element_nodes_; }
+  [[nodiscard]] int max_element_points() const noexcept { return max_element_points_; }
+  [[nodiscard]] const CsrLists& element_lists() const noexcept { return element_nodes_; }
+
+  /// Writes element e's basis tabulation in the kernel layout basis[(q*J + s)*n + a],
+  /// J = jet_size(dim, order). Throws if order exceeds the tabulated order.
+  void tabulate(int e, int order, std::span<double> out, LmeWorkspace& ws) const;
+  /// Doubles held by the basis storage of this rank's points.
+  [[nodiscard]] std::size_t storage_doubles() const noexcept;
+
+ private:
+  friend class Discretization;
+  void select_local_elements(const CsrLists& all_elements, int points_per_element, int begin, int end);
+  void number_locally(std::span<const int> ghosts, int begin, int end);
+  void build_storage(const LmeBasis& basis, BasisStorage storage, int order, NeighbourhoodStrategy strategy);
+
+  std::string name_;
+  bool boundary_ = false;
+  int dim_ = 0;
+  int basis_order_ = 0;
+  NeighbourhoodStrategy strategy_ = NeighbourhoodStrategy::CellBased;
+  const LmeBasis* basis_ = nullptr;
+  // Views of the points and their lists, owned by the Discretization.
+  std::span<const double> points_, weights_, normals_;
+  const CsrLists* point_lists_ = nullptr;
+  CsrLists element_nodes_;
+  CsrLists element_local_;
+  std::vector<int> element_first_point_;
+  std::vector<int> element_point_count_;
+  std::vector<char> element_owned_;
+  std::vector<int> element_first_local_point_;  // into the storage's local points
+  int max_element_nodes_ = 0;
+  int max_element_points_ = 0;
+  std::vector<int> storage_point_ids_;  // 0, 1, 2, ...: element e's storage points are a slice
+  std::variant<std::monostate, LmeFullStorage, LmeCompressedStorage> storage_;
+};
+
 class Discretization {
  public:
   /// Builds everything from a node set given identically on every rank of `comm`.
   Discretization(MPI_Comm comm, const NodeSet& nodes, DiscretizationOptions options);
+  // The domains point into the basis: neither copied nor moved.
+  Discretization(const Discretization&) = delete;
+  Discretization& operator=(const Discretization&) = delete;
 
   [[nodiscard]] MPI_Comm comm() const noexcept { return comm_; }
   [[nodiscard]] int rank() const noexcept { return rank_; }
@@ -114,21 +192,23 @@ class Discretization {
   /// vertices of a Delaunay cell of the current nodes holding them.
   [[nodiscard]] std::size_t points_outside_carried_cells() const noexcept { return points_outside_carried_cells_; }
 
-  // --- this rank's elements -------------------------------------------------------------
-  [[nodiscard]] int n_elements() const noexcept { return static_cast<int>(element_nodes_.size()); }
-  /// Renumbered global nodes of element e, sorted.
-  [[nodiscard]] std::span<const int> element_nodes(int e) const noexcept { return element_nodes_[static_cast<std::size_t>(e)]; }
-  /// The same nodes as positions in the local (owned + ghost) numbering.
-  [[nodiscard]] std::span<const int> element_local_nodes(int e) const noexcept { return element_local_[static_cast<std::size_t>(e)]; }
-  /// Global quadrature points of element e: [first, first + count).
-  [[nodiscard]] int element_first_point(int e) const noexcept { return element_first_point_[static_cast<std::size_t>(e)]; }
-  [[nodiscard]] int element_point_count(int e) const noexcept { return element_point_count_[static_cast<std::size_t>(e)]; }
-  /// True on exactly one rank per element: that rank counts it for energies and, in
-  /// PetscExchange mode, is the only one to compute it.
-  [[nodiscard]] bool element_owned(int e) const noexcept { return element_owned_[static_cast<std::size_t>(e)] != 0; }
+  // --- integration domains: the cells, then the boundary parts -------------------------------
+  [[nodiscard]] std::span<const ElementSet> domains() const noexcept { return domains_; }
+  [[nodiscard]] const ElementSet& cells_domain() const noexcept { return domains_.front(); }
+  /// The domain of boundary part `part` (as given in options().boundary); throws std::out_of_range.
+  [[nodiscard]] const ElementSet& boundary_domain(std::string_view part) const;
+
+  // --- this rank's elements of the cells -------------------------------------------------
+  [[nodiscard]] int n_elements() const noexcept { return cells_domain().n_elements(); }
+  [[nodiscard]] std::span<const int> element_nodes(int e) const noexcept { return cells_domain().element_nodes(e); }
+  [[nodiscard]] std::span<const int> element_local_nodes(int e) const noexcept { return cells_domain().element_local_nodes(e); }
+  [[nodiscard]] int element_first_point(int e) const noexcept { return cells_domain().element_first_point(e); }
+  [[nodiscard]] int element_point_count(int e) const noexcept { return cells_domain().element_point_count(e); }
+  [[nodiscard]] bool element_owned(int e) const noexcept { return cells_domain().element_owned(e); }
+  [[nodiscard]] const CsrLists& element_lists() const noexcept { return cells_domain().element_lists(); }
+  /// The largest element over every domain (the scratch an assembly needs).
   [[nodiscard]] int max_element_nodes() const noexcept { return max_element_nodes_; }
   [[nodiscard]] int max_element_points() const noexcept { return max_element_points_; }
-  [[nodiscard]] const CsrLists& element_lists() const noexcept { return element_nodes_; }
 
   /// Ghost nodes (renumbered, sorted): used by this rank's elements, owned elsewhere. The local
   /// numbering is [owned nodes..., ghost nodes...].
@@ -137,11 +217,11 @@ class Discretization {
   /// Node-to-node pattern of this rank's rows.
   [[nodiscard]] const SparsityPattern& pattern() const noexcept { return pattern_; }
 
-  /// Writes element e's basis tabulation in the kernel layout basis[(q*J + s)*n + a],
+  /// Writes cell element e's basis tabulation in the kernel layout basis[(q*J + s)*n + a],
   /// J = jet_size(dim, order). Throws if order exceeds the tabulated order.
-  void tabulate(int e, int order, std::span<double> out, LmeWorkspace& ws) const;
+  void tabulate(int e, int order, std::span<double> out, LmeWorkspace& ws) const { cells_domain().tabulate(e, order, out, ws); }
 
-  /// Doubles held by the basis storage of this rank.
+  /// Doubles held by the basis storage of this rank (every domain).
   [[nodiscard]] std::size_t basis_storage_doubles() const noexcept;
   /// Mean number of nodes per quadrature point's list.
   [[nodiscard]] double mean_point_neighbours() const noexcept { return point_lists_.mean_size(); }
@@ -153,9 +233,9 @@ class Discretization {
   [[nodiscard]] std::span<const int> renumbered_index() const noexcept { return partition_.new_index; }
 
  private:
-  void select_local_elements(const CsrLists& all_elements, int points_per_element);
-  void build_ghosts();
-  void build_storage();
+  void build_cell_domain();
+  void build_boundary_domain(const BoundaryQuadrature& q);
+  void build_ghosts_and_pattern();
 
   MPI_Comm comm_;
   int rank_ = 0;
@@ -169,21 +249,13 @@ class Discretization {
   CellQuadrature quadrature_;
   CsrLists point_lists_;
   std::size_t points_outside_carried_cells_ = 0;
+  std::vector<CsrLists> boundary_point_lists_;  // per options_.boundary entry
 
-  CsrLists element_nodes_;
-  CsrLists element_local_;
-  std::vector<int> element_first_point_;
-  std::vector<int> element_point_count_;
-  std::vector<char> element_owned_;
-  std::vector<int> element_first_local_point_;  // into the storage's local points
+  std::vector<ElementSet> domains_;  // the cells, then the boundary parts
   int max_element_nodes_ = 0;
   int max_element_points_ = 0;
   std::vector<int> ghosts_;
   SparsityPattern pattern_;
-
-  std::vector<int> local_points_;  // global point ids held by the storage, element by element
-  std::vector<int> storage_point_ids_;  // 0, 1, 2, ...: element e's storage points are a slice
-  std::variant<std::monostate, LmeFullStorage, LmeCompressedStorage> storage_;
   StageTimes times_;
 };
 

@@ -103,7 +103,11 @@ struct CellInputs {
   const double* constants = nullptr;   ///< [n_constants], in declaration order
   double* workspace = nullptr;         ///< scratch, at least workspace_doubles(n, nq)
   const ContractionRoutines* contractions = nullptr;  ///< null: the plain loops of this header
+  const double* normals = nullptr;     ///< [nq * dim] outward unit normals (boundary integrals; null for cells)
 };
+
+/// Where a kernel integrates: over the background cells (dx) or a boundary part (ds(part)).
+enum class IntegralDomain : int { Cells = 0, Boundary = 1 };
 
 using ValueKernel = double (*)(const CellInputs&);
 using VectorKernel = void (*)(const CellInputs&, double* local_vector);
@@ -165,6 +169,8 @@ struct FormKernels {
   /// [n_constants]: the form's default of each constant, NaN where it declares none (the runtime
   /// must then be given a value).
   const double* constant_defaults = nullptr;
+  IntegralDomain domain = IntegralDomain::Cells;
+  const char* boundary_part = "";      ///< Boundary: the part of ds(part), "" for the whole boundary
 };
 
 /// A compiled form module: every functional it defines (each output in each declared dimension).

@@ -1,4 +1,6 @@
 #include "lmeform/assembler.hpp"
+
+#include <array>
 #include "lmeform/stopwatch.hpp"
 
 #include <algorithm>
@@ -23,27 +25,56 @@ const char* order_name(int order) {
 
 }  // namespace
 
+namespace {
+
+/// The integration domain of a kernel in a discretization.
+const ElementSet& domain_of(const Discretization& disc, const kernel::FormKernels& k) {
+  if (k.domain != kernel::IntegralDomain::Boundary) return disc.cells_domain();
+  try {
+    return disc.boundary_domain(k.boundary_part);
+  } catch (const std::out_of_range&) {
+    throw std::invalid_argument(std::string("form '") + k.module + "/" + k.name + "' integrates over the boundary part '" +
+                                k.boundary_part + "', which the discretization has no quadrature for (DiscretizationOptions::boundary)");
+  }
+}
+
+}  // namespace
+
 Assembler::Assembler(const Discretization& discretization, const kernel::FormKernels& form)
-    : disc_(&discretization), form_(&form) {
-  if (form.contract_version != kernel::kContractVersion) {
-    throw std::invalid_argument(describe() + ": generated for kernel contract version " +
-                                std::to_string(form.contract_version) + ", this runtime speaks version " +
-                                std::to_string(kernel::kContractVersion) + "; regenerate it with this lmeformc");
+    : Assembler(discretization, std::span<const kernel::FormKernels* const>(std::array<const kernel::FormKernels*, 1>{&form})) {}
+
+Assembler::Assembler(const Discretization& discretization, std::span<const kernel::FormKernels* const> integrals)
+    : disc_(&discretization), form_(integrals.empty() ? nullptr : integrals.front()) {
+  if (form_ == nullptr) throw std::invalid_argument("Assembler: no kernel to assemble");
+  const kernel::FormKernels& form = *form_;
+  int needed = 0;
+  std::size_t workspace = 0;
+  for (const kernel::FormKernels* k : integrals) {
+    if (k->contract_version != kernel::kContractVersion) {
+      throw std::invalid_argument(describe() + ": generated for kernel contract version " + std::to_string(k->contract_version) +
+                                  ", this runtime speaks version " + std::to_string(kernel::kContractVersion) +
+                                  "; regenerate it with this lmeformc");
+    }
+    if (k->dim != disc_->dim()) {
+      throw std::invalid_argument(describe() + ": generated for dimension " + std::to_string(k->dim) + " but the discretization is " +
+                                  std::to_string(disc_->dim()) + "-dimensional");
+    }
+    if (k->dofs_per_node != form.dofs_per_node || k->n_constants != form.n_constants ||
+        k->coefficient_components_per_node != form.coefficient_components_per_node || k->qdata_per_point != form.qdata_per_point)
+      throw std::invalid_argument(describe() + ": its integrals over several domains do not share one layout of unknowns, "
+                                  "coefficients, constants and data");
+    if (k->workspace_doubles == nullptr) throw std::invalid_argument(describe() + ": has no workspace_doubles function");
+    needed = std::max({needed, k->basis_order, k->coefficient_basis_order});
+    integrals_.push_back({k, &domain_of(discretization, *k), {}});
   }
-  if (form.dim != disc_->dim()) {
-    throw std::invalid_argument(describe() + ": generated for dimension " + std::to_string(form.dim) +
-                                " but the discretization is " + std::to_string(disc_->dim()) + "-dimensional");
-  }
-  const int needed = std::max(form.basis_order, form.coefficient_basis_order);
   const int tabulated = disc_->options().basis_order;
   if (needed > tabulated) {
-    throw std::invalid_argument(describe() + ": needs basis " + order_name(needed) + " (derivative order " +
-                                std::to_string(needed) + ") but the discretization tabulates only up to " +
-                                order_name(tabulated) + " (order " + std::to_string(tabulated) +
-                                "); build it with DiscretizationOptions::basis_order = " + std::to_string(needed));
+    throw std::invalid_argument(describe() + ": needs basis " + order_name(needed) + " (derivative order " + std::to_string(needed) +
+                                ") but the discretization tabulates only up to " + order_name(tabulated) + " (order " +
+                                std::to_string(tabulated) + "); build it with DiscretizationOptions::basis_order = " +
+                                std::to_string(needed));
   }
   if (form.dofs_per_node < 1) throw std::invalid_argument(describe() + ": has no unknowns (dofs_per_node = 0)");
-  if (form.workspace_doubles == nullptr) throw std::invalid_argument(describe() + ": has no workspace_doubles function");
 
   constants_.assign(static_cast<std::size_t>(form.n_constants), std::numeric_limits<double>::quiet_NaN());
 
@@ -51,16 +82,16 @@ Assembler::Assembler(const Discretization& discretization, const kernel::FormKer
   const auto ghosts = disc_->ghost_nodes();
   ghost_blocks_.assign(ghosts.begin(), ghosts.end());
   LMEFORM_PETSC_CHECK(VecCreateGhostBlock(disc_->comm(), bs, disc_->n_owned() * bs, PETSC_DECIDE,
-                                          static_cast<PetscInt>(ghost_blocks_.size()), ghost_blocks_.data(),
-                                          u_ghosted_.out()));
+                                          static_cast<PetscInt>(ghost_blocks_.size()), ghost_blocks_.data(), u_ghosted_.out()));
 
   const auto n_max = static_cast<std::size_t>(disc_->max_element_nodes());
   const auto nq_max = static_cast<std::size_t>(disc_->max_element_points());
   const auto jet = static_cast<std::size_t>(kernel::jet_size(disc_->dim(), needed));
+  for (const Integral& i : integrals_) workspace = std::max(workspace, i.kernel->workspace_doubles(static_cast<int>(n_max), static_cast<int>(nq_max)));
   tabulation_.resize(nq_max * jet * n_max);
   element_u_.resize(n_max * static_cast<std::size_t>(bs));
   element_c_.resize(n_max * static_cast<std::size_t>(std::max(form.coefficient_components_per_node, 0)));
-  workspace_.resize(form.workspace_doubles(static_cast<int>(n_max), static_cast<int>(nq_max)));
+  workspace_.resize(workspace);
   local_.resize(n_max * n_max * static_cast<std::size_t>(bs * bs));
   rows_.resize(n_max);
   cols_.resize(n_max);
@@ -107,15 +138,22 @@ void Assembler::set_coefficients(Vec coefficients) {
   have_coefficients_ = true;
 }
 
-void Assembler::set_qdata(std::span<const double> values) {
-  const std::size_t expected = disc_->quadrature().size() * static_cast<std::size_t>(form_->qdata_per_point);
+void Assembler::set_qdata(std::span<const double> values) { set_qdata(disc_->cells_domain(), values); }
+
+void Assembler::set_qdata(const ElementSet& domain, std::span<const double> values) {
+  const std::size_t expected = domain.n_points() * static_cast<std::size_t>(form_->qdata_per_point);
   if (values.size() != expected) {
-    throw std::invalid_argument(describe() + ": quadrature data needs " + std::to_string(form_->qdata_per_point) +
-                                " values at each of " + std::to_string(disc_->quadrature().size()) +
-                                " quadrature points (" + std::to_string(expected) + "), got " +
-                                std::to_string(values.size()));
+    throw std::invalid_argument(describe() + ": quadrature data needs " + std::to_string(form_->qdata_per_point) + " values at each of " +
+                                std::to_string(domain.n_points()) + " points of " + domain.name() + " (" + std::to_string(expected) +
+                                "), got " + std::to_string(values.size()));
   }
-  qdata_.assign(values.begin(), values.end());
+  bool used = false;
+  for (Integral& i : integrals_)
+    if (i.domain == &domain) {
+      i.qdata.assign(values.begin(), values.end());
+      used = true;
+    }
+  if (!used) throw std::invalid_argument(describe() + ": has no integral over " + domain.name());
 }
 
 PetscVector Assembler::create_vector() const {
@@ -204,20 +242,13 @@ void Assembler::check_ready() const {
   if (form_->coefficient_components_per_node > 0 && !have_coefficients_) {
     throw std::invalid_argument(describe() + ": its coefficients were not set (set_coefficients)");
   }
-  if (form_->qdata_per_point > 0 && qdata_.empty()) {
-    throw std::invalid_argument(describe() + ": its quadrature data were not set (set_qdata)");
-  }
+  for (const Integral& i : integrals_)
+    if (form_->qdata_per_point > 0 && i.qdata.empty())
+      throw std::invalid_argument(describe() + ": its quadrature data on " + i.domain->name() + " were not set (set_qdata)");
 }
 
 template <class PerElement>
-void Assembler::element_loop(Vec u, bool owned_only, PerElement&& per_element) {
-  element_loop(u, owned_only, std::max(form_->basis_order, form_->coefficient_basis_order),
-               std::forward<PerElement>(per_element));
-}
-
-template <class PerElement>
-void Assembler::element_loop(Vec u, bool owned_only, int order, PerElement&& per_element) {
-  check_ready();
+void Assembler::element_loop(const ElementSet& domain, Vec u, bool owned_only, int order, PerElement&& per_element) {
   gather_ghosted(u, u_ghosted_);
   Vec u_local = nullptr;
   Vec c_local = nullptr;
@@ -232,8 +263,7 @@ void Assembler::element_loop(Vec u, bool owned_only, int order, PerElement&& per
 
   const int bs = form_->dofs_per_node;
   const int cs = form_->coefficient_components_per_node;
-  const int dim = disc_->dim();
-  const CellQuadrature& quadrature = disc_->quadrature();
+  const auto dim = static_cast<std::size_t>(disc_->dim());
   kernel::CellInputs in;
   in.contractions = &dense_contractions();
   in.basis_order = order;
@@ -246,19 +276,19 @@ void Assembler::element_loop(Vec u, bool owned_only, int order, PerElement&& per
   in.basis = tabulation_.data();
   in.unknowns = element_u_.data();
   in.coefficients = have_coefficients_ ? element_c_.data() : nullptr;
+  const auto points = domain.points(), weights = domain.weights(), normals = domain.normals();
 
-  for (int e = 0; e < disc_->n_elements(); ++e) {
-    if (owned_only && !disc_->element_owned(e)) continue;
-    const auto local_nodes = disc_->element_local_nodes(e);
+  for (int e = 0; e < domain.n_elements(); ++e) {
+    if (owned_only && !domain.element_owned(e)) continue;
+    const auto local_nodes = domain.element_local_nodes(e);
     const int n = static_cast<int>(local_nodes.size());
-    const int first = disc_->element_first_point(e);
+    const auto first = static_cast<std::size_t>(domain.element_first_point(e));
     in.n_nodes = n;
-    in.n_points = disc_->element_point_count(e);
-    in.weights = quadrature.weights.data() + first;
-    in.points = quadrature.points.data() + static_cast<std::size_t>(first) * static_cast<std::size_t>(dim);
-    in.qdata = qdata_.empty() ? nullptr
-                              : qdata_.data() + static_cast<std::size_t>(first) * static_cast<std::size_t>(form_->qdata_per_point);
-    disc_->tabulate(e, order, tabulation_, lme_ws_);
+    in.n_points = domain.element_point_count(e);
+    in.weights = weights.data() + first;
+    in.points = points.data() + first * dim;
+    in.normals = normals.empty() ? nullptr : normals.data() + first * dim;
+    domain.tabulate(e, order, tabulation_, lme_ws_);
     for (int a = 0; a < n; ++a) {
       const auto src = static_cast<std::size_t>(local_nodes[static_cast<std::size_t>(a)]);
       for (int c = 0; c < bs; ++c) {
@@ -279,11 +309,24 @@ void Assembler::element_loop(Vec u, bool owned_only, int order, PerElement&& per
   }
 }
 
+template <class PerElement>
+void Assembler::integral_loop(Vec u, bool owned_only, PerElement&& per_element) {
+  check_ready();
+  for (const Integral& i : integrals_) {
+    const kernel::FormKernels& k = *i.kernel;
+    const auto per_point = static_cast<std::size_t>(k.qdata_per_point);
+    element_loop(*i.domain, u, owned_only, std::max(k.basis_order, k.coefficient_basis_order), [&](int e, kernel::CellInputs& in) {
+      in.qdata = i.qdata.empty() ? nullptr : i.qdata.data() + static_cast<std::size_t>(i.domain->element_first_point(e)) * per_point;
+      per_element(i, e, in);
+    });
+  }
+}
+
 double Assembler::value(Vec u) {
   if (form_->value == nullptr) throw std::logic_error(describe() + ": has no value kernel (it is not an energy or constraint)");
   const Stopwatch clock;
   double local_sum = 0.0;
-  element_loop(u, /*owned_only=*/true, [&](int, const kernel::CellInputs& in) { local_sum += form_->value(in); });
+  integral_loop(u, /*owned_only=*/true, [&](const Integral& i, int, const kernel::CellInputs& in) { local_sum += i.kernel->value(in); });
   double total = 0.0;
   MPI_Allreduce(&local_sum, &total, 1, MPI_DOUBLE, MPI_SUM, disc_->comm());
   times_.value = clock.seconds();
@@ -316,12 +359,12 @@ double Assembler::vector_pass(Vec u, Vec out, double scale, bool with_value) {
   LMEFORM_PETSC_CHECK(VecSetOption(out, VEC_IGNORE_OFF_PROC_ENTRIES, zero_communication ? PETSC_TRUE : PETSC_FALSE));
   double local_sum = 0.0;
   // One tabulation per element for both kernels; the value counts owned elements only.
-  element_loop(u, /*owned_only=*/!zero_communication, [&](int e, const kernel::CellInputs& in) {
-    if (with_value && disc_->element_owned(e)) local_sum += form_->value(in);
-    const auto nodes = disc_->element_nodes(e);
+  integral_loop(u, /*owned_only=*/!zero_communication, [&](const Integral& i, int e, const kernel::CellInputs& in) {
+    if (with_value && i.domain->element_owned(e)) local_sum += i.kernel->value(in);
+    const auto nodes = i.domain->element_nodes(e);
     const std::size_t m = nodes.size() * static_cast<std::size_t>(bs);
     std::fill_n(local_.begin(), m, 0.0);
-    form_->vector(in, local_.data());
+    i.kernel->vector(in, local_.data());
     if (scale != 1.0) {
       for (std::size_t i = 0; i < m; ++i) local_[i] *= scale;
     }
@@ -354,10 +397,59 @@ void Assembler::matrix_sum(Vec u, std::span<const MatrixTerm> terms, Mat out) {
   add_matrix_terms(u, terms, out);
 }
 
+template <class Insert>
+void Assembler::add_domain_matrix(const ElementSet& domain, Vec u, std::span<const MatrixTerm> terms, Insert&& insert, double& kernel_seconds) {
+  const bool zero_communication = disc_->options().off_process == OffProcessMode::ZeroCommunication;
+  const int bs = form_->dofs_per_node;
+  // The terms' integrals over this domain, and the tabulation order they need.
+  std::vector<std::pair<const MatrixTerm*, const Integral*>> parts;
+  int order = 0;
+  for (const MatrixTerm& t : terms)
+    for (const Integral& i : t.form->integrals_)
+      if (i.domain == &domain && !i.kernel->matrix_structurally_zero) {
+        parts.emplace_back(&t, &i);
+        order = std::max({order, i.kernel->basis_order, i.kernel->coefficient_basis_order});
+      }
+  element_loop(domain, u, /*owned_only=*/!zero_communication, order, [&](int e, kernel::CellInputs& in) {
+    const Stopwatch kernel_clock;
+    const auto nodes = domain.element_nodes(e);
+    const std::size_t m = nodes.size() * static_cast<std::size_t>(bs);
+    std::fill_n(local_.begin(), m * m, 0.0);
+    bool first = true;
+    for (const auto& [t, integral] : parts) {
+      Assembler& a = *t->form;
+      const auto qdata_at = [&](const Integral& i) {
+        return i.qdata.empty() ? nullptr
+                               : i.qdata.data() + static_cast<std::size_t>(domain.element_first_point(e)) *
+                                                      static_cast<std::size_t>(i.kernel->qdata_per_point);
+      };
+      if (first && &a == this) {
+        in.qdata = qdata_at(*integral);
+        integral->kernel->matrix(in, local_.data());
+        if (t->weight != 1.0) {
+          for (std::size_t i = 0; i < m * m; ++i) local_[i] *= t->weight;
+        }
+      } else {
+        // Same element, same tabulation; the other form's constants, data and scratch.
+        kernel::CellInputs other = in;
+        other.constants = a.constants_.data();
+        other.workspace = a.workspace_.data();
+        other.coefficients = &a == this ? in.coefficients : nullptr;
+        other.qdata = qdata_at(*integral);
+        std::fill_n(a.local_.begin(), m * m, 0.0);
+        integral->kernel->matrix(other, a.local_.data());
+        for (std::size_t i = 0; i < m * m; ++i) local_[i] += t->weight * a.local_[i];
+      }
+      first = false;
+    }
+    kernel_seconds += kernel_clock.seconds();
+    insert(nodes, local_.data());
+  });
+}
+
 void Assembler::add_matrix_terms(Vec u, std::span<const MatrixTerm> all_terms, Mat out) {
   // The terms that add something; each must be a form on this discretization and block size.
   std::vector<MatrixTerm> terms;
-  int order = 0;
   for (const MatrixTerm& t : all_terms) {
     if (t.form == nullptr) throw std::invalid_argument(describe() + ": a matrix term has no form");
     const kernel::FormKernels& f = t.form->form();
@@ -370,9 +462,10 @@ void Assembler::add_matrix_terms(Vec u, std::span<const MatrixTerm> all_terms, M
       throw std::invalid_argument(t.form->describe() + ": forms with coefficients can only be summed as the first term");
     }
     t.form->check_ready();
-    if (f.matrix_structurally_zero || t.weight == 0.0) continue;  // linear in the unknowns: adds nothing
+    if (t.weight == 0.0) continue;
+    if (std::all_of(t.form->integrals_.begin(), t.form->integrals_.end(), [](const Integral& i) { return i.kernel->matrix_structurally_zero; }))
+      continue;  // linear in the unknowns: adds nothing
     terms.push_back(t);
-    order = std::max({order, f.basis_order, f.coefficient_basis_order});
   }
   if (terms.empty()) return;
   if (terms.front().form != this) {
@@ -380,47 +473,25 @@ void Assembler::add_matrix_terms(Vec u, std::span<const MatrixTerm> all_terms, M
     const auto self = std::find_if(terms.begin(), terms.end(), [this](const MatrixTerm& t) { return t.form == this; });
     if (self != terms.end()) std::iter_swap(terms.begin(), self);
   }
+  // Each domain once: every term's integral over it adds to the same element block.
+  std::vector<const ElementSet*> domains;
+  for (const ElementSet& d : disc_->domains())
+    for (const MatrixTerm& t : terms)
+      for (const Integral& i : t.form->integrals_)
+        if (i.domain == &d && !i.kernel->matrix_structurally_zero && std::find(domains.begin(), domains.end(), &d) == domains.end())
+          domains.push_back(&d);
 
   const Stopwatch clock;
   const bool zero_communication = disc_->options().off_process == OffProcessMode::ZeroCommunication;
-  const int bs = form_->dofs_per_node;
   double kernel_seconds = 0.0;
   // Matrices from create_matrix() carry a map of their structure: element blocks are added
   // straight into the AIJ arrays. Others (another type chosen by options) go through MatSetValues.
-  detail::AijDirectAdd* direct =
-      (zero_communication || disc_->ranks() == 1) ? detail::AijDirectAdd::find(out) : nullptr;
+  detail::AijDirectAdd* direct = (zero_communication || disc_->ranks() == 1) ? detail::AijDirectAdd::find(out) : nullptr;
   std::optional<detail::AijDirectAdd::Fill> fill;
   if (direct != nullptr) fill.emplace(*direct, out);
-
-  element_loop(u, /*owned_only=*/!zero_communication, order, [&](int e, const kernel::CellInputs& in) {
-    const Stopwatch kernel_clock;
-    const auto nodes = disc_->element_nodes(e);
+  const int bs = form_->dofs_per_node;
+  auto insert = [&](std::span<const int> nodes, const double* block) {
     const std::size_t m = nodes.size() * static_cast<std::size_t>(bs);
-    std::fill_n(local_.begin(), m * m, 0.0);
-    bool first = true;
-    for (const MatrixTerm& t : terms) {
-      Assembler& a = *t.form;
-      if (first && &a == this) {
-        form_->matrix(in, local_.data());
-        if (t.weight != 1.0) {
-          for (std::size_t i = 0; i < m * m; ++i) local_[i] *= t.weight;
-        }
-      } else {
-        // Same element, same tabulation; the other form's constants, data and scratch.
-        kernel::CellInputs other = in;
-        other.constants = a.constants_.data();
-        other.workspace = a.workspace_.data();
-        other.coefficients = nullptr;
-        other.qdata = a.qdata_.empty() ? nullptr
-                                       : a.qdata_.data() + static_cast<std::size_t>(disc_->element_first_point(e)) *
-                                                               static_cast<std::size_t>(a.form_->qdata_per_point);
-        std::fill_n(a.local_.begin(), m * m, 0.0);
-        a.form_->matrix(other, a.local_.data());
-        for (std::size_t i = 0; i < m * m; ++i) local_[i] += t.weight * a.local_[i];
-      }
-      first = false;
-    }
-    kernel_seconds += kernel_clock.seconds();
     if (fill) {
       for (std::size_t a = 0; a < nodes.size(); ++a) {
         const bool mine = !zero_communication || disc_->owns(nodes[a]);
@@ -430,16 +501,17 @@ void Assembler::add_matrix_terms(Vec u, std::span<const MatrixTerm> all_terms, M
           scalar_rows_[a * static_cast<std::size_t>(bs) + static_cast<std::size_t>(c)] = mine ? dof : -1;
         }
       }
-      fill->add({scalar_rows_.data(), m}, {scalar_cols_.data(), m}, local_.data(), 1.0);
-    } else {
-      for (std::size_t a = 0; a < nodes.size(); ++a) {
-        cols_[a] = nodes[a];
-        rows_[a] = (!zero_communication || disc_->owns(nodes[a])) ? nodes[a] : -1;
-      }
-      const auto count = static_cast<PetscInt>(nodes.size());
-      LMEFORM_PETSC_CHECK(MatSetValuesBlocked(out, count, rows_.data(), count, cols_.data(), local_.data(), ADD_VALUES));
+      fill->add({scalar_rows_.data(), m}, {scalar_cols_.data(), m}, block, 1.0);
+      return;
     }
-  });
+    for (std::size_t a = 0; a < nodes.size(); ++a) {
+      cols_[a] = nodes[a];
+      rows_[a] = (!zero_communication || disc_->owns(nodes[a])) ? nodes[a] : -1;
+    }
+    const auto count = static_cast<PetscInt>(nodes.size());
+    LMEFORM_PETSC_CHECK(MatSetValuesBlocked(out, count, rows_.data(), count, cols_.data(), block, ADD_VALUES));
+  };
+  for (const ElementSet* domain : domains) add_domain_matrix(*domain, u, terms, insert, kernel_seconds);
   if (fill) {
     fill->finish();
   } else {

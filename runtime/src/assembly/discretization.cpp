@@ -198,37 +198,75 @@ Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, Discretizati
           add_enclosing_cells(point_lists_, quadrature_, cells_, nodes_, nodes, partition_.new_index);
   }
 
-  // Elements: cells (union of their points' lists) or single points.
-  CsrLists all_elements;
-  int points_per_element = 1;
+  // Elements of every integration domain; ghosts and the pattern of their union; basis storage.
   {
     StageClock clock(times_.neighbour_search);
-    if (options_.strategy == NeighbourhoodStrategy::CellBased) {
-      points_per_element = quadrature_.points_per_cell;
-      all_elements = union_of_groups(point_lists_, points_per_element, n);
-    } else {
-      all_elements = point_lists_;
-    }
+    build_cell_domain();
+    boundary_point_lists_.reserve(options_.boundary.size());  // the domains view them: no reallocation
+    for (const BoundaryQuadrature& q : options_.boundary) build_boundary_domain(q);
   }
-
   {
     StageClock clock(times_.structure);
-    select_local_elements(all_elements, points_per_element);
-    build_ghosts();
-    const CsrLists dual = dual_lists(element_nodes_, n);
-    pattern_ = build_sparsity_pattern(element_nodes_.offsets, element_nodes_.indices, dual.offsets, dual.indices, n,
-                                      owned_begin(), owned_end());
+    build_ghosts_and_pattern();
   }
-
   {
     StageClock clock(times_.basis);
-    build_storage();
+    for (ElementSet& d : domains_) d.build_storage(*basis_, options_.storage, options_.basis_order, options_.strategy);
   }
 }
 
-void Discretization::select_local_elements(const CsrLists& all_elements, int points_per_element) {
-  const int begin = owned_begin();
-  const int end = owned_end();
+void Discretization::build_cell_domain() {
+  ElementSet cells;
+  cells.name_ = "cells";
+  cells.dim_ = dim();
+  cells.points_ = quadrature_.points;
+  cells.weights_ = quadrature_.weights;
+  cells.point_lists_ = &point_lists_;
+  // Elements: cells (union of their points' lists) or single points.
+  const bool cell_based = options_.strategy == NeighbourhoodStrategy::CellBased;
+  const int points_per_element = cell_based ? quadrature_.points_per_cell : 1;
+  const CsrLists all_elements = cell_based ? union_of_groups(point_lists_, points_per_element, n_nodes()) : point_lists_;
+  cells.select_local_elements(all_elements, points_per_element, owned_begin(), owned_end());
+  domains_.push_back(std::move(cells));
+}
+
+void Discretization::build_boundary_domain(const BoundaryQuadrature& q) {
+  if (q.dim != dim() || q.points.size() != q.weights.size() * std::size_t(dim()) || q.normals.size() != q.points.size() ||
+      q.points_per_facet <= 0 || q.weights.size() % std::size_t(q.points_per_facet) != 0 ||
+      q.facet_vertices.size() != q.facets() * std::size_t(q.vertices_per_facet))
+    throw std::invalid_argument("Discretization: the boundary quadrature of part '" + q.part + "' is inconsistent");
+  for (const int v : q.facet_vertices)
+    if (v < 0 || v >= n_nodes()) throw std::invalid_argument("Discretization: a facet of part '" + q.part + "' names node " + std::to_string(v));
+  // As for the cells, every point's list holds its facet's vertices: the point lies in the hull
+  // of its list (a boundary point is a vertex of that hull at worst).
+  const auto per_facet = static_cast<std::size_t>(q.points_per_facet), vertices = static_cast<std::size_t>(q.vertices_per_facet);
+  std::vector<int> renumbered(q.facet_vertices.size());
+  for (std::size_t k = 0; k < renumbered.size(); ++k) renumbered[k] = partition_.new_index[static_cast<std::size_t>(q.facet_vertices[k])];
+  boundary_point_lists_.push_back(with_vertices(basis_->neighbour_lists(q.points), [&](std::size_t p) {
+    return std::span<const int>(renumbered.data() + (p / per_facet) * vertices, vertices);
+  }));
+  ElementSet d;
+  d.name_ = q.part;
+  d.boundary_ = true;
+  d.dim_ = dim();
+  d.points_ = q.points;
+  d.weights_ = q.weights;
+  d.normals_ = q.normals;
+  d.point_lists_ = &boundary_point_lists_.back();
+  const bool cell_based = options_.strategy == NeighbourhoodStrategy::CellBased;
+  const int points_per_element = cell_based ? q.points_per_facet : 1;
+  const CsrLists all_elements = cell_based ? union_of_groups(*d.point_lists_, points_per_element, n_nodes()) : *d.point_lists_;
+  d.select_local_elements(all_elements, points_per_element, owned_begin(), owned_end());
+  domains_.push_back(std::move(d));
+}
+
+const ElementSet& Discretization::boundary_domain(std::string_view part) const {
+  for (std::size_t k = 1; k < domains_.size(); ++k)
+    if (domains_[k].name() == part) return domains_[k];
+  throw std::out_of_range("Discretization: no boundary domain '" + std::string(part) + "'");
+}
+
+void ElementSet::select_local_elements(const CsrLists& all_elements, int points_per_element, int begin, int end) {
   element_nodes_ = CsrLists{};
   element_first_point_.clear();
   element_point_count_.clear();
@@ -252,15 +290,7 @@ void Discretization::select_local_elements(const CsrLists& all_elements, int poi
   }
 }
 
-void Discretization::build_ghosts() {
-  const int begin = owned_begin();
-  const int end = owned_end();
-  ghosts_.clear();
-  for (const int b : element_nodes_.indices) {
-    if (b < begin || b >= end) ghosts_.push_back(b);
-  }
-  std::sort(ghosts_.begin(), ghosts_.end());
-  ghosts_.erase(std::unique(ghosts_.begin(), ghosts_.end()), ghosts_.end());
+void ElementSet::number_locally(std::span<const int> ghosts, int begin, int end) {
   element_local_ = CsrLists{};
   element_local_.offsets = element_nodes_.offsets;
   element_local_.indices.resize(element_nodes_.indices.size());
@@ -270,51 +300,76 @@ void Discretization::build_ghosts() {
     if (b >= begin && b < end) {
       element_local_.indices[k] = b - begin;
     } else {
-      const auto it = std::lower_bound(ghosts_.begin(), ghosts_.end(), b);
-      element_local_.indices[k] = n_owned_nodes + static_cast<int>(it - ghosts_.begin());
+      const auto it = std::lower_bound(ghosts.begin(), ghosts.end(), b);
+      element_local_.indices[k] = n_owned_nodes + static_cast<int>(it - ghosts.begin());
     }
   }
 }
 
-void Discretization::build_storage() {
+void Discretization::build_ghosts_and_pattern() {
+  const int begin = owned_begin();
+  const int end = owned_end();
+  ghosts_.clear();
+  max_element_nodes_ = max_element_points_ = 0;
+  // The pattern of the union of every domain's elements: a boundary facet can couple nodes that
+  // no cell's points do.
+  CsrLists all;
+  for (const ElementSet& d : domains_) {
+    for (const int b : d.element_nodes_.indices)
+      if (b < begin || b >= end) ghosts_.push_back(b);
+    max_element_nodes_ = std::max(max_element_nodes_, d.max_element_nodes());
+    max_element_points_ = std::max(max_element_points_, d.max_element_points());
+    if (domains_.size() > 1)
+      for (std::size_t e = 0; e < d.element_nodes_.size(); ++e) all.push_back(d.element_nodes_[e]);
+  }
+  std::sort(ghosts_.begin(), ghosts_.end());
+  ghosts_.erase(std::unique(ghosts_.begin(), ghosts_.end()), ghosts_.end());
+  for (ElementSet& d : domains_) d.number_locally(ghosts_, begin, end);
+  const CsrLists& elements = domains_.size() > 1 ? all : domains_.front().element_nodes_;
+  const CsrLists dual = dual_lists(elements, n_nodes());
+  pattern_ = build_sparsity_pattern(elements.offsets, elements.indices, dual.offsets, dual.indices, n_nodes(), begin, end);
+}
+
+void ElementSet::build_storage(const LmeBasis& basis, BasisStorage storage, int order, NeighbourhoodStrategy strategy) {
+  basis_ = &basis;
+  basis_order_ = order;
+  strategy_ = strategy;
   // The storage holds the points of this rank's elements, element after element, each point
   // with its own primal list.
-  local_points_.clear();
+  std::vector<int> local_points;
   element_first_local_point_.clear();
   for (int e = 0; e < n_elements(); ++e) {
-    element_first_local_point_.push_back(static_cast<int>(local_points_.size()));
-    for (int q = 0; q < element_point_count(e); ++q) local_points_.push_back(element_first_point(e) + q);
+    element_first_local_point_.push_back(static_cast<int>(local_points.size()));
+    for (int q = 0; q < element_point_count(e); ++q) local_points.push_back(element_first_point(e) + q);
   }
-  element_first_local_point_.push_back(static_cast<int>(local_points_.size()));
-  storage_point_ids_.resize(local_points_.size());
+  element_first_local_point_.push_back(static_cast<int>(local_points.size()));
+  storage_point_ids_.resize(local_points.size());
   for (std::size_t k = 0; k < storage_point_ids_.size(); ++k) storage_point_ids_[k] = static_cast<int>(k);
-  const auto d = static_cast<std::size_t>(dim());
-  std::vector<double> coords(local_points_.size() * d);
+  const auto d = static_cast<std::size_t>(dim_);
+  std::vector<double> coords(local_points.size() * d);
   CsrLists lists;
-  lists.offsets.reserve(local_points_.size() + 1);
-  for (std::size_t k = 0; k < local_points_.size(); ++k) {
-    const auto q = static_cast<std::size_t>(local_points_[k]);
-    std::copy_n(quadrature_.points.begin() + static_cast<std::ptrdiff_t>(q * d), d,
-                coords.begin() + static_cast<std::ptrdiff_t>(k * d));
-    lists.push_back(point_lists_[q]);
+  lists.offsets.reserve(local_points.size() + 1);
+  for (std::size_t k = 0; k < local_points.size(); ++k) {
+    const auto q = static_cast<std::size_t>(local_points[k]);
+    std::copy_n(points_.begin() + static_cast<std::ptrdiff_t>(q * d), d, coords.begin() + static_cast<std::ptrdiff_t>(k * d));
+    lists.push_back((*point_lists_)[q]);
   }
-  if (options_.storage == BasisStorage::Full) {
-    storage_.emplace<LmeFullStorage>(*basis_, coords, std::move(lists), options_.basis_order);
+  if (storage == BasisStorage::Full) {
+    storage_.emplace<LmeFullStorage>(basis, coords, std::move(lists), order);
   } else {
-    storage_.emplace<LmeCompressedStorage>(*basis_, coords, std::move(lists), options_.basis_order);
+    storage_.emplace<LmeCompressedStorage>(basis, coords, std::move(lists), order);
   }
 }
 
-void Discretization::tabulate(int e, int order, std::span<double> out, LmeWorkspace& ws) const {
-  if (order > options_.basis_order) {
+void ElementSet::tabulate(int e, int order, std::span<double> out, LmeWorkspace& ws) const {
+  if (order > basis_order_) {
     throw std::invalid_argument("Discretization::tabulate: derivative order " + std::to_string(order) +
-                                " requested but the basis was tabulated to order " +
-                                std::to_string(options_.basis_order) +
+                                " requested but the basis was tabulated to order " + std::to_string(basis_order_) +
                                 " (set DiscretizationOptions::basis_order to the highest order the forms need)");
   }
   const auto first = static_cast<std::size_t>(element_first_local_point_[static_cast<std::size_t>(e)]);
   const auto count = static_cast<std::size_t>(element_point_count_[static_cast<std::size_t>(e)]);
-  if (options_.strategy == NeighbourhoodStrategy::PerPoint) {
+  if (strategy_ == NeighbourhoodStrategy::PerPoint) {
     if (const auto* full = std::get_if<LmeFullStorage>(&storage_)) {
       full->point_jet(first, order, out);
     } else {
@@ -330,10 +385,16 @@ void Discretization::tabulate(int e, int order, std::span<double> out, LmeWorksp
   }
 }
 
-std::size_t Discretization::basis_storage_doubles() const noexcept {
+std::size_t ElementSet::storage_doubles() const noexcept {
   if (const auto* full = std::get_if<LmeFullStorage>(&storage_)) return full->doubles();
   if (const auto* compressed = std::get_if<LmeCompressedStorage>(&storage_)) return compressed->doubles();
   return 0;
+}
+
+std::size_t Discretization::basis_storage_doubles() const noexcept {
+  std::size_t total = 0;
+  for (const ElementSet& d : domains_) total += d.storage_doubles();
+  return total;
 }
 
 }  // namespace lmeform
