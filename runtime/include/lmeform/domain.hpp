@@ -74,6 +74,8 @@ class Domain {
   [[nodiscard]] bool contains(std::span<const double> x, double tolerance) const;
   /// Whether x lies on face f (within tolerance of its plane and of its extent).
   [[nodiscard]] bool on_face(int face, std::span<const double> x, double tolerance) const;
+  /// The distance from x to the faces of `part`.
+  [[nodiscard]] double distance_to_part(std::span<const double> x, const std::string& part) const;
   /// The indices of the nodes on the faces of `part`, sorted (tolerance: relative to the diameter).
   [[nodiscard]] std::vector<int> nodes_on(const NodeSet& nodes, const std::string& part, double relative_tolerance = 1e-9) const;
 
@@ -85,6 +87,9 @@ class Domain {
   std::vector<std::array<double, 3>> vertices_;
   std::vector<DomainFace> faces_;
 };
+
+/// The distance from x to a polyline (one point: the distance to it), dim 2 or 3.
+[[nodiscard]] double distance_to_polyline(std::span<const double> x, const std::vector<std::array<double, 3>>& path, int dim);
 
 /// A node spacing over a domain: h(x) > 0, and its smallest value (the sampling resolution).
 struct SpacingFunction {

@@ -262,6 +262,54 @@ bool Domain::on_face(int face, std::span<const double> x, double tolerance) cons
   return std::abs(dot3(f.normal, point_of(x)) - f.offset) <= tolerance && contains(x, tolerance);
 }
 
+namespace {
+
+double segment_distance(const Point& x, const Point& a, const Point& b) {
+  const Point ab = sub(b, a), ax = sub(x, a);
+  const double l2 = dot3(ab, ab);
+  const double t = l2 > 0 ? std::clamp(dot3(ax, ab) / l2, 0.0, 1.0) : 0.0;
+  return length(sub(ax, scaled(ab, t)));
+}
+
+}  // namespace
+
+double Domain::distance_to_part(std::span<const double> x, const std::string& part) const {
+  const Point p = point_of(x);
+  double best = std::numeric_limits<double>::infinity();
+  for (const int fi : faces_of(part)) {
+    const DomainFace& f = faces_[std::size_t(fi)];
+    const std::size_t n = f.vertices.size();
+    if (dim_ == 2) {
+      best = std::min(best, segment_distance(p, vertices_[std::size_t(f.vertices[0])], vertices_[std::size_t(f.vertices[1])]));
+      continue;
+    }
+    // Inside the face's outline: the distance to its plane; else to its nearest edge.
+    const double height = dot3(f.normal, p) - f.offset;
+    const Point projected = sub(p, scaled(f.normal, height));
+    bool inside = true;
+    double edge = std::numeric_limits<double>::infinity();
+    for (std::size_t i = 0; i < n; ++i) {
+      const Point& a = vertices_[std::size_t(f.vertices[i])];
+      const Point& b = vertices_[std::size_t(f.vertices[(i + 1) % n])];
+      const Point c{(b[1] - a[1]) * f.normal[2] - (b[2] - a[2]) * f.normal[1], (b[2] - a[2]) * f.normal[0] - (b[0] - a[0]) * f.normal[2],
+                    (b[0] - a[0]) * f.normal[1] - (b[1] - a[1]) * f.normal[0]};  // n × (b − a): inward for a counter-clockwise loop
+      inside = inside && dot3(sub(projected, a), c) >= 0;
+      edge = std::min(edge, segment_distance(p, a, b));
+    }
+    best = std::min(best, inside ? std::abs(height) : edge);
+  }
+  return best;
+}
+
+double distance_to_polyline(std::span<const double> x, const std::vector<std::array<double, 3>>& path, int dim) {
+  Point p{};
+  for (int i = 0; i < dim; ++i) p[std::size_t(i)] = x[std::size_t(i)];
+  if (path.size() == 1) return length(sub(p, path.front()));
+  double best = std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i + 1 < path.size(); ++i) best = std::min(best, segment_distance(p, path[i], path[i + 1]));
+  return best;
+}
+
 std::vector<int> Domain::nodes_on(const NodeSet& nodes, const std::string& part, double relative_tolerance) const {
   const double tol = relative_tolerance * diameter();
   const std::vector<int> faces = faces_of(part);

@@ -180,6 +180,22 @@ void bind_layout(const Scene& scene, BoundScene& b) {
   }
 }
 
+/// Every ds(part) of the outputs must name a part of the scene's domain.
+void bind_boundary_parts(const Scene& scene, BoundScene& b) {
+  for (const BoundOutput* o : b.outputs())
+    for (const FormKernels* k : o->kernels) {
+      if (k->domain != kernel::IntegralDomain::Boundary) continue;
+      const std::string part = k->boundary_part;
+      if (!b.geometry.has_part(part)) {
+        std::vector<std::string> parts = b.geometry.part_names();
+        throw SceneError(fmt::format("{}: {} integrates over ds({}), but the scene's [domain] has no part '{}'{} (its parts: {})", scene.source,
+                                     o->label, part, part, did_you_mean(part, parts),
+                                     parts.empty() ? std::string("none named") : fmt::format("{}", fmt::join(parts, ", "))));
+      }
+      if (std::find(b.boundary_parts.begin(), b.boundary_parts.end(), part) == b.boundary_parts.end()) b.boundary_parts.push_back(part);
+    }
+}
+
 /// The scene's value of each constant, else the form's default; every scene constant must be a form's.
 void bind_constants(const Scene& scene, const OutputRoles& roles, BoundScene& b) {
   std::vector<std::string> form_constants;
@@ -402,6 +418,8 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
   b.dim = scene.dim();
   b.axisymmetric = scene.axisymmetric();
   b.domain = scene.domain;
+  b.geometry = scene.geometry;
+  b.boundary_points = scene.nodes.boundary_points;
   b.discretization = {scene.nodes.gamma, scene.nodes.quadrature_points, scene.nodes.spacing_smoothing};
   b.solver = &solver;
   OutputRoles roles = solver.roles(scene);
@@ -411,6 +429,7 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
   load_modules(scene, comm, log, b);
   bind_outputs(scene, roles, b);
   bind_layout(scene, b);
+  bind_boundary_parts(scene, b);
   bind_constants(scene, roles, b);
   bind_constraint_targets(scene, roles, b);
   // A driver's constants are set at solve time: expressions see them as 0.

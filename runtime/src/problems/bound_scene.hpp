@@ -121,7 +121,11 @@ struct BoundScene {
   std::string source;            ///< the scene file, for messages
   int dim = 2;
   bool axisymmetric = false;
-  Box domain;
+  Box domain;                    ///< the box, or the bounding box of the geometry
+  Domain geometry;               ///< with its named boundary parts
+  int boundary_points = 3;       ///< of the rule per boundary segment (2D) or triangle (3D)
+  /// The boundary parts the outputs integrate over (ds(part); "" for ds), each once.
+  std::vector<std::string> boundary_parts;
   DiscretizationSettings discretization;
   /// The stationary solve of this problem (minimization, residual, linear): the driver whose
   /// roles bound the outputs.

@@ -3,10 +3,13 @@
 #include <algorithm>
 #include <set>
 
+#include <fmt/ranges.h>
+
 #include <fmt/format.h>
 
 #include "lmeform/convex_hull.hpp"
 #include "lmeform/cvt.hpp"
+#include "lmeform/domain.hpp"
 #include "lmeform/node_sets.hpp"
 #include "lmeform/output.hpp"
 #include "lmeform/stopwatch.hpp"
@@ -72,6 +75,35 @@ NodeSet cvt_nodes(const Scene& scene, std::ostream* log) {
   return nodes;
 }
 
+/// The spacing of generated nodes: nodes.spacing, finer near each refinement's part or path.
+SpacingFunction scene_spacing(const Scene& scene) {
+  const double h0 = scene.nodes.spacing;
+  double h_min = h0;
+  for (const auto& r : scene.nodes.refine) h_min = std::min(h_min, r.spacing);
+  const Domain& geometry = scene.geometry;
+  const int dim = scene.dim();
+  const std::vector<SceneRefinement> refine = scene.nodes.refine;
+  return {[h0, refine, &geometry, dim](std::span<const double> x) {
+            double h = h0;
+            for (const auto& r : refine) {
+              const double d = r.part.empty() ? distance_to_polyline(x, r.path, dim) : geometry.distance_to_part(x, r.part);
+              h = std::min(h, r.spacing + r.grading * std::max(0.0, d - r.width));
+            }
+            return h;
+          },
+          h_min};
+}
+
+/// Every point of a node file inside the domain (boxes are checked by read_points).
+void check_inside(const Scene& scene, const NodeSet& nodes) {
+  if (scene.geometry.is_box()) return;
+  const double tol = 1e-9 * scene.geometry.diameter();
+  for (std::size_t a = 0; a < nodes.size(); ++a)
+    if (!scene.geometry.contains(nodes.point(a), tol))
+      throw std::runtime_error(fmt::format("point {} ({}) lies outside the domain (by {:.3g})", a + 1, fmt::join(nodes.point(a), ", "),
+                                           -scene.geometry.depth(nodes.point(a))));
+}
+
 NodeSet file_nodes(const Scene& scene) {
   try {
     // A previous run's output (HDF5): its nodes, so that its fields can be read back on them.
@@ -91,7 +123,10 @@ NodeSet file_nodes(const Scene& scene) {
 
 NodeSet initial_nodes(const Scene& scene, std::ostream* log) {
   switch (scene.nodes.kind) {
-    case SceneNodes::Kind::spacing: return uniform_grid(scene.domain, scene.nodes.spacing);
+    case SceneNodes::Kind::spacing:
+      // A box without refinement keeps its uniform grid; anything else is generated for the domain.
+      if (scene.geometry.is_box() && scene.nodes.refine.empty()) return uniform_grid(scene.domain, scene.nodes.spacing);
+      return domain_nodes(scene.geometry, scene_spacing(scene));
     case SceneNodes::Kind::counts: return uniform_grid(scene.domain, scene.nodes.counts);
     case SceneNodes::Kind::count: return cvt_nodes(scene, log);
     case SceneNodes::Kind::file: return file_nodes(scene);
@@ -99,26 +134,9 @@ NodeSet initial_nodes(const Scene& scene, std::ostream* log) {
   throw std::logic_error("unknown node kind");
 }
 
-std::vector<int> boundary_nodes(const Box& box, bool axisymmetric, const NodeSet& nodes, const std::string& part) {
+std::vector<int> boundary_nodes(const Domain& geometry, const NodeSet& nodes, const std::string& part) {
   if (part == "hull") return hull_boundary_nodes(nodes);
-  double extent = 0;
-  for (int i = 0; i < box.dim; ++i) extent = std::max(extent, box.hi[std::size_t(i)] - box.lo[std::size_t(i)]);
-  const double tol = 1e-9 * extent;
-  int axis = 0;
-  bool upper = false;
-  if (part != "axis") {
-    static const std::string names[] = {"x", "y", "z"};
-    const std::string a = part.substr(0, part.find('_'));
-    axis = a == "r" ? 0 : (axisymmetric && a == "z") ? 1 : static_cast<int>(std::find(names, names + 3, a) - names);
-    upper = part.ends_with("_max");
-  }
-  const auto k = static_cast<std::size_t>(axis);
-  std::vector<int> out;
-  for (std::size_t n = 0; n < nodes.size(); ++n) {
-    const double x = nodes.point(n)[k];
-    if (upper ? x >= box.hi[k] - tol : x <= box.lo[k] + tol) out.push_back(static_cast<int>(n));
-  }
-  return out;
+  return geometry.nodes_on(nodes, part);
 }
 
 std::vector<std::vector<int>> dirichlet_nodes(const BoundScene& b, const NodeSet& nodes) {
@@ -126,7 +144,7 @@ std::vector<std::vector<int>> dirichlet_nodes(const BoundScene& b, const NodeSet
   for (const BoundDirichlet& d : b.dirichlet) {
     std::set<int> on;
     for (const auto& part : d.parts)
-      for (const int n : boundary_nodes(b.domain, b.axisymmetric, nodes, part)) on.insert(n);
+      for (const int n : boundary_nodes(b.geometry, nodes, part)) on.insert(n);
     if (on.empty()) throw SceneError(fmt::format("{}: no node lies on the boundary parts given in key 'boundary'", d.where));
     out.emplace_back(on.begin(), on.end());
   }

@@ -25,6 +25,16 @@ std::shared_ptr<Discretization> discretization_of(MPI_Comm comm, const BoundScen
   options.quadrature_points = b.discretization.quadrature_points;
   options.basis_order = std::max(b.basis_order, 1);  // |∇u| at the nodes and H1 errors need gradients
   options.carried = input.carried;
+  // The boundary parts the forms integrate over: a rule per segment between boundary nodes.
+  for (const std::string& part : b.boundary_parts) {
+    if (input.carried)
+      throw SceneError(fmt::format("{}: a boundary integral ds({}) on a moving reference configuration is not supported", b.source, part));
+    try {
+      options.boundary.push_back(boundary_quadrature(b.geometry, input.nodes, part, b.boundary_points));
+    } catch (const std::invalid_argument& e) {
+      throw SceneError(fmt::format("{}: the boundary quadrature of ds({}): {}", b.source, part, e.what()));
+    }
+  }
   return std::make_shared<Discretization>(comm, input.nodes, options);
 }
 
@@ -45,12 +55,28 @@ void resolve_constants(const BoundScene& b, const ProblemInput& input, ProblemSp
   }
 }
 
+/// The quadrature data kernel `k` reads at every point of a domain, interleaved per point.
+std::vector<double> qdata_of(const BoundScene& b, const kernel::FormKernels& k, const ElementSet& domain, QuadratureData& qdata) {
+  const auto per_point = std::size_t(k.qdata_per_point);
+  std::vector<double> data(domain.n_points() * per_point, 0.0);
+  std::size_t offset = 0;
+  for (int i = 0; i < k.n_qdata; ++i) {
+    const auto size = std::size_t(k.qdata[i].size);
+    const auto source = std::find_if(b.qdata.begin(), b.qdata.end(), [&](const BoundQdata& q) { return q.name == k.qdata[i].name; });
+    const std::vector<double>& values = qdata.values(*source, domain);
+    for (std::size_t q = 0; q < domain.n_points(); ++q)
+      std::copy_n(values.begin() + std::ptrdiff_t(q * size), size, data.begin() + std::ptrdiff_t(q * per_point + offset));
+    offset += size;
+  }
+  return data;
+}
+
 /// An assembler of one output with its coefficients, constants and quadrature data set.
 std::unique_ptr<Assembler> make_assembler(const BoundScene& b, const BoundOutput& output, const ProblemInput& input,
                                           QuadratureData& qdata, ProblemSpace& space) {
   const Discretization& disc = *space.disc;
   const kernel::FormKernels& k = output.first();
-  auto a = std::make_unique<Assembler>(disc, k);
+  auto a = std::make_unique<Assembler>(disc, output.kernels);
   if (k.n_coefficients > 0) {
     const std::vector<double> values = kernel_coefficient_values(b, k, input.nodes, input.coefficient_values);
     PetscVector& c = space.coefficient_vectors[output.label] = a->create_coefficient_vector();
@@ -65,20 +91,8 @@ std::unique_ptr<Assembler> make_assembler(const BoundScene& b, const BoundOutput
     if (std::isnan(v)) throw SceneError(fmt::format("{}: the constant '{}' of {} has no value", b.source, k.constants[i], output.label));
     a->set_constant(k.constants[i], v);
   }
-  if (k.qdata_per_point > 0) {
-    const auto per_point = std::size_t(k.qdata_per_point);
-    std::vector<double> data(disc.quadrature().size() * per_point, 0.0);
-    std::size_t offset = 0;
-    for (int i = 0; i < k.n_qdata; ++i) {
-      const auto size = std::size_t(k.qdata[i].size);
-      const auto source = std::find_if(b.qdata.begin(), b.qdata.end(), [&](const BoundQdata& q) { return q.name == k.qdata[i].name; });
-      const std::vector<double>& values = qdata.values(*source);
-      for (std::size_t q = 0; q < disc.quadrature().size(); ++q)
-        std::copy_n(values.begin() + std::ptrdiff_t(q * size), size, data.begin() + std::ptrdiff_t(q * per_point + offset));
-      offset += size;
-    }
-    a->set_qdata(data);
-  }
+  if (k.qdata_per_point > 0)
+    for (const Assembler::Integral& integral : a->integrals()) a->set_qdata(*integral.domain, qdata_of(b, k, *integral.domain, qdata));
   return a;
 }
 

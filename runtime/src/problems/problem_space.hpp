@@ -86,8 +86,9 @@ struct ProblemSpace {
 /// order; throws SceneError for an entry whose parts hold no node.
 [[nodiscard]] std::vector<std::vector<int>> dirichlet_nodes(const BoundScene& b, const NodeSet& nodes);
 
-/// The original indices of the nodes on a named boundary part (box sides, "hull", "axis").
-[[nodiscard]] std::vector<int> boundary_nodes(const Box& domain, bool axisymmetric, const NodeSet& nodes, const std::string& part);
+/// The original indices of the nodes on a named boundary part of the domain ("hull": the nodes on
+/// the convex hull of the node set).
+[[nodiscard]] std::vector<int> boundary_nodes(const Domain& geometry, const NodeSet& nodes, const std::string& part);
 
 /// Values at the nodes (original order, dofs interleaved) of the scene's [initial] fields (unknowns
 /// without an entry start at 0).

@@ -13,28 +13,31 @@ namespace {
 /// computes the points of the elements it owns; summed over the ranks), jet-size values each: the
 /// reference field of a Lagrangian form. `field_basis` interpolates (its nodes in the original
 /// numbering); with a null basis the discretization's own.
-std::vector<double> interpolated_field_qdata(const Discretization& disc, std::span<const double> original_values, int derivative,
-                                             const LmeBasis* field_basis) {
-  const auto& quad = disc.quadrature();
-  const auto& lists = disc.point_lists();
+std::vector<double> interpolated_field_qdata(const Discretization& disc, const ElementSet& domain, std::span<const double> original_values,
+                                             int derivative, const LmeBasis* field_basis) {
+  const auto& lists = domain.point_lists();
   const int dim = disc.dim();
+  // A cell's vertices restore the hull of a point's list where the field's own basis sees too few
+  // neighbours (boundary points lie on the hull of their lists' facets already).
+  const bool cells = !domain.boundary();
+  const int points_per_cell = disc.quadrature().points_per_cell;
   const std::size_t size = derivative == 0 ? 1 : derivative == 1 ? std::size_t(dim) : std::size_t(dim * dim);
   const std::size_t first = derivative == 0 ? 0 : derivative == 1 ? 1 : 1 + std::size_t(dim);
   const auto original = disc.original_index();
-  std::vector<double> out(quad.size() * size, 0.0);
+  std::vector<double> out(domain.n_points() * size, 0.0);
   std::vector<int> own_list;
-  for (int e = 0; e < disc.n_elements(); ++e) {
-    if (!disc.element_owned(e)) continue;
-    for (int q = disc.element_first_point(e); q < disc.element_first_point(e) + disc.element_point_count(e); ++q) {
-      const auto x = quad.point(std::size_t(q));
+  for (int e = 0; e < domain.n_elements(); ++e) {
+    if (!domain.element_owned(e)) continue;
+    for (int q = domain.element_first_point(e); q < domain.element_first_point(e) + domain.element_point_count(e); ++q) {
+      const auto x = domain.point(std::size_t(q));
       std::span<const int> list = lists[std::size_t(q)];
       std::vector<double> jet;
       if (field_basis != nullptr) {
         own_list = field_basis->neighbours(x);
         jet = evaluate_with_cell_fallback(*field_basis, x, own_list, derivative, [&] {
           std::vector<int> vertices;
-          for (const int v : disc.cells().cell(std::size_t(q) / std::size_t(quad.points_per_cell)))
-            vertices.push_back(original[std::size_t(v)]);
+          if (cells)
+            for (const int v : disc.cells().cell(std::size_t(q) / std::size_t(points_per_cell))) vertices.push_back(original[std::size_t(v)]);
           return vertices;
         });
         list = own_list;
@@ -64,17 +67,16 @@ std::vector<double> interpolated_field_qdata(const Discretization& disc, std::sp
 
 }  // namespace
 
-std::vector<double> support_size_qdata(const Discretization& disc) {
+std::vector<double> support_size_qdata(const Discretization& disc, const ElementSet& domain) {
   // The partition of unity weights each nodal spacing by the node's share of the point: the local
   // length scale of the basis the point actually sees (a plain mean over the support would count
   // far, barely contributing nodes as much as the nearest ones, and jump as nodes enter it).
-  const auto& quad = disc.quadrature();
-  const auto& lists = disc.point_lists();
+  const auto& lists = domain.point_lists();
   const auto h = disc.basis().spacing();
-  std::vector<double> out(quad.size());
-  for (std::size_t q = 0; q < quad.size(); ++q) {
+  std::vector<double> out(domain.n_points());
+  for (std::size_t q = 0; q < domain.n_points(); ++q) {
     const auto list = lists[q];
-    const auto p = disc.basis().evaluate(quad.point(q), list, 0);
+    const auto p = disc.basis().evaluate(domain.point(q), list, 0);
     double s = 0;
     for (std::size_t m = 0; m < list.size(); ++m) s += p[m] * h[static_cast<std::size_t>(list[m])];
     out[q] = s;
@@ -85,23 +87,30 @@ std::vector<double> support_size_qdata(const Discretization& disc) {
 QuadratureData::QuadratureData(const BoundScene& b, const Discretization& disc, const ProblemInput& input)
     : bound_(b), disc_(disc), input_(input) {}
 
-const std::vector<double>& QuadratureData::values(const BoundQdata& source) {
-  if (const auto it = computed_.find(source.name); it != computed_.end()) return it->second;
-  if (input_.qdata_values.contains(source.name) || source.source == SceneQdata::Source::field)
+const std::vector<double>& QuadratureData::values(const BoundQdata& source) { return values(source, disc_.cells_domain()); }
+
+const std::vector<double>& QuadratureData::values(const BoundQdata& source, const ElementSet& domain) {
+  const auto key = std::pair{&domain, source.name};
+  if (const auto it = computed_.find(key); it != computed_.end()) return it->second;
+  if (!domain.boundary() && (input_.qdata_values.contains(source.name) || source.source == SceneQdata::Source::field))
     field_data_names_.push_back(source.name);
-  return computed_[source.name] = compute(source);
+  return computed_[key] = compute(source, domain);
 }
 
 std::map<std::string, std::vector<double>, std::less<>> QuadratureData::field_data() const {
   std::map<std::string, std::vector<double>, std::less<>> out;
-  for (const auto& name : field_data_names_) out[name] = computed_.at(name);
+  for (const auto& name : field_data_names_) out[name] = computed_.at({&disc_.cells_domain(), name});
   return out;
 }
 
-std::vector<double> QuadratureData::compute(const BoundQdata& source) {
-  const std::size_t points = disc_.quadrature().size();
+std::vector<double> QuadratureData::compute(const BoundQdata& source, const ElementSet& domain) {
+  const std::size_t points = domain.n_points();
   const auto size = static_cast<std::size_t>(source.size);
   if (const auto given = input_.qdata_values.find(source.name); given != input_.qdata_values.end()) {
+    if (domain.boundary())
+      throw SceneError(fmt::format("{}: quadrature data '{}' given by the driver exist at the cells' points only; a boundary "
+                                   "integral cannot read them",
+                                   bound_.source, source.name));
     if (given->second.size() != points * size)
       throw std::invalid_argument(fmt::format("build_problem_space: {} values of '{}' for {} points x {}", given->second.size(),
                                               given->first, points, size));
@@ -110,25 +119,27 @@ std::vector<double> QuadratureData::compute(const BoundQdata& source) {
   using Source = SceneQdata::Source;
   switch (source.source) {
     case Source::zero: return std::vector<double>(points * size, 0.0);
-    case Source::support_size:
-      if (support_size_.empty()) support_size_ = support_size_qdata(disc_);
-      return support_size_;
+    case Source::support_size: {
+      auto& rho = support_size_[&domain];
+      if (rho.empty()) rho = support_size_qdata(disc_, domain);
+      return rho;
+    }
     case Source::value: {
       std::vector<double> out(points * size);
       std::vector<double> v(size, source.value.number);
       for (std::size_t q = 0; q < points; ++q) {
-        if (source.value.is_expression()) bound_.expressions->evaluate(source.value.expression, disc_.quadrature().point(q), v);
+        if (source.value.is_expression()) bound_.expressions->evaluate(source.value.expression, domain.point(q), v);
         std::copy(v.begin(), v.end(), out.begin() + std::ptrdiff_t(q * size));
       }
       return out;
     }
-    case Source::field: return field_jets(source);
+    case Source::field: return field_jets(source, domain);
   }
   throw std::logic_error("unknown quadrature-data source");
 }
 
-std::vector<double> QuadratureData::field_jets(const BoundQdata& source) {
-  auto& values = field_jets_[{source.field, source.derivative}];
+std::vector<double> QuadratureData::field_jets(const BoundQdata& source, const ElementSet& domain) {
+  auto& values = field_jets_[{&domain, source.field, source.derivative}];
   if (!values.empty()) return values;
   const auto given = input_.coefficient_values.find(source.field);
   const std::vector<double> field =
@@ -140,7 +151,7 @@ std::vector<double> QuadratureData::field_jets(const BoundQdata& source) {
     lme.mirror_position = 0.0;
     field_basis_.emplace(input_.nodes, std::vector<double>{bound_.discretization.gamma}, lme);
   }
-  values = interpolated_field_qdata(disc_, field, source.derivative, field_basis_ ? &*field_basis_ : nullptr);
+  values = interpolated_field_qdata(disc_, domain, field, source.derivative, field_basis_ ? &*field_basis_ : nullptr);
   return values;
 }
 

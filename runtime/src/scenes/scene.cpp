@@ -12,6 +12,7 @@
 
 #include "lmeform/quadrature.hpp"
 #include "lmeform/scene_table.hpp"
+#include "scene_domain.hpp"
 
 namespace lmeform {
 namespace {
@@ -20,6 +21,7 @@ using Section = SceneTable;
 using scene_detail::Context;
 using scene_detail::fail;
 using scene_detail::format_number;
+using scene_detail::read_domain;
 
 const char* axis_name(bool axisymmetric, int dim, int i) {
   static const char* cart[3] = {"x", "y", "z"};
@@ -36,29 +38,10 @@ void read_scene_section(const Section& root, Scene& s) {
   s.coordinates = c == "axisymmetric" ? Coordinates::axisymmetric : Coordinates::cartesian;
 }
 
-void read_domain(const Section& root, Scene& s) {
-  const Section t = root.table("domain", {"lower", "upper"});
-  const int count = s.axisymmetric() ? 2 : 0;
-  const std::vector<double> lo = t.numbers("lower", count);
-  const std::vector<double> hi = t.numbers("upper", static_cast<int>(lo.size()));
-  s.domain.dim = static_cast<int>(lo.size());
-  for (int i = 0; i < s.domain.dim; ++i) {
-    const auto k = static_cast<std::size_t>(i);
-    if (!(lo[k] < hi[k]))
-      t.fail_key("upper", "must exceed 'domain.lower' on every axis: axis " +
-                              std::string(axis_name(s.axisymmetric(), s.domain.dim, i)) + " has lower " +
-                              format_number(lo[k]) + ", upper " + format_number(hi[k]));
-    s.domain.lo[k] = lo[k];
-    s.domain.hi[k] = hi[k];
-  }
-  if (s.axisymmetric() && lo[0] < 0)
-    t.fail_key("lower", "must have r >= 0 in an axisymmetric scene (r is the distance to the axis), got r = " +
-                            format_number(lo[0]));
-}
 
 void read_nodes(const Section& root, const std::filesystem::path& folder, Scene& s) {
-  const Section t = root.table(
-      "nodes", {"spacing", "counts", "count", "lloyd_iterations", "file", "gamma", "spacing_smoothing", "quadrature_points"});
+  const Section t = root.table("nodes", {"spacing", "counts", "count", "lloyd_iterations", "file", "gamma", "spacing_smoothing",
+                                         "quadrature_points", "refine", "boundary_points"});
   SceneNodes& n = s.nodes;
   const char* const kinds[] = {"spacing", "counts", "count", "file"};
   std::vector<std::string> present;
@@ -83,6 +66,7 @@ void read_nodes(const Section& root, const std::filesystem::path& folder, Scene&
       t.fail_key("spacing", "= " + format_number(n.spacing) + " exceeds the smallest extent of the domain (" + format_number(extent) +
                                 ")");
   } else if (t.has("counts")) {
+    if (!s.geometry.is_box()) t.fail_key("counts", "makes a grid of a box; a polygon or polyhedron takes 'nodes.spacing' or 'nodes.file'");
     n.kind = SceneNodes::Kind::counts;
     const std::vector<int> c = t.integers("counts", s.dim());
     for (std::size_t i = 0; i < c.size(); ++i) {
@@ -93,6 +77,7 @@ void read_nodes(const Section& root, const std::filesystem::path& folder, Scene&
     }
   } else if (t.has("count")) {
     n.kind = SceneNodes::Kind::count;
+    if (!s.geometry.is_box()) t.fail_key("count", "places a CVT in a box; a polygon or polyhedron takes 'nodes.spacing' or 'nodes.file'");
     if (s.dim() != 2) t.fail_key("count", "is a 2D node set (uniform CVT); this domain is " + std::to_string(s.dim()) + "D");
     n.count = t.at_least("count", t.integer_of("count", t.require("count")), 16);
     n.lloyd_iterations = t.at_least("lloyd_iterations", t.integer("lloyd_iterations", n.lloyd_iterations), 0);
@@ -104,10 +89,21 @@ void read_nodes(const Section& root, const std::filesystem::path& folder, Scene&
       t.fail_key("file", "names a file that does not exist: " + p.string());
     n.file = p;
   }
+  if (t.has("refine")) {
+    if (n.kind != SceneNodes::Kind::spacing) t.fail_key("refine", "grades the nodes generated for 'nodes.spacing'");
+    n.refine = scene_detail::read_refinements(t, s);
+    for (const auto& r : n.refine)
+      if (r.spacing > n.spacing) t.fail_key("refine", "asks for a spacing " + format_number(r.spacing) + " coarser than nodes.spacing = " + format_number(n.spacing));
+  }
   n.gamma = t.positive("gamma", t.number("gamma", n.gamma));
   n.spacing_smoothing = t.at_least("spacing_smoothing", t.integer("spacing_smoothing", n.spacing_smoothing), 0);
   // Default: a positive rule of degree 4 in 2D (6 points), degree 5 in 3D (14 points).
   n.quadrature_points = t.integer("quadrature_points", s.dim() == 3 ? 14 : n.quadrature_points);
+  n.boundary_points = t.integer("boundary_points", s.dim() == 3 ? 6 : n.boundary_points);
+  if (s.dim() == 2 ? (n.boundary_points < 1 || n.boundary_points > 10)
+                   : std::find(triangle_rule_sizes().begin(), triangle_rule_sizes().end(), n.boundary_points) == triangle_rule_sizes().end())
+    t.fail_key("boundary_points", "= " + std::to_string(n.boundary_points) + (s.dim() == 2 ? " must lie in 1..10 (Gauss-Legendre points per boundary segment)"
+                                                                                    : " is not a triangle rule (per boundary triangle)"));
   const std::vector<int> sizes = s.dim() == 2 ? triangle_rule_sizes() : tetrahedron_rule_sizes();
   if (std::find(sizes.begin(), sizes.end(), n.quadrature_points) == sizes.end()) {
     std::string list;
@@ -245,15 +241,16 @@ void read_dirichlet(const Section& root, Scene& s) {
   if (n == nullptr) return;
   const auto* a = n->as_array();
   if (a == nullptr) root.wrong_type("dirichlet", *n, "an array of tables ([[dirichlet]])");
-  std::vector<std::string> sides;
+  // A box's sides by axis; a polygon's or polyhedron's named parts.
+  std::vector<std::string> sides = s.geometry.is_box() ? std::vector<std::string>{} : s.geometry.part_names();
   static const char* const cartesian[] = {"x", "y", "z"};
-  for (int i = 0; i < s.dim(); ++i) {
+  for (int i = 0; i < s.dim() && s.geometry.is_box(); ++i) {
     const std::string axis = s.axisymmetric() ? (i == 0 ? "r" : "z") : cartesian[i];
     if (!(s.axisymmetric() && i == 0)) sides.push_back(axis + "_min");
     sides.push_back(axis + "_max");
   }
   sides.emplace_back("hull");
-  if (s.axisymmetric()) sides.emplace_back("axis");
+  if (s.axisymmetric() && s.geometry.is_box()) sides.emplace_back("axis");
   for (std::size_t i = 0; i < a->size(); ++i) {
     const std::string key = "dirichlet[" + std::to_string(i) + "]";
     const Section t = root.table_of(key, (*a)[i], {"boundary", "unknown", "components", "value"});
