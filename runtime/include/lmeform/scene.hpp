@@ -169,6 +169,25 @@ struct SceneSolver {
   std::string petsc_options;
 };
 
+/// [quantities]: a quantity of interest reported per solve (per load step): written to the closing
+/// table, the JSON and <output>/history.csv.
+struct SceneQuantity {
+  std::string name;
+  enum class Kind {
+    reaction,   ///< the residual summed over the nodes of a Dirichlet part: the force there, per component
+    probe,      ///< a field's value at a point
+    integral,   ///< ∫ expression dx, or ds(part) with `part`
+    constant,   ///< a constant's value (a load parameter)
+  } kind = Kind::constant;
+  std::string part;                  ///< reaction: the boundary part; integral: "" (dx) or the part of ds
+  std::string field;                 ///< reaction, probe: the unknown
+  std::array<double, 3> point{};     ///< probe
+  int component = -1;                ///< probe, reaction: one component (-1: every one)
+  std::string expression;            ///< integral (of x, the constants and the unknowns)
+  std::string constant;              ///< constant
+  std::string where;
+};
+
 /// [reference]: what the result is compared with.
 struct SceneReference {
   std::optional<double> energy;        ///< e.g. the sharp-interface energy
@@ -206,6 +225,7 @@ struct Scene {
   std::vector<SceneQdata> qdata;
   SceneSolver solver;
   SceneReference reference;
+  std::vector<SceneQuantity> quantities;  ///< in the order of the file
   std::optional<SceneOutput> output;
   /// Extension tables (e.g. "vesicle") kept for the model that reads them.
   std::vector<std::string> extensions;

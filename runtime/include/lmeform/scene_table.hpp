@@ -76,6 +76,19 @@ inline std::vector<std::string_view> partial_matches(std::string_view word,
   return out;
 }
 
+/// The entries of a table in the order of the file (toml++ keeps tables sorted by key; the order
+/// of constraints and fields is the user's).
+inline std::vector<std::pair<std::string, const toml::node*>> in_file_order(const toml::table& table) {
+  std::vector<std::pair<std::string, const toml::node*>> out;
+  for (const auto& [key, node] : table) out.emplace_back(std::string(key.str()), &node);
+  std::stable_sort(out.begin(), out.end(), [](const auto& a, const auto& b) {
+    const auto& sa = a.second->source().begin;
+    const auto& sb = b.second->source().begin;
+    return sa.line != sb.line ? sa.line < sb.line : sa.column < sb.column;
+  });
+  return out;
+}
+
 inline std::string join(std::initializer_list<std::string_view> items) {
   std::string s;
   for (auto it : items) {

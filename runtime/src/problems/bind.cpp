@@ -395,6 +395,47 @@ void bind_reference(const Scene& scene, MPI_Comm comm, std::ostream* log, const 
   }
 }
 
+/// [quantities]: fields and constants checked, the integrals compiled into one generated form.
+void bind_quantities(const Scene& scene, MPI_Comm comm, std::ostream* log, const std::map<std::string, double, std::less<>>& constants,
+                     BoundScene& b) {
+  std::vector<QuantityIntegral> integrals;
+  std::vector<std::string> where;
+  for (const SceneQuantity& q : scene.quantities) {
+    BoundQuantity bq{q, {}, std::nullopt};
+    using Kind = SceneQuantity::Kind;
+    if (q.kind == Kind::reaction || q.kind == Kind::probe) {
+      bq.field = check_unknown(b, q.field, q.where);
+      if (q.component >= bq.field.components)
+        throw SceneError(fmt::format("{}: key 'component' = {}: '{}' has {} component(s)", q.where, q.component, q.field, bq.field.components));
+    }
+    if (q.kind == Kind::constant && !b.constants.contains(q.constant)) {
+      std::vector<std::string> names;
+      for (const auto& [n, v] : b.constants) names.push_back(n);
+      throw SceneError(fmt::format("{}: '{}' is no constant of the forms{}", q.where, q.constant, did_you_mean(q.constant, names)));
+    }
+    if (q.kind == Kind::integral) {
+      integrals.push_back({q.expression, q.part, !q.part.empty()});
+      where.push_back(q.where);
+      if (!q.part.empty() && std::find(b.boundary_parts.begin(), b.boundary_parts.end(), q.part) == b.boundary_parts.end())
+        b.boundary_parts.push_back(q.part);
+    }
+    b.quantities.push_back(std::move(bq));
+  }
+  if (integrals.empty()) return;
+  std::vector<std::pair<std::string, int>> unknowns;
+  for (const auto& u : b.layout.fields) unknowns.emplace_back(u.name, u.components);
+  const FormModule& module = compile_quantity_form(b.dim, unknowns, constants, integrals, where, comm, log);
+  std::size_t i = 0;
+  for (BoundQuantity& q : b.quantities) {
+    if (q.scene.kind != SceneQuantity::Kind::integral) continue;
+    BoundOutput out;
+    out.label = module.name + ".q" + std::to_string(i++);
+    for (const auto* k : module.kernels)
+      if (k->dim == b.dim && out.label == module.name + "." + k->name) out.kernels.push_back(k);
+    q.integral = std::move(out);
+  }
+}
+
 }  // namespace
 
 std::vector<const BoundOutput*> BoundScene::outputs() const {
@@ -440,6 +481,7 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
   bind_qdata(scene, b);
   bind_nodal_data(scene, b);
   bind_reference(scene, comm, log, expression_constants, b);
+  bind_quantities(scene, comm, log, expression_constants, b);
   b.expressions->compile(comm, log);
   return b;
 }

@@ -108,6 +108,13 @@ struct BoundExactSolution {
   std::string where;
 };
 
+/// A quantity of interest ([quantities]), with what it reads bound.
+struct BoundQuantity {
+  SceneQuantity scene;
+  UnknownField field;                 ///< reaction, probe
+  std::optional<BoundOutput> integral;  ///< integral: its generated kernels
+};
+
 /// What the discretization of a scene is made of.
 struct DiscretizationSettings {
   double gamma = 0.8;
@@ -153,6 +160,7 @@ struct BoundScene {
   std::vector<BoundQdata> qdata;
   std::vector<std::string> zero_mean;    ///< scalar unknowns fixed by ∫ u dx = 0
   std::vector<BoundExactSolution> exact;
+  std::vector<BoundQuantity> quantities;
 
   [[nodiscard]] const UnknownField& unknown(std::string_view name) const { return layout.field(name); }
   /// Every output the problem assembles, in the order: energies, constraints, residual, bilinear,

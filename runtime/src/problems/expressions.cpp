@@ -100,6 +100,15 @@ void PointExpressions::compile(MPI_Comm comm, std::ostream* log) {
   for (int i = 0; i < k0.n_constants; ++i) constant_values_.push_back(constants_.at(k0.constants[i]));
 }
 
+void PointExpressions::set_constant(const std::string& name, double value) {
+  if (!constants_.contains(name)) throw std::invalid_argument("PointExpressions: no constant '" + name + "'");
+  constants_[name] = value;
+  if (module_ == nullptr) return;
+  const auto& k0 = module_->at("value0", dim_);
+  for (int i = 0; i < k0.n_constants; ++i)
+    if (name == k0.constants[i]) constant_values_[static_cast<std::size_t>(i)] = value;
+}
+
 void PointExpressions::evaluate(int handle, std::span<const double> x, std::span<double> out) const {
   const Item& it = items_.at(static_cast<std::size_t>(handle));
   const auto& k = module_->at("value" + std::to_string(handle), dim_);
@@ -137,6 +146,36 @@ const FormModule& compile_error_form(int dim, const std::string& unknown, int co
     return load_generated("scene_errors", body.str(), comm, log);
   } catch (const FormLoadError& e) {
     throw SceneError(fmt::format("{}: the exact solution \"{}\" does not compile:\n{}", where, exact, e.what()));
+  }
+}
+
+const FormModule& compile_quantity_form(int dim, const std::vector<std::pair<std::string, int>>& unknowns,
+                                        const std::map<std::string, double, std::less<>>& constants,
+                                        const std::vector<QuantityIntegral>& integrals, const std::vector<std::string>& where,
+                                        MPI_Comm comm, std::ostream* log) {
+  auto header = [&] {
+    std::ostringstream h;
+    h << "dimension " << dim << "\ncoordinate x\n" << constant_declarations(constants);
+    for (const auto& [name, components] : unknowns) h << "unknown " << name << (components > 1 ? " : vector" : "") << "\n";
+    return h.str();
+  };
+  auto output = [](std::size_t i, const QuantityIntegral& q) {
+    const std::string measure = !q.boundary ? "dx" : q.part.empty() ? "ds" : "ds(" + q.part + ")";
+    return "energy q" + std::to_string(i) + " = (" + q.expression + ") * " + measure + "\n";
+  };
+  std::string body = header();
+  for (std::size_t i = 0; i < integrals.size(); ++i) body += output(i, integrals[i]);
+  try {
+    return load_generated("scene_quantities", body, comm, log);
+  } catch (const FormLoadError&) {
+    for (std::size_t i = 0; i < integrals.size(); ++i) {
+      try {
+        (void)load_generated("scene_quantity", header() + output(0, integrals[i]), comm, nullptr);
+      } catch (const FormLoadError& single) {
+        throw SceneError(fmt::format("{}: the integral \"{}\" does not compile:\n{}", where.at(i), integrals[i].expression, single.what()));
+      }
+    }
+    throw;
   }
 }
 

@@ -31,6 +31,8 @@ class PointExpressions {
   void compile(MPI_Comm comm, std::ostream* log);
   /// Values of expression `handle` at x (components values).
   void evaluate(int handle, std::span<const double> x, std::span<double> out) const;
+  /// Changes a constant's value for later evaluations (a load step's imposed displacement).
+  void set_constant(const std::string& name, double value);
   [[nodiscard]] int components(int handle) const { return items_[static_cast<std::size_t>(handle)].components; }
   [[nodiscard]] bool empty() const noexcept { return items_.empty(); }
 
@@ -53,6 +55,21 @@ class PointExpressions {
                                                    const std::string& exact,
                                                    const std::map<std::string, double, std::less<>>& constants,
                                                    const std::string& where, MPI_Comm comm, std::ostream* log);
+
+/// An integral of a scene quantity: ∫ expression dx, or ds(part) when part is given.
+struct QuantityIntegral {
+  std::string expression;
+  std::string part;       ///< "" : dx
+  bool boundary = false;  ///< ds(part) ("" part: the whole boundary)
+};
+
+/// The generated form of the scene's integral quantities: outputs "q0", "q1", ... (energies, in
+/// the order given), reading the problem's unknowns (names and shapes in order), x and the
+/// constants. An expression that does not compile throws SceneError naming `where[i]`.
+[[nodiscard]] const FormModule& compile_quantity_form(int dim, const std::vector<std::pair<std::string, int>>& unknowns,
+                                                      const std::map<std::string, double, std::less<>>& constants,
+                                                      const std::vector<QuantityIntegral>& integrals, const std::vector<std::string>& where,
+                                                      MPI_Comm comm, std::ostream* log);
 
 /// The generated form of the mean of a scalar field: output "integral" = ∫ u dx (dx, no
 /// axisymmetric weight); its gradient is ∫ N_a dx.

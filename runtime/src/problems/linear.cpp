@@ -77,6 +77,14 @@ class LinearDriver final : public StationaryDriver {
     result.energy = std::numeric_limits<double>::quiet_NaN();
     LMEFORM_PETSC_CHECK(VecCopy(x, u));
   }
+  void residual(const BoundScene&, ProblemSpace& space, Vec u, const ProblemResult&, Vec out) const override {
+    PetscMatrix A = space.bilinear->create_matrix();
+    PetscVector b = space.linear->create_vector();
+    space.bilinear->matrix(u, A);
+    space.linear->vector(u, b);
+    LMEFORM_PETSC_CHECK(MatMult(A, u, out));
+    LMEFORM_PETSC_CHECK(VecAXPY(out, -1.0, b));
+  }
   void describe(const BoundScene&, const ProblemResult& r, RunReport& report) const override { describe_equation_solve(r, report); }
 };
 

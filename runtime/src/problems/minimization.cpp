@@ -37,6 +37,12 @@ class MinimizationDriver final : public StationaryDriver {
     result.energy = result.minimization.energy;
     result.iterations = result.minimization.augmented_iterations + result.minimization.newton_iterations;
   }
+  void residual(const BoundScene&, ProblemSpace& space, Vec u, const ProblemResult& r, Vec out) const override {
+    LMEFORM_PETSC_CHECK(VecZeroEntries(out));
+    for (Assembler* term : space.energy_terms) term->add_vector(u, out, 1.0);
+    const auto& sigma = r.minimization.multipliers;
+    for (std::size_t i = 0; i < space.constraints.size() && i < sigma.size(); ++i) space.constraints[i].functional->add_vector(u, out, -sigma[i]);
+  }
   void describe(const BoundScene& b, const ProblemResult& r, RunReport& report) const override {
     describe_minimization(b.scene->reference.energy, r, report);
   }

@@ -65,6 +65,10 @@ class StationaryDriver : public ProblemDriver {
   /// u and filling the solver's part of `result` (converged, message, iterations, ...).
   virtual void solve(MPI_Comm comm, const BoundScene& bound, ProblemSpace& space, const ProblemInput& input, Vec u,
                      ProblemResult& result) const = 0;
+  /// The residual of the problem at u, Dirichlet rows included: at a fixed dof, the force the
+  /// support exerts there (a reaction). Minimization: ∇E − Σ σ_i ∇C_i; residual: R(u); linear:
+  /// A u − b, all before boundary conditions are applied.
+  virtual void residual(const BoundScene& bound, ProblemSpace& space, Vec u, const ProblemResult& result, Vec out) const = 0;
   /// The solver's rows of the closing table and its keys of the JSON document for a result.
   virtual void describe(const BoundScene& bound, const ProblemResult& result, RunReport& report) const = 0;
 

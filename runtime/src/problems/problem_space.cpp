@@ -152,6 +152,8 @@ void make_assemblers(const BoundScene& b, const ProblemInput& input, const std::
   if (b.bilinear) space.bilinear = add(*b.bilinear);
   if (b.linear) space.linear = add(*b.linear);
   for (const auto& a : b.auxiliary) space.auxiliary.push_back(add(a));
+  for (const auto& q : b.quantities)
+    if (q.integral) (void)add(*q.integral);
   space.primary = space.assemblers.at(b.primary->label).get();
   space.qdata = qdata.field_data();
 }
@@ -194,6 +196,7 @@ std::vector<double> ProblemSpace::constraint_values(Vec u) const {
 ProblemSpace build_problem_space(MPI_Comm comm, const BoundScene& b, const ProblemInput& input) {
   ProblemSpace space;
   space.disc = discretization_of(comm, b, input);
+  space.nodes = input.nodes;
   std::vector<double> targets, scales;
   resolve_constants(b, input, space, targets, scales);
   impose_dirichlet(b, input, space);

@@ -51,6 +51,7 @@ struct ProblemInput {
 
 struct ProblemSpace {
   std::shared_ptr<Discretization> disc;
+  NodeSet nodes;                                         ///< the nodes, original order
   std::map<std::string, double, std::less<>> constants;  ///< every constant, resolved (targets included)
   /// One assembler per output of the problem, by its label "module.output".
   std::map<std::string, std::unique_ptr<Assembler>, std::less<>> assemblers;

@@ -86,6 +86,7 @@ class ResidualDriver final : public StationaryDriver {
     result.residual_norm = norm;
     result.energy = std::numeric_limits<double>::quiet_NaN();
   }
+  void residual(const BoundScene&, ProblemSpace& space, Vec u, const ProblemResult&, Vec out) const override { space.residual->vector(u, out); }
   void describe(const BoundScene&, const ProblemResult& r, RunReport& report) const override { describe_equation_solve(r, report); }
 };
 

@@ -12,6 +12,7 @@
 #include "lmeform/cvt.hpp"
 #include "lmeform/stopwatch.hpp"
 #include "problem_registry.hpp"
+#include "quantities.hpp"
 
 namespace lmeform::problems {
 
@@ -106,6 +107,7 @@ ProblemResult solve_problem(MPI_Comm comm, const BoundScene& b, const ProblemInp
   if (space.energy_terms.size() > 1) record_values(b, space, u, result);
   result.state = to_original(disc, u, bs);
   result.errors = field_errors(comm, b, space, result.state, input.log);
+  result.quantities = evaluate_quantities(b, space, u, result);
   result.gradient_norm = gradient_norm_at_nodes(b, space, result.state);
   result.cells = delaunay(result.nodes);
   return result;
@@ -156,6 +158,7 @@ RunReport StationaryDriver::run(const DriverContext& ctx) const {
   report.fields = state_fields(bound.layout, bound.axisymmetric, r);
   describe(bound, r, report);
   describe_errors(r, report);
+  describe_quantities(r.quantities, report);
   report.row("nodes", fmt::format("{} (h_min {:.4g}, h_mean {:.4g})", r.nodes.size(), r.h_min, r.h_mean));
   report.row("times", fmt::format("setup {:.2f} s, solve {:.2f} s", r.seconds_setup, r.seconds_solve));
   report.json["nodes"] = r.nodes.size();

@@ -38,6 +38,8 @@ struct ProblemResult {
   std::vector<double> gradient_norm;         ///< |∇u| of the first scalar unknown at the nodes (0 where fixed)
   std::vector<std::string> constraint_names;
   std::vector<FieldError> errors;
+  /// The scene's [quantities] at the solution, by column.
+  std::vector<std::pair<std::string, double>> quantities;
   /// Each energy term ("module.output") and constraint (by name) at the state: filled by
   /// evaluate_only, and after a solve whose energy has several terms.
   std::map<std::string, double, std::less<>> values;

@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include "minimization.hpp"
+#include "quantities.hpp"
 #include "vesicle.hpp"
 
 namespace lmeform::problems {
@@ -74,6 +75,7 @@ class VesicleDriver final : public ProblemDriver {
     // The area multiplier is the membrane tension, the volume multiplier the pressure difference.
     describe_minimization(scene.reference.energy, r, report, {{"area", "tension"}, {"volume", "pressure"}});
     describe_errors(r, report);
+    describe_quantities(r.quantities, report);
     report.row("nodes", fmt::format("{} (h_min {:.4g}, h_mean {:.4g})", last.nodes, r.h_min, r.h_mean));
     report.row(model.width, fmt::format("{:g}", last.eps));
     const auto& reference = scene.reference.energy;

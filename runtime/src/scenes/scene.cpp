@@ -22,6 +22,7 @@ using scene_detail::Context;
 using scene_detail::fail;
 using scene_detail::format_number;
 using scene_detail::read_domain;
+using scene_detail::in_file_order;
 
 const char* axis_name(bool axisymmetric, int dim, int i) {
   static const char* cart[3] = {"x", "y", "z"};
@@ -190,18 +191,6 @@ void read_constants(const Section& root, Scene& s) {
   }
 }
 
-/// The entries of a table in the order of the file (toml++ keeps tables sorted by key; the order
-/// of constraints and fields is the user's).
-std::vector<std::pair<std::string, const toml::node*>> in_file_order(const toml::table& table) {
-  std::vector<std::pair<std::string, const toml::node*>> out;
-  for (const auto& [key, node] : table) out.emplace_back(std::string(key.str()), &node);
-  std::stable_sort(out.begin(), out.end(), [](const auto& a, const auto& b) {
-    const auto& sa = a.second->source().begin;
-    const auto& sb = b.second->source().begin;
-    return sa.line != sb.line ? sa.line < sb.line : sa.column < sb.column;
-  });
-  return out;
-}
 
 void read_constraints(const Section& root, Scene& s) {
   const auto t = root.optional_any_table("constraints");
@@ -446,7 +435,7 @@ Scene parse_scene(std::string_view text, std::string source_name, std::span<cons
                      ": TOML syntax error: " + std::string(e.description()));
   }
   std::vector<std::string_view> tables{"scene", "domain", "nodes", "model", "constants", "constraints", "dirichlet",
-                                       "initial", "coefficients", "qdata", "solver", "reference", "output"};
+                                       "initial", "coefficients", "qdata", "solver", "reference", "quantities", "output"};
   tables.insert(tables.end(), extensions.begin(), extensions.end());
   // The initializer_list interface of SceneTable wants a list: check the top-level keys here.
   for (const auto& [key, node] : document->root) {
@@ -476,6 +465,7 @@ Scene parse_scene(std::string_view text, std::string source_name, std::span<cons
   read_qdata(root, s);
   read_solver(root, s);
   read_reference(root, s);
+  scene_detail::read_quantities(root, s);
   read_output(root, s);
   s.document = std::move(document);
   return s;

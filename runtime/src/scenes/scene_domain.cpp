@@ -171,4 +171,59 @@ std::vector<SceneRefinement> read_refinements(const SceneTable& nodes, const Sce
   return out;
 }
 
+void read_quantities(const SceneTable& root, Scene& s) {
+  const auto table = root.optional_any_table("quantities");
+  if (!table) return;
+  for (const auto& [name, node] : in_file_order(table->entries())) {
+    const SceneTable t = table->table_of(name, *node, {"reaction", "unknown", "probe", "field", "component", "integral", "part", "constant"});
+    SceneQuantity q;
+    q.name = name;
+    q.where = where_of(*table, name);
+    const int kinds = int(t.has("reaction")) + int(t.has("probe")) + int(t.has("integral")) + int(t.has("constant"));
+    if (kinds != 1)
+      table->fail_key(name, "must be one of { reaction = PART, unknown }, { probe = POINT, field }, { integral = EXPRESSION }, "
+                            "{ constant = NAME }");
+    if (t.has("reaction")) {
+      q.kind = SceneQuantity::Kind::reaction;
+      q.part = t.string("reaction");
+      q.field = t.string("unknown");
+      const bool dirichlet = std::any_of(s.dirichlet.begin(), s.dirichlet.end(), [&](const SceneDirichlet& d) {
+        return d.unknown == q.field && std::find(d.boundary.begin(), d.boundary.end(), q.part) != d.boundary.end();
+      });
+      if (!dirichlet)
+        t.fail_key("reaction", "names '" + q.part + "', on which no [[dirichlet]] entry fixes '" + q.field +
+                                   "': a reaction is the force where the unknown is prescribed");
+    } else if (t.has("probe")) {
+      q.kind = SceneQuantity::Kind::probe;
+      const std::vector<double> x = t.numbers("probe", s.dim());
+      for (std::size_t i = 0; i < x.size(); ++i) q.point[i] = x[i];
+      if (!s.geometry.contains(std::span<const double>(q.point.data(), std::size_t(s.dim())), 1e-9 * s.geometry.diameter()))
+        t.fail_key("probe", "lies outside the domain");
+      q.field = t.string("field");
+    } else if (t.has("integral")) {
+      q.kind = SceneQuantity::Kind::integral;
+      q.expression = t.string("integral");
+      if (t.has("part")) {
+        q.part = t.string("part");
+        if (!s.geometry.has_part(q.part)) t.fail_key("part", "names '" + q.part + "', no boundary part of the domain");
+      }
+    } else {
+      q.kind = SceneQuantity::Kind::constant;
+      q.constant = t.string("constant");
+    }
+    if (t.has("component")) {
+      if (q.kind != SceneQuantity::Kind::probe && q.kind != SceneQuantity::Kind::reaction)
+        t.fail_key("component", "selects a component of a probe or a reaction");
+      q.component = t.integer_of("component", t.require("component"));
+      if (q.component < 0 || q.component >= s.dim()) t.fail_key("component", "must lie in 0.." + std::to_string(s.dim() - 1));
+    }
+    for (const char* k : {"unknown", "field", "part"})
+      if (t.has(k) && ((std::string(k) == "unknown" && q.kind != SceneQuantity::Kind::reaction) ||
+                       (std::string(k) == "field" && q.kind != SceneQuantity::Kind::probe) ||
+                       (std::string(k) == "part" && q.kind != SceneQuantity::Kind::integral)))
+        t.fail_key(k, "does not belong to this kind of quantity");
+    s.quantities.push_back(std::move(q));
+  }
+}
+
 }  // namespace lmeform::scene_detail

@@ -12,6 +12,10 @@ namespace lmeform::scene_detail {
 /// { vertices, faces, parts }; sets Scene::domain (the box or the bounding box) and Scene::geometry.
 void read_domain(const SceneTable& root, Scene& s);
 
+/// [quantities] (after [domain] and [[dirichlet]]): NAME = { reaction = PART, unknown }, { probe =
+/// POINT, field, component }, { integral = EXPR, part }, { constant = NAME }.
+void read_quantities(const SceneTable& root, Scene& s);
+
 /// The `refine` entries of [nodes] (after [domain]).
 [[nodiscard]] std::vector<SceneRefinement> read_refinements(const SceneTable& nodes, const Scene& s);
 
