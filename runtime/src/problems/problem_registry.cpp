@@ -4,6 +4,7 @@
 #include <stdexcept>
 
 #include "dynamics.hpp"
+#include "load_steps.hpp"
 #include "minimization.hpp"
 #include "vesicle.hpp"
 
@@ -17,9 +18,9 @@ namespace {
 
 /// Drivers of a table first (they build on a stationary solve), then the stationary drivers, the
 /// minimization last (it claims every scene that names no residual or linear problem).
-const std::array<const ProblemDriver*, 5>& all_drivers() {
-  static const std::array<const ProblemDriver*, 5> drivers{&dynamics_driver(), &vesicle_driver(), &residual_driver(), &linear_driver(),
-                                                           &minimization_driver()};
+const std::array<const ProblemDriver*, 6>& all_drivers() {
+  static const std::array<const ProblemDriver*, 6> drivers{&dynamics_driver(), &vesicle_driver(), &load_steps_driver(),
+                                                           &residual_driver(),  &linear_driver(),  &minimization_driver()};
   return drivers;
 }
 

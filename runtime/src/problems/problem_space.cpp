@@ -109,6 +109,12 @@ std::vector<PetscInt> owned_dofs(const Discretization& disc, const std::vector<s
   return dofs;
 }
 
+/// The value of Dirichlet entry d at x (every component).
+void dirichlet_value(const BoundScene& b, const BoundDirichlet& d, std::span<const double> x, std::vector<double>& value) {
+  if (d.value.is_expression()) b.expressions->evaluate(d.value.expression, x, value);
+  else std::fill(value.begin(), value.end(), d.value.number);
+}
+
 /// The start (the input's, else the scene's [initial]) with the Dirichlet values imposed.
 void impose_dirichlet(const BoundScene& b, const ProblemInput& input, ProblemSpace& space) {
   const NodeSet& nodes = input.nodes;
@@ -118,16 +124,15 @@ void impose_dirichlet(const BoundScene& b, const ProblemInput& input, ProblemSpa
   if (state.size() != nodes.size() * std::size_t(bs))
     throw std::invalid_argument(fmt::format("build_problem_space: the initial state has {} values for {} nodes x {} dofs", state.size(),
                                             nodes.size(), bs));
-  const std::vector<std::vector<int>> on_boundary = input.dirichlet_nodes.empty() ? dirichlet_nodes(b, nodes) : input.dirichlet_nodes;
-  if (on_boundary.size() != b.dirichlet.size())
-    throw std::invalid_argument(fmt::format("build_problem_space: node sets for {} Dirichlet entries, the scene has {}", on_boundary.size(),
-                                            b.dirichlet.size()));
+  space.dirichlet_nodes = input.dirichlet_nodes.empty() ? dirichlet_nodes(b, nodes) : input.dirichlet_nodes;
+  if (space.dirichlet_nodes.size() != b.dirichlet.size())
+    throw std::invalid_argument(fmt::format("build_problem_space: node sets for {} Dirichlet entries, the scene has {}",
+                                            space.dirichlet_nodes.size(), b.dirichlet.size()));
   std::vector<double> value(3);
   for (std::size_t i = 0; i < b.dirichlet.size(); ++i) {
     const BoundDirichlet& d = b.dirichlet[i];
-    for (const int n : on_boundary[i]) {
-      if (d.value.is_expression()) b.expressions->evaluate(d.value.expression, nodes.point(std::size_t(n)), value);
-      else std::fill(value.begin(), value.end(), d.value.number);
+    for (const int n : space.dirichlet_nodes[i]) {
+      dirichlet_value(b, d, nodes.point(std::size_t(n)), value);
       for (const int c : d.components) {
         state[std::size_t(n) * std::size_t(bs) + std::size_t(d.field.offset + c)] = value[d.field.components == 1 ? 0 : std::size_t(c)];
         space.fixed_pairs.emplace_back(n, d.field.offset + c);
@@ -179,6 +184,26 @@ void ProblemSpace::set_constant(const std::string& name, double value) {
   for (auto& [label, a] : assemblers)
     for (int j = 0; j < a->form().n_constants; ++j)
       if (a->form().constants[j] == name) a->set_constant(name, value);
+}
+
+void ProblemSpace::impose_dirichlet_values(const BoundScene& b, Vec u) const {
+  const Discretization& d = *disc;
+  const int bs = b.layout.dofs_per_node;
+  const auto renumbered = d.renumbered_index();
+  std::vector<double> value(3);
+  {
+    VecWriteView v(u);
+    for (std::size_t i = 0; i < b.dirichlet.size(); ++i) {
+      const BoundDirichlet& entry = b.dirichlet[i];
+      for (const int n : dirichlet_nodes[i]) {
+        const int node = renumbered[std::size_t(n)];
+        if (!d.owns(node)) continue;
+        dirichlet_value(b, entry, nodes.point(std::size_t(n)), value);
+        for (const int c : entry.components)
+          v[(node - d.owned_begin()) * bs + entry.field.offset + c] = value[entry.field.components == 1 ? 0 : std::size_t(c)];
+      }
+    }
+  }
 }
 
 double ProblemSpace::energy(Vec u) const {

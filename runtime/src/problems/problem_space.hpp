@@ -65,6 +65,7 @@ struct ProblemSpace {
   Assembler* bilinear = nullptr;
   Assembler* linear = nullptr;
   Assembler* primary = nullptr;                          ///< owns the dof layout (first energy, residual, bilinear)
+  std::vector<std::vector<int>> dirichlet_nodes;         ///< per [[dirichlet]] entry, original numbering
   std::vector<std::pair<int, int>> fixed_pairs;          ///< (original node, dof within the node) with Dirichlet values
   std::vector<PetscInt> fixed;                           ///< the same as owned global dofs
   std::vector<double> state;                             ///< the start (original order), Dirichlet values imposed
@@ -73,6 +74,9 @@ struct ProblemSpace {
 
   /// Sets a constant in every assembler that reads it.
   void set_constant(const std::string& name, double value);
+  /// Writes the Dirichlet values, evaluated with the expressions' current constants, into u
+  /// (owned dofs): a load step's prescribed values.
+  void impose_dirichlet_values(const BoundScene& b, Vec u) const;
   /// Σ energies at u.
   [[nodiscard]] double energy(Vec u) const;
   /// The constraints' values at u, in order.

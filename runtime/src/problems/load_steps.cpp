@@ -1,0 +1,368 @@
+#include "load_steps.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "lmeform/delaunay.hpp"
+#include "lmeform/output.hpp"
+#include "lmeform/scene_table.hpp"
+#include "lmeform/stopwatch.hpp"
+#include "quantities.hpp"
+#include "stationary.hpp"
+
+namespace lmeform::problems {
+
+namespace fs = std::filesystem;
+
+double SteppedConstant::at(double lambda) const {
+  const auto last = static_cast<double>(values.size() - 1);
+  const double l = std::clamp(lambda, 0.0, last);
+  const auto k = static_cast<std::size_t>(std::min(std::floor(l), last - 1));
+  return values[k] + (l - double(k)) * (values[k + 1] - values[k]);
+}
+
+namespace {
+
+std::vector<double> numbers_of(const SceneTable& t, const std::string& name, const toml::node& node) {
+  const auto* a = node.as_array();
+  if (a == nullptr) t.wrong_type(name, node, "an array of numbers");
+  std::vector<double> v;
+  for (std::size_t i = 0; i < a->size(); ++i) v.push_back(t.number_of(name + "[" + std::to_string(i) + "]", (*a)[i]));
+  return v;
+}
+
+}  // namespace
+
+LoadStepSettings read_steps(const Scene& scene) {
+  const auto t = extension_table(scene, kStepsTable, {"count", "ramp", "values", "cut", "max_cuts", "solve_start", "checkpoint_every", "until"});
+  LoadStepSettings s;
+  s.count = t->at_least("count", t->integer_of("count", t->require("count")), 1);
+  if (s.count > 100000) t->fail_key("count", "= " + std::to_string(s.count) + " is more steps than a run can write (at most 100000)");
+  if (const auto ramp = t->optional_any_table("ramp"))
+    for (const auto& [name, node] : scene_detail::in_file_order(ramp->entries())) {
+      const std::vector<double> ends = numbers_of(*ramp, name, *node);
+      if (ends.size() != 2) ramp->fail_key(name, "must be [from, to], got " + std::to_string(ends.size()) + " values");
+      SteppedConstant c{name, {}, ramp->where(name)};
+      for (int k = 0; k <= s.count; ++k) c.values.push_back(ends[0] + (ends[1] - ends[0]) * k / s.count);
+      s.constants.push_back(std::move(c));
+    }
+  if (const auto values = t->optional_any_table("values"))
+    for (const auto& [name, node] : scene_detail::in_file_order(values->entries())) {
+      SteppedConstant c{name, numbers_of(*values, name, *node), values->where(name)};
+      if (c.values.size() != std::size_t(s.count) + 1)
+        values->fail_key(name, "must give count + 1 = " + std::to_string(s.count + 1) + " values (step 0 first), got " + std::to_string(c.values.size()));
+      if (std::any_of(s.constants.begin(), s.constants.end(), [&](const SteppedConstant& o) { return o.name == name; }))
+        values->fail_key(name, "is ramped already in steps.ramp: give it once");
+      s.constants.push_back(std::move(c));
+    }
+  if (s.constants.empty()) t->fail_key("ramp", "is missing: [steps] ramps constants (ramp = { NAME = [from, to] } or values = { NAME = [...] })");
+  s.cut = t->number("cut", s.cut);
+  if (!(s.cut > 0 && s.cut < 1)) t->fail_key("cut", "must lie in (0, 1): the factor of a failed increment, got " + std::to_string(s.cut));
+  s.max_cuts = t->at_least("max_cuts", t->integer("max_cuts", s.max_cuts), 0);
+  s.solve_start = t->boolean("solve_start", s.solve_start);
+  s.checkpoint_every = t->at_least("checkpoint_every", t->integer("checkpoint_every", s.checkpoint_every), 0);
+  s.until = t->at_least("until", t->integer("until", s.count), 0);
+  if (s.until > s.count) t->fail_key("until", "= " + std::to_string(s.until) + " exceeds count = " + std::to_string(s.count));
+  if (s.until < s.count && s.checkpoint_every == 0) t->fail_key("until", "stops before the last step: it needs checkpoints to continue from");
+  return s;
+}
+
+namespace {
+
+/// The ramped constants are the driver's: no value needed in [constants].
+OutputRoles ramped(const LoadStepSettings& settings) {
+  OutputRoles roles;
+  for (const SteppedConstant& c : settings.constants) roles.provided_constants.push_back(c.name);
+  return roles;
+}
+
+/// The stepping of one run: the problem space built once, the state carried from step to step.
+class LoadStepper {
+ public:
+  LoadStepper(const DriverContext& ctx, const LoadStepSettings& settings)
+      : ctx_(ctx), settings_(settings), bound_(bind_scene(*ctx.scene, ctx.comm, ctx.log, ramped(settings))) {
+    MPI_Comm_rank(ctx.comm, &rank_);
+    for (const SteppedConstant& c : settings.constants)
+      if (!bound_.constants.contains(c.name)) {
+        std::vector<std::string> names;
+        for (const auto& [n, v] : bound_.constants) names.push_back(n);
+        throw SceneError(fmt::format("{}: '{}' is no constant of the forms{}", c.where, c.name, did_you_mean(c.name, names)));
+      }
+  }
+
+  LoadStepRun run();
+  [[nodiscard]] const BoundScene& bound() const noexcept { return bound_; }
+  [[nodiscard]] ReportFields final_fields() const;
+
+ private:
+  void setup();
+  void set_load(double lambda);
+  [[nodiscard]] bool attempt(double lambda, ProblemResult& result);
+  [[nodiscard]] bool advance(int step);
+  void record(int step, double lambda, const ProblemResult& result, int cuts);
+  void write_outputs(int step);
+  void write_history() const;
+  void resume();
+  [[nodiscard]] fs::path path(const std::string& suffix) const { return ctx_.output_directory / (ctx_.scene->name + suffix); }
+
+  const DriverContext& ctx_;
+  const LoadStepSettings& settings_;
+  BoundScene bound_;
+  int rank_ = 0;
+  Stopwatch clock_;
+  ProblemInput input_;
+  ProblemSpace space_;
+  BackgroundCells cells_;
+  PetscVector u_, trial_;
+  double lambda_ = 0;           ///< the converged load
+  int first_step_ = 0;
+  std::vector<double> multipliers_;
+  std::vector<TimeSeriesStep> series_;
+  LoadStepRun run_;
+};
+
+void LoadStepper::setup() {
+  input_.nodes = initial_nodes(*ctx_.scene, ctx_.log);
+  input_.log = ctx_.log;
+  input_.lme = bound_.lme(AxisParity::even);
+  set_load(0.0);  // the expressions of the start and the Dirichlet values at step 0
+  space_ = build_problem_space(ctx_.comm, bound_, input_);
+  cells_ = delaunay(input_.nodes);
+  u_ = space_.primary->create_vector();
+  trial_ = space_.primary->create_vector();
+  set_from_original(*space_.disc, space_.state, bound_.layout.dofs_per_node, u_);
+}
+
+void LoadStepper::set_load(double lambda) {
+  for (const SteppedConstant& c : settings_.constants) {
+    const double v = c.at(lambda);
+    bound_.expressions->set_constant(c.name, v);
+    if (space_.disc) space_.set_constant(c.name, v);
+    input_.constants[c.name] = v;
+  }
+}
+
+/// A solve at load λ from the converged state; the state moves only when it converges.
+bool LoadStepper::attempt(double lambda, ProblemResult& result) {
+  set_load(lambda);
+  LMEFORM_PETSC_CHECK(VecCopy(u_, trial_));
+  space_.impose_dirichlet_values(bound_, trial_);
+  result = ProblemResult{};
+  input_.initial_multipliers = multipliers_;
+  bound_.solver->solve(ctx_.comm, bound_, space_, input_, trial_, result);
+  if (!result.converged) return false;
+  LMEFORM_PETSC_CHECK(VecCopy(trial_, u_));
+  lambda_ = lambda;
+  if (!result.minimization.multipliers.empty()) multipliers_ = result.minimization.multipliers;
+  return true;
+}
+
+/// Step `step` (from λ = step − 1, or the start): the whole increment, else cut increments.
+bool LoadStepper::advance(int step) {
+  const double target = step;
+  double increment = target - lambda_;
+  int cuts = 0;
+  ProblemResult result;
+  while (lambda_ < target - 1e-12) {
+    const double next = std::min(target, lambda_ + increment);
+    if (attempt(next, result)) continue;
+    if (++cuts > settings_.max_cuts) {
+      run_.failure = fmt::format("step {} did not converge from load {:.6g} with increments down to {:.3g} of a step ({} cuts): {}", step,
+                                 lambda_, increment, settings_.max_cuts, result.message);
+      set_load(lambda_);
+      return false;
+    }
+    increment *= settings_.cut;
+    if (ctx_.log != nullptr)
+      *ctx_.log << fmt::format("  step {} at load {:.6g}: {}; retrying with an increment of {:.3g} step\n", step, next, result.message, increment);
+  }
+  if (step == 0 && !attempt(0.0, result)) {
+    run_.failure = "the start (step 0) did not converge: " + result.message;
+    return false;
+  }
+  record(step, lambda_, result, cuts);
+  return true;
+}
+
+void LoadStepper::record(int step, double lambda, const ProblemResult& result, int cuts) {
+  LoadStep s;
+  s.step = step;
+  s.lambda = lambda;
+  for (const SteppedConstant& c : settings_.constants) s.constants.emplace_back(c.name, c.at(lambda));
+  s.quantities = evaluate_quantities(bound_, space_, u_, result);
+  s.iterations = result.iterations;
+  s.cuts = cuts;
+  s.wall_s = clock_.seconds();
+  run_.history.push_back(s);
+  if (ctx_.log == nullptr) return;
+  std::string values;
+  for (const auto& [name, v] : s.constants) values += fmt::format("  {} {:.6g}", name, v);
+  for (const auto& [name, v] : s.quantities) values += fmt::format("  {} {:.6g}", name, v);
+  *ctx_.log << fmt::format("step {:4d}/{}{}  iterations {}  cuts {}  {:.1f} s", step, settings_.count, values, s.iterations, cuts, s.wall_s)
+            << std::endl;
+}
+
+void LoadStepper::write_history() const {
+  std::ostringstream csv;
+  nlohmann::ordered_json js;
+  js["scene"] = ctx_.scene->name;
+  js["steps"] = nlohmann::ordered_json::array();
+  csv << "step,load";
+  const LoadStep& first = run_.history.front();
+  for (const auto& [name, v] : first.constants) csv << "," << name;
+  for (const auto& [name, v] : first.quantities) csv << "," << name;
+  csv << ",iterations,cuts,wall_s\n";
+  for (const LoadStep& s : run_.history) {
+    csv << s.step << "," << fmt::format("{:.17g}", s.lambda);
+    nlohmann::ordered_json row{{"step", s.step}, {"load", s.lambda}, {"iterations", s.iterations}, {"cuts", s.cuts}, {"wall_s", s.wall_s}};
+    for (const auto& [name, v] : s.constants) csv << "," << fmt::format("{:.17g}", v), row["constants"][name] = json_number(v);
+    for (const auto& [name, v] : s.quantities) csv << "," << fmt::format("{:.17g}", v), row["quantities"][name] = json_number(v);
+    csv << "," << s.iterations << "," << s.cuts << "," << fmt::format("{:.3f}", s.wall_s) << "\n";
+    js["steps"].push_back(row);
+  }
+  write_text_atomically(ctx_.output_directory / "history.csv", csv.str());
+  write_text_atomically(ctx_.output_directory / "history.json", js.dump(1) + "\n");
+}
+
+void LoadStepper::write_outputs(int step) {
+  if (ctx_.output_directory.empty()) return;
+  const std::vector<double> state = to_original(*space_.disc, u_, bound_.layout.dofs_per_node);
+  if (rank_ != 0) return;
+  std::vector<std::vector<double>> values;
+  FieldViews fields;
+  for (const auto& f : bound_.layout.fields) {
+    values.push_back(bound_.layout.values(state, f));
+    fields.emplace(f.name, FieldView{values.back(), f.components});
+  }
+  const std::string file = fmt::format("series/{}_{:06d}.h5", ctx_.scene->name, step);
+  fs::create_directories(ctx_.output_directory / "series");
+  const OutputAttributes attributes{{"step", static_cast<std::int64_t>(step)}, {"load", lambda_}};
+  write_field_hdf5(ctx_.output_directory / file, input_.nodes, cells_, fields, attributes);
+  TimeSeriesStep entry{lambda_, file, bound_.dim, input_.nodes.size(), cells_.size(), {}};
+  for (const auto& [name, view] : fields) entry.fields.emplace_back(name, view.components);
+  series_.push_back(entry);
+  if (bound_.dim >= 2) write_xdmf_time_series(path(".xmf"), series_);
+  write_history();
+  if (settings_.checkpoint_every > 0 && (step % settings_.checkpoint_every == 0 || step == settings_.until))
+    write_field_hdf5(path("_checkpoint.h5"), input_.nodes, cells_, {{"state", FieldView{state, bound_.layout.dofs_per_node}}}, attributes);
+}
+
+void LoadStepper::resume() {
+  const fs::path checkpoint = path("_checkpoint.h5"), history = ctx_.output_directory / "history.json";
+  if (!fs::exists(checkpoint) || !fs::exists(history))
+    throw std::runtime_error(fmt::format("--restart: no checkpoint in {} (expected {} and history.json)", ctx_.output_directory.string(),
+                                         checkpoint.filename().string()));
+  const FieldFile cp = read_field_hdf5(checkpoint);
+  if (cp.nodes.coords != input_.nodes.coords)
+    throw std::runtime_error(fmt::format("--restart: {} was written for other nodes than the scene's", checkpoint.string()));
+  const int step = static_cast<int>(std::get<std::int64_t>(cp.attributes.at("step")));
+  set_from_original(*space_.disc, cp.fields.at("state").values, bound_.layout.dofs_per_node, u_);
+  lambda_ = std::get<double>(cp.attributes.at("load"));
+  set_load(lambda_);
+  std::ifstream in(history);
+  const nlohmann::ordered_json js = nlohmann::ordered_json::parse(in);
+  for (const auto& row : js.at("steps")) {
+    if (row.at("step").get<int>() > step) break;
+    LoadStep s;
+    s.step = row.at("step");
+    s.lambda = row.at("load");
+    s.iterations = row.at("iterations");
+    s.cuts = row.at("cuts");
+    s.wall_s = row.at("wall_s");
+    const nlohmann::ordered_json constants = row.value("constants", nlohmann::ordered_json::object()), quantities = row.value("quantities", nlohmann::ordered_json::object());
+    for (const auto& [name, v] : constants.items()) s.constants.emplace_back(name, v.is_null() ? NAN : v.get<double>());
+    for (const auto& [name, v] : quantities.items()) s.quantities.emplace_back(name, v.is_null() ? NAN : v.get<double>());
+    run_.history.push_back(s);
+    series_.push_back({s.lambda, fmt::format("series/{}_{:06d}.h5", ctx_.scene->name, s.step), bound_.dim, input_.nodes.size(), cells_.size(), {}});
+    for (const auto& f : bound_.layout.fields) series_.back().fields.emplace_back(f.name, f.components);
+  }
+  first_step_ = step + 1;
+  if (ctx_.log != nullptr) *ctx_.log << fmt::format("resumed from {} at step {} (load {:.6g})\n", checkpoint.string(), step, lambda_);
+}
+
+LoadStepRun LoadStepper::run() {
+  setup();
+  const ScopedPetscOptions petsc_options(ctx_.scene->solver.petsc_options);
+  if (ctx_.restart) resume();
+  for (int step = first_step_; step <= settings_.until; ++step) {
+    if (step == 0 && !settings_.solve_start) {
+      ProblemResult none;
+      none.converged = true;
+      record(0, 0.0, none, 0);
+    } else if (!advance(step)) {
+      break;
+    }
+    write_outputs(step);
+  }
+  run_.wall_s = clock_.seconds();
+  return std::move(run_);
+}
+
+ReportFields LoadStepper::final_fields() const {
+  ProblemResult r;
+  r.nodes = input_.nodes;
+  r.cells = cells_;
+  r.state = to_original(*space_.disc, u_, bound_.layout.dofs_per_node);
+  ReportFields f = state_fields(bound_.layout, bound_.axisymmetric, r);
+  f.attributes.emplace("load", lambda_);
+  return f;
+}
+
+void describe_steps(const LoadStepSettings& settings, const LoadStepRun& run, RunReport& report) {
+  const LoadStep& last = run.history.back();
+  report.row("steps", fmt::format("{} of {} (load {:.6g}), {} increments cut", last.step, settings.count, last.lambda,
+                                  [&] { int c = 0; for (const auto& s : run.history) c += s.cuts; return c; }()));
+  for (const auto& [name, v] : last.constants) report.row(name, fmt::format("{:.10g}", v));
+  describe_quantities(last.quantities, report);
+  report.json["steps"] = nlohmann::json::array();
+  for (const LoadStep& s : run.history) {
+    nlohmann::json row{{"step", s.step}, {"load", s.lambda}, {"iterations", s.iterations}, {"cuts", s.cuts}};
+    for (const auto& [name, v] : s.quantities) row["quantities"][name] = json_number(v);
+    report.json["steps"].push_back(row);
+  }
+}
+
+class LoadStepsDriver final : public ProblemDriver {
+ public:
+  [[nodiscard]] std::string_view name() const override { return "load steps"; }
+  [[nodiscard]] std::string_view table() const override { return kStepsTable; }
+  [[nodiscard]] bool claims(const Scene& scene) const override { return scene.has_extension(kStepsTable); }
+  [[nodiscard]] bool restartable() const override { return true; }
+  void check(const DriverContext& ctx) const override {
+    const LoadStepSettings settings = read_steps(*ctx.scene);
+    const LoadStepper stepper(ctx, settings);
+  }
+  [[nodiscard]] RunReport run(const DriverContext& ctx) const override {
+    const LoadStepSettings settings = read_steps(*ctx.scene);
+    LoadStepper stepper(ctx, settings);
+    const LoadStepRun run = stepper.run();
+    RunReport report;
+    report.problem = std::string(stepper.bound().solver->name());
+    report.success = run.failure.empty();
+    report.status = !run.failure.empty()            ? "STOPPED: " + run.failure
+                    : settings.until < settings.count ? fmt::format("stopped after step {} as asked (steps.until): --restart continues", settings.until)
+                                                      : std::string("every step converged");
+    if (run.history.empty()) throw std::runtime_error(report.status);
+    describe_steps(settings, run, report);
+    report.fields = stepper.final_fields();
+    if (!ctx.output_directory.empty()) {
+      report.files.emplace_back("history", (ctx.output_directory / "history.csv").string() + " (+ history.json)");
+      report.files.emplace_back("series", (ctx.output_directory / (ctx.scene->name + ".xmf")).string() + " (ParaView)");
+    }
+    return report;
+  }
+};
+
+}  // namespace
+
+const ProblemDriver& load_steps_driver() {
+  static const LoadStepsDriver driver;
+  return driver;
+}
+
+}  // namespace lmeform::problems

@@ -1,0 +1,73 @@
+// Load steps for any stationary problem (minimization, residual, linear): a scene with a [steps]
+// table ramps constants — a load factor, an imposed displacement, a plate position — over N steps.
+// Each step sets the constants (Dirichlet values that are expressions of them follow), starts
+// from the last converged state, solves with the scene's stationary solver, records the scene's
+// [quantities] in <output>/history.csv and history.json, writes the state as one entry of an XDMF
+// series and a checkpoint. A step that does not converge is retried with its increment halved, up
+// to `max_cuts` times; if the smallest increment fails, the run stops with the last converged
+// state on disk, and `lmeform run --restart` continues from it.
+//
+//   [steps]
+//   count = 20
+//   ramp = { delta = [0.0, 0.01] }        # linear in the step: delta_k = 0 + 0.01 k / count
+//   values = { load = [0.0, 0.2, ...] }   # or one value per step, step 0 first (count + 1 values)
+#pragma once
+
+#include <mpi.h>
+
+#include <filesystem>
+#include <iosfwd>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "lmeform/scene.hpp"
+#include "problem_registry.hpp"
+
+namespace lmeform::problems {
+
+inline constexpr std::string_view kStepsTable = "steps";
+
+/// A constant's value at each step (count + 1 values, step 0 first).
+struct SteppedConstant {
+  std::string name;
+  std::vector<double> values;
+  std::string where;
+  /// The value at a fractional step λ ∈ [0, count]: linear between the steps.
+  [[nodiscard]] double at(double lambda) const;
+};
+
+struct LoadStepSettings {
+  int count = 1;
+  std::vector<SteppedConstant> constants;
+  double cut = 0.5;             ///< a failed increment is multiplied by this for the retry
+  int max_cuts = 4;             ///< retries of one step before the run stops
+  bool solve_start = true;      ///< solve at step 0 too (else step 0 is the initial state)
+  int checkpoint_every = 1;     ///< steps between checkpoints (0: none)
+  int until = 0;                ///< the last step of this run (count: all; fewer: continue later with --restart)
+};
+
+/// Reads [steps]; throws SceneError naming the key.
+[[nodiscard]] LoadStepSettings read_steps(const Scene& scene);
+
+/// One converged step.
+struct LoadStep {
+  int step = 0;
+  double lambda = 0;            ///< the step's position in [0, count] (fractional after cuts)
+  std::vector<std::pair<std::string, double>> constants;
+  std::vector<std::pair<std::string, double>> quantities;
+  int iterations = 0;
+  int cuts = 0;                 ///< increments halved before it converged
+  double wall_s = 0;
+};
+
+struct LoadStepRun {
+  std::vector<LoadStep> history;
+  std::string failure;          ///< empty when every step converged
+  double wall_s = 0;
+};
+
+/// The driver of scenes with a [steps] table.
+[[nodiscard]] const ProblemDriver& load_steps_driver();
+
+}  // namespace lmeform::problems
