@@ -169,6 +169,16 @@ struct SceneSolver {
   std::string petsc_options;
 };
 
+/// [bounds]: lower and upper bounds of an unknown (its every component), solved as a variational
+/// inequality. A bound is a number, an expression of x and the constants, or "previous": the
+/// state of the previous load step (the start for a single solve) — irreversibility.
+struct SceneBound {
+  std::string unknown;
+  std::optional<SceneValue> lower, upper;
+  bool lower_previous = false, upper_previous = false;
+  std::string where;
+};
+
 /// [quantities]: a quantity of interest reported per solve (per load step): written to the closing
 /// table, the JSON and <output>/history.csv.
 struct SceneQuantity {
@@ -226,6 +236,7 @@ struct Scene {
   SceneSolver solver;
   SceneReference reference;
   std::vector<SceneQuantity> quantities;  ///< in the order of the file
+  std::vector<SceneBound> bounds;
   std::optional<SceneOutput> output;
   /// Extension tables (e.g. "vesicle") kept for the model that reads them.
   std::vector<std::string> extensions;

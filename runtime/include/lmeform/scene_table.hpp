@@ -120,6 +120,7 @@ struct Context {
   std::string file;
 };
 
+
 }  // namespace scene_detail
 
 /// The parsed scene file, kept for the models that read their extension tables.
@@ -369,6 +370,20 @@ class SceneTable {
   const toml::table& table_;
   std::string path_;
 };
+
+/// A number or an expression string (of x and the constants).
+inline SceneValue value_of(const SceneTable& t, std::string_view key, const toml::node& n) {
+  SceneValue v;
+  v.where = t.where(key);
+  if (n.is_string()) {
+    v.value = t.string_of(key, n);
+  } else if (n.is_number()) {
+    v.value = t.number_of(key, n);
+  } else {
+    t.wrong_type(key, n, "a number or an expression string (e.g. \"sin(pi*x[0])\")");
+  }
+  return v;
+}
 
 }  // namespace scene_detail
 

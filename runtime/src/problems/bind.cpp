@@ -436,6 +436,25 @@ void bind_quantities(const Scene& scene, MPI_Comm comm, std::ostream* log, const
   }
 }
 
+/// [bounds]: the unknowns checked, the expressions registered; bounds constrain a minimization
+/// without global constraints, a residual or a linear problem.
+void bind_bounds(const Scene& scene, BoundScene& b) {
+  for (const SceneBound& sb : scene.bounds) {
+    BoundBound bb;
+    bb.field = check_unknown(b, sb.unknown, sb.where);
+    bb.where = sb.where;
+    bb.lower_previous = sb.lower_previous;
+    bb.upper_previous = sb.upper_previous;
+    if (sb.lower) bb.lower = bind_value(b, *sb.lower, bb.field.components, sb.lower->where);
+    if (sb.upper) bb.upper = bind_value(b, *sb.upper, bb.field.components, sb.upper->where);
+    b.bounds.push_back(std::move(bb));
+  }
+  if (!b.bounds.empty() && !b.constraints.empty())
+    throw SceneError(fmt::format("{}: [bounds] and [constraints] together are not supported: a bounded problem is solved as a variational "
+                                 "inequality, without multipliers of global constraints",
+                                 b.bounds.front().where));
+}
+
 }  // namespace
 
 std::vector<const BoundOutput*> BoundScene::outputs() const {
@@ -480,6 +499,7 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
   b.expressions = std::make_shared<PointExpressions>(b.dim, expression_constants);
   bind_qdata(scene, b);
   bind_nodal_data(scene, b);
+  bind_bounds(scene, b);
   bind_reference(scene, comm, log, expression_constants, b);
   bind_quantities(scene, comm, log, expression_constants, b);
   b.expressions->compile(comm, log);

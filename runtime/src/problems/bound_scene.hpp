@@ -108,6 +108,14 @@ struct BoundExactSolution {
   std::string where;
 };
 
+/// Bounds of an unknown ([bounds]): a value (number or expression) or the previous state per side.
+struct BoundBound {
+  UnknownField field;
+  std::optional<BoundValue> lower, upper;
+  bool lower_previous = false, upper_previous = false;
+  std::string where;
+};
+
 /// A quantity of interest ([quantities]), with what it reads bound.
 struct BoundQuantity {
   SceneQuantity scene;
@@ -161,6 +169,7 @@ struct BoundScene {
   std::vector<std::string> zero_mean;    ///< scalar unknowns fixed by ∫ u dx = 0
   std::vector<BoundExactSolution> exact;
   std::vector<BoundQuantity> quantities;
+  std::vector<BoundBound> bounds;
 
   [[nodiscard]] const UnknownField& unknown(std::string_view name) const { return layout.field(name); }
   /// Every output the problem assembles, in the order: energies, constraints, residual, bilinear,

@@ -10,6 +10,7 @@
 #include "linear_system.hpp"
 #include "problem_registry.hpp"
 #include "stationary.hpp"
+#include "variational_inequality.hpp"
 
 namespace lmeform::problems {
 
@@ -61,6 +62,19 @@ class LinearDriver final : public StationaryDriver {
     space.bilinear->matrix(u, A);
     space.linear->vector(u, rhs);
     result.seconds_assembly = clock.seconds();
+    if (space.bounded()) {
+      if (!b.zero_mean.empty()) throw SceneError(fmt::format("{}: [bounds] and model.zero_mean together are not supported", b.source));
+      // A bounded linear problem is a linear complementarity problem: F = A u − b, Jacobian A.
+      PetscMatrix J = space.bilinear->create_matrix();
+      const auto residual = [&](Vec y, Vec F) {
+        LMEFORM_PETSC_CHECK(MatMult(A, y, F));
+        LMEFORM_PETSC_CHECK(VecAXPY(F, -1.0, rhs));
+      };
+      const auto jacobian = [&](Vec, Mat M) { LMEFORM_PETSC_CHECK(MatCopy(A, M, SAME_NONZERO_PATTERN)); };
+      take_bounded_solve(solve_bounded(comm, space, u, b.scene->solver, residual, jacobian, J), result);
+      result.energy = std::numeric_limits<double>::quiet_NaN();
+      return;
+    }
     LMEFORM_PETSC_CHECK(VecCopy(u, x));
     apply_dirichlet(A, rhs, x, space.fixed);
     LinearSystemLayout layout;

@@ -157,6 +157,7 @@ bool LoadStepper::attempt(double lambda, ProblemResult& result) {
   bound_.solver->solve(ctx_.comm, bound_, space_, input_, trial_, result);
   if (!result.converged) return false;
   LMEFORM_PETSC_CHECK(VecCopy(trial_, u_));
+  space_.update_previous_bounds(bound_, u_);  // irreversibility: the next step starts from here
   lambda_ = lambda;
   if (!result.minimization.multipliers.empty()) multipliers_ = result.minimization.multipliers;
   return true;

@@ -3,10 +3,30 @@
 #include <fmt/format.h>
 
 #include "lmeform/constrained_minimizer.hpp"
+#include "variational_inequality.hpp"
 
 namespace lmeform::problems {
 
 namespace {
+
+/// Minimization under bounds: ∇E = 0 as a variational inequality with the Hessian as Jacobian.
+void solve_bounded_minimization(MPI_Comm comm, const BoundScene& b, ProblemSpace& space, Vec u, ProblemResult& result) {
+  PetscMatrix J = space.primary->create_matrix();
+  const auto gradient = [&](Vec x, Vec F) {
+    LMEFORM_PETSC_CHECK(VecZeroEntries(F));
+    for (Assembler* term : space.energy_terms) term->add_vector(x, F, 1.0);
+  };
+  const auto hessian = [&](Vec x, Mat A) {
+    std::vector<Assembler::MatrixTerm> terms;
+    for (Assembler* term : space.energy_terms) terms.push_back({term, 1.0});
+    space.primary->matrix_sum(x, terms, A);
+  };
+  take_bounded_solve(solve_bounded(comm, space, u, b.scene->solver, gradient, hessian, J), result);
+  result.energy = space.energy(u);
+  result.minimization.energy = result.energy;
+  result.minimization.converged = result.converged;
+  result.minimization.newton_iterations = result.iterations;
+}
 
 class MinimizationDriver final : public StationaryDriver {
  public:
@@ -21,7 +41,11 @@ class MinimizationDriver final : public StationaryDriver {
     r.constraints = true;
     return r;
   }
-  void solve(MPI_Comm, const BoundScene& b, ProblemSpace& space, const ProblemInput& input, Vec u, ProblemResult& result) const override {
+  void solve(MPI_Comm comm, const BoundScene& b, ProblemSpace& space, const ProblemInput& input, Vec u, ProblemResult& result) const override {
+    if (space.bounded()) {
+      solve_bounded_minimization(comm, b, space, u, result);
+      return;
+    }
     ConstrainedMinimizer minimizer(space.energy_terms, space.constraints, minimizer_options(b.scene->solver, input.log));
     minimizer.set_fixed_dofs(space.fixed);
     std::vector<double> nu;  // the minimizer works with multipliers of the scaled constraints

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include "quadrature_data.hpp"
 
@@ -163,6 +164,46 @@ void make_assemblers(const BoundScene& b, const ProblemInput& input, const std::
   space.qdata = qdata.field_data();
 }
 
+/// The bound vectors from [bounds]: values at the nodes, or the start for "previous"; the start must
+/// lie within them.
+void make_bounds(const BoundScene& b, ProblemSpace& space) {
+  if (b.bounds.empty()) return;
+  const Discretization& disc = *space.disc;
+  const int bs = b.layout.dofs_per_node;
+  const std::size_t n = space.nodes.size();
+  std::vector<double> lower(n * std::size_t(bs), PETSC_NINFINITY), upper(n * std::size_t(bs), PETSC_INFINITY);
+  std::vector<double> value(3);
+  auto fill = [&](const BoundValue& v, std::span<const double> x) {
+    if (v.is_expression()) b.expressions->evaluate(v.expression, x, value);
+    else std::fill(value.begin(), value.end(), v.number);
+  };
+  for (const BoundBound& bb : b.bounds)
+    for (std::size_t a = 0; a < n; ++a)
+      for (int c = 0; c < bb.field.components; ++c) {
+        const std::size_t dof = a * std::size_t(bs) + std::size_t(bb.field.offset + c);
+        if (bb.lower) fill(*bb.lower, space.nodes.point(a)), lower[dof] = value[std::size_t(c)];
+        if (bb.upper) fill(*bb.upper, space.nodes.point(a)), upper[dof] = value[std::size_t(c)];
+        if (bb.lower_previous) lower[dof] = space.state[dof];
+        if (bb.upper_previous) upper[dof] = space.state[dof];
+        if (lower[dof] > upper[dof])
+          throw SceneError(fmt::format("{}: the lower bound {} lies above the upper bound {} at ({})", bb.where, lower[dof], upper[dof],
+                                       fmt::join(space.nodes.point(a), ", ")));
+        if (space.state[dof] < lower[dof] - 1e-12 * std::max(1.0, std::abs(lower[dof])) ||
+            space.state[dof] > upper[dof] + 1e-12 * std::max(1.0, std::abs(upper[dof])))
+          throw SceneError(fmt::format("{}: the start violates the bounds: {} = {} outside [{}, {}] at ({})", bb.where, bb.field.name,
+                                       space.state[dof], lower[dof], upper[dof], fmt::join(space.nodes.point(a), ", ")));
+      }
+  // Prescribed dofs keep their Dirichlet values: no bound there.
+  for (const auto& [node, dof] : space.fixed_pairs) {
+    lower[std::size_t(node) * std::size_t(bs) + std::size_t(dof)] = PETSC_NINFINITY;
+    upper[std::size_t(node) * std::size_t(bs) + std::size_t(dof)] = PETSC_INFINITY;
+  }
+  space.lower_bound = space.primary->create_vector();
+  space.upper_bound = space.primary->create_vector();
+  set_from_original(disc, lower, bs, space.lower_bound);
+  set_from_original(disc, upper, bs, space.upper_bound);
+}
+
 /// Targets given as "initial": the constraint's value at the start (the scale follows unless given).
 void set_initial_targets(const BoundScene& b, const ProblemInput& input, ProblemSpace& space) {
   if (std::none_of(b.constraints.begin(), b.constraints.end(), [](const BoundConstraint& c) { return c.initial; })) return;
@@ -206,6 +247,27 @@ void ProblemSpace::impose_dirichlet_values(const BoundScene& b, Vec u) const {
   }
 }
 
+void ProblemSpace::update_previous_bounds(const BoundScene& b, Vec u) {
+  if (!bounded()) return;
+  const int bs = b.layout.dofs_per_node;
+  std::vector<char> prescribed(std::size_t(disc->n_owned()) * std::size_t(bs), 0);
+  const auto renumbered = disc->renumbered_index();
+  for (const auto& [node, dof] : fixed_pairs) {
+    const int r = renumbered[std::size_t(node)];
+    if (disc->owns(r)) prescribed[std::size_t(r - disc->owned_begin()) * std::size_t(bs) + std::size_t(dof)] = 1;
+  }
+  const VecReadView state(u);
+  VecWriteView lower(lower_bound), upper(upper_bound);
+  for (const BoundBound& bb : b.bounds)
+    for (PetscInt a = 0; a < disc->n_owned(); ++a)
+      for (int c = 0; c < bb.field.components; ++c) {
+        const PetscInt dof = a * bs + bb.field.offset + c;
+        if (prescribed[std::size_t(dof)] != 0) continue;
+        if (bb.lower_previous) lower[dof] = state[dof];
+        if (bb.upper_previous) upper[dof] = state[dof];
+      }
+}
+
 double ProblemSpace::energy(Vec u) const {
   double e = 0;
   for (Assembler* term : energy_terms) e += term->value(u);
@@ -227,6 +289,7 @@ ProblemSpace build_problem_space(MPI_Comm comm, const BoundScene& b, const Probl
   impose_dirichlet(b, input, space);
   make_assemblers(b, input, targets, scales, space);
   set_initial_targets(b, input, space);
+  make_bounds(b, space);
   return space;
 }
 

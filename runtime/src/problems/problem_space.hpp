@@ -71,6 +71,13 @@ struct ProblemSpace {
   std::vector<double> state;                             ///< the start (original order), Dirichlet values imposed
   /// Every quadrature datum the assemblers read, by name: all global points, the datum's size each.
   std::map<std::string, std::vector<double>, std::less<>> qdata;
+  /// [bounds]: the lower and upper bound of every dof (±infinity where free or prescribed);
+  /// empty when the problem has none.
+  PetscVector lower_bound, upper_bound;
+
+  [[nodiscard]] bool bounded() const noexcept { return static_cast<Vec>(lower_bound) != nullptr; }
+  /// The bounds given as "previous" become the state u (after a converged load step).
+  void update_previous_bounds(const BoundScene& b, Vec u);
 
   /// Sets a constant in every assembler that reads it.
   void set_constant(const std::string& name, double value);

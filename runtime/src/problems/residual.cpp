@@ -8,6 +8,7 @@
 
 #include "problem_registry.hpp"
 #include "stationary.hpp"
+#include "variational_inequality.hpp"
 
 // PETSc callbacks at global scope: inside namespace lmeform the name PetscError would find
 // lmeform::PetscError, not the PETSc function PETSc's macros call.
@@ -60,6 +61,14 @@ class ResidualDriver final : public StationaryDriver {
     return r;
   }
   void solve(MPI_Comm comm, const BoundScene& b, ProblemSpace& space, const ProblemInput&, Vec u, ProblemResult& result) const override {
+    if (space.bounded()) {
+      PetscMatrix J = space.residual->create_matrix();
+      take_bounded_solve(solve_bounded(comm, space, u, b.scene->solver, [&](Vec x, Vec F) { space.residual->vector(x, F); },
+                                       [&](Vec x, Mat A) { space.residual->matrix(x, A); }, J),
+                         result);
+      result.energy = std::numeric_limits<double>::quiet_NaN();
+      return;
+    }
     SnesContext ctx{space.residual, &space.fixed};
     PetscNonlinearSolver snes;
     LMEFORM_PETSC_CHECK(SNESCreate(comm, snes.out()));

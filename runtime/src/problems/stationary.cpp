@@ -13,6 +13,7 @@
 #include "lmeform/stopwatch.hpp"
 #include "problem_registry.hpp"
 #include "quantities.hpp"
+#include "variational_inequality.hpp"
 
 namespace lmeform::problems {
 
@@ -124,6 +125,15 @@ ReportFields state_fields(const StateLayout& layout, bool axisymmetric, const Pr
   return out;
 }
 
+void take_bounded_solve(const BoundedSolve& solve, ProblemResult& result) {
+  result.converged = solve.converged;
+  result.message = solve.message;
+  result.iterations = solve.iterations;
+  result.residual_norm = solve.residual_norm;
+  result.active_lower = solve.active_lower;
+  result.active_upper = solve.active_upper;
+}
+
 void describe_equation_solve(const ProblemResult& r, RunReport& report) {
   report.row("solver", r.message);
   report.json["energy"] = nullptr;
@@ -132,6 +142,7 @@ void describe_equation_solve(const ProblemResult& r, RunReport& report) {
 }
 
 void describe_errors(const ProblemResult& r, RunReport& report) {
+  if (r.active_lower >= 0) report.json["active_set"] = {{"lower", r.active_lower}, {"upper", r.active_upper}};
   report.json["errors"] = nlohmann::json::array();
   for (const auto& e : r.errors) {
     report.row("error of " + e.unknown, fmt::format("L2 {:.6e}, H1 semi-norm {:.6e}", e.l2, e.h1));

@@ -38,6 +38,8 @@ struct ProblemResult {
   std::vector<double> gradient_norm;         ///< |∇u| of the first scalar unknown at the nodes (0 where fixed)
   std::vector<std::string> constraint_names;
   std::vector<FieldError> errors;
+  /// Bounded problems: the free dofs at their lower and upper bounds at the end (-1: no bounds).
+  long active_lower = -1, active_upper = -1;
   /// The scene's [quantities] at the solution, by column.
   std::vector<std::pair<std::string, double>> quantities;
   /// Each energy term ("module.output") and constraint (by name) at the state: filled by
@@ -61,6 +63,9 @@ struct ProblemResult {
 /// The fields of a solved state for output: each unknown, and |∇u| of the first scalar unknown;
 /// a figure of that unknown when it is scalar.
 [[nodiscard]] ReportFields state_fields(const StateLayout& layout, bool axisymmetric, const ProblemResult& result);
+
+/// A bounded solve's outcome in a result.
+void take_bounded_solve(const struct BoundedSolve& solve, ProblemResult& result);
 
 /// The closing rows and JSON keys of a solve of equations (residual, linear): the solver's message,
 /// iterations and residual.

@@ -23,6 +23,7 @@ using scene_detail::fail;
 using scene_detail::format_number;
 using scene_detail::read_domain;
 using scene_detail::in_file_order;
+using scene_detail::value_of;
 
 const char* axis_name(bool axisymmetric, int dim, int i) {
   static const char* cart[3] = {"x", "y", "z"};
@@ -115,18 +116,6 @@ void read_nodes(const Section& root, const std::filesystem::path& folder, Scene&
 }
 
 /// A number, or a string holding an expression of the coordinates.
-SceneValue value_of(const Section& t, std::string_view key, const toml::node& n) {
-  SceneValue v;
-  v.where = t.where(key);
-  if (n.is_string()) {
-    v.value = t.string_of(key, n);
-  } else if (n.is_number()) {
-    v.value = t.number_of(key, n);
-  } else {
-    t.wrong_type(key, n, "a number or an expression string (e.g. \"sin(pi*x[0])\")");
-  }
-  return v;
-}
 
 SceneName name_of(const Section& t, std::string_view key, const toml::node& n) {
   return {t.string_of(key, n), t.where(key)};
@@ -435,7 +424,7 @@ Scene parse_scene(std::string_view text, std::string source_name, std::span<cons
                      ": TOML syntax error: " + std::string(e.description()));
   }
   std::vector<std::string_view> tables{"scene", "domain", "nodes", "model", "constants", "constraints", "dirichlet",
-                                       "initial", "coefficients", "qdata", "solver", "reference", "quantities", "output"};
+                                       "initial", "coefficients", "qdata", "solver", "reference", "quantities", "bounds", "output"};
   tables.insert(tables.end(), extensions.begin(), extensions.end());
   // The initializer_list interface of SceneTable wants a list: check the top-level keys here.
   for (const auto& [key, node] : document->root) {
@@ -466,6 +455,7 @@ Scene parse_scene(std::string_view text, std::string source_name, std::span<cons
   read_solver(root, s);
   read_reference(root, s);
   scene_detail::read_quantities(root, s);
+  scene_detail::read_bounds(root, s);
   read_output(root, s);
   s.document = std::move(document);
   return s;

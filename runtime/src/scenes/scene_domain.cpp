@@ -226,4 +226,27 @@ void read_quantities(const SceneTable& root, Scene& s) {
   }
 }
 
+void read_bounds(const SceneTable& root, Scene& s) {
+  const auto table = root.optional_any_table("bounds");
+  if (!table) return;
+  for (const auto& [name, node] : in_file_order(table->entries())) {
+    const SceneTable t = table->table_of(name, *node, {"lower", "upper"});
+    SceneBound b;
+    b.unknown = name;
+    b.where = where_of(*table, name);
+    if (!t.has("lower") && !t.has("upper")) table->fail_key(name, "gives neither 'lower' nor 'upper'");
+    for (const char* side : {"lower", "upper"}) {
+      if (!t.has(side)) continue;
+      SceneValue v = value_of(t, side, t.require(side));
+      const bool previous = !v.is_number() && v.expression() == "previous";
+      (std::string(side) == "lower" ? b.lower_previous : b.upper_previous) = previous;
+      if (!previous) (std::string(side) == "lower" ? b.lower : b.upper) = std::move(v);
+    }
+    if (b.lower && b.upper && b.lower->is_number() && b.upper->is_number() && b.lower->number() > b.upper->number())
+      t.fail_key("lower", "= " + format_number(b.lower->number()) + " lies above upper = " + format_number(b.upper->number()));
+    if (b.lower_previous && b.upper_previous) t.fail_key("upper", "and 'lower' cannot both be \"previous\": the unknown would not move");
+    s.bounds.push_back(std::move(b));
+  }
+}
+
 }  // namespace lmeform::scene_detail

@@ -16,6 +16,9 @@ void read_domain(const SceneTable& root, Scene& s);
 /// POINT, field, component }, { integral = EXPR, part }, { constant = NAME }.
 void read_quantities(const SceneTable& root, Scene& s);
 
+/// [bounds]: UNKNOWN = { lower = ..., upper = ... } (numbers, expressions or "previous").
+void read_bounds(const SceneTable& root, Scene& s);
+
 /// The `refine` entries of [nodes] (after [domain]).
 [[nodiscard]] std::vector<SceneRefinement> read_refinements(const SceneTable& nodes, const Scene& s);
 

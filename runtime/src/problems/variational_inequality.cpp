@@ -1,0 +1,97 @@
+#include "variational_inequality.hpp"
+
+#include <petscsnes.h>
+
+#include <fmt/format.h>
+
+#include "toolkit.hpp"
+
+// PETSc callbacks at global scope: inside namespace lmeform the name PetscError would find
+// lmeform::PetscError, not the PETSc function PETSc's macros call.
+namespace {
+
+struct ViContext {
+  const std::function<void(Vec, Vec)>* residual;
+  const std::function<void(Vec, Mat)>* jacobian;
+  const std::vector<PetscInt>* fixed;
+};
+
+PetscErrorCode vi_residual(SNES, Vec u, Vec r, void* ctx) {
+  auto* c = static_cast<ViContext*>(ctx);
+  try {
+    (*c->residual)(u, r);
+    // Fixed dofs hold their values: their equations u_i − g_i = 0 hold from the start.
+    std::vector<PetscScalar> zeros(c->fixed->size(), 0.0);
+    PetscCall(VecSetValues(r, static_cast<PetscInt>(c->fixed->size()), c->fixed->data(), zeros.data(), INSERT_VALUES));
+    PetscCall(VecAssemblyBegin(r));
+    PetscCall(VecAssemblyEnd(r));
+  } catch (const std::exception& e) {
+    SETERRQ(PETSC_COMM_SELF, PETSC_ERR_LIB, "%s", e.what());
+  }
+  return 0;
+}
+
+PetscErrorCode vi_jacobian(SNES, Vec u, Mat J, Mat, void* ctx) {
+  auto* c = static_cast<ViContext*>(ctx);
+  try {
+    (*c->jacobian)(u, J);
+    PetscCall(MatZeroRowsColumns(J, static_cast<PetscInt>(c->fixed->size()), c->fixed->data(), 1.0, nullptr, nullptr));
+  } catch (const std::exception& e) {
+    SETERRQ(PETSC_COMM_SELF, PETSC_ERR_LIB, "%s", e.what());
+  }
+  return 0;
+}
+
+}  // namespace
+
+namespace lmeform::problems {
+
+namespace {
+
+/// Free dofs at their lower and upper bounds (to a relative 1e-10 of the bound).
+std::pair<long, long> active_set(const ProblemSpace& space, Vec u) {
+  long at[2] = {0, 0};
+  const VecReadView x(u), lo(space.lower_bound), hi(space.upper_bound);
+  for (PetscInt i = 0; i < x.size(); ++i) {
+    if (lo[i] > PETSC_NINFINITY && x[i] <= lo[i] + 1e-10 * std::max(1.0, std::abs(lo[i]))) ++at[0];
+    else if (hi[i] < PETSC_INFINITY && x[i] >= hi[i] - 1e-10 * std::max(1.0, std::abs(hi[i]))) ++at[1];
+  }
+  MPI_Allreduce(MPI_IN_PLACE, at, 2, MPI_LONG, MPI_SUM, space.disc->comm());
+  return {at[0], at[1]};
+}
+
+}  // namespace
+
+BoundedSolve solve_bounded(MPI_Comm comm, ProblemSpace& space, Vec u, const SceneSolver& solver,
+                           const std::function<void(Vec, Vec)>& residual, const std::function<void(Vec, Mat)>& jacobian, Mat J) {
+  ViContext ctx{&residual, &jacobian, &space.fixed};
+  PetscNonlinearSolver snes;
+  LMEFORM_PETSC_CHECK(SNESCreate(comm, snes.out()));
+  LMEFORM_PETSC_CHECK(SNESSetType(snes, SNESVINEWTONRSLS));
+  PetscVector r = space.primary->create_vector();
+  LMEFORM_PETSC_CHECK(SNESSetFunction(snes, r, vi_residual, &ctx));
+  LMEFORM_PETSC_CHECK(SNESSetJacobian(snes, J, J, vi_jacobian, &ctx));
+  LMEFORM_PETSC_CHECK(SNESVISetVariableBounds(snes, space.lower_bound, space.upper_bound));
+  KSP ksp = nullptr;
+  LMEFORM_PETSC_CHECK(SNESGetKSP(snes, &ksp));
+  configure_direct_solver(ksp);
+  LMEFORM_PETSC_CHECK(SNESSetTolerances(snes, 1e-12, solver.newton_tolerance, 1e-14, solver.max_newton_iterations, 10000));
+  LMEFORM_PETSC_CHECK(SNESSetFromOptions(snes));
+  LMEFORM_PETSC_CHECK(SNESSolve(snes, nullptr, u));
+  SNESConvergedReason reason = SNES_CONVERGED_ITERATING;
+  PetscInt its = 0;
+  PetscReal norm = 0;
+  LMEFORM_PETSC_CHECK(SNESGetConvergedReason(snes, &reason));
+  LMEFORM_PETSC_CHECK(SNESGetIterationNumber(snes, &its));
+  LMEFORM_PETSC_CHECK(SNESGetFunctionNorm(snes, &norm));
+  BoundedSolve out;
+  out.converged = reason > 0;
+  out.iterations = static_cast<int>(its);
+  out.residual_norm = norm;
+  std::tie(out.active_lower, out.active_upper) = active_set(space, u);
+  out.message = fmt::format("SNES VI {} after {} Newton steps, |R| = {:.3e}; active set: {} dofs at the lower bound, {} at the upper",
+                            SNESConvergedReasons[reason], its, norm, out.active_lower, out.active_upper);
+  return out;
+}
+
+}  // namespace lmeform::problems
