@@ -13,18 +13,20 @@ namespace lmeform::problems {
 // Defined in their drivers' files.
 const StationaryDriver& residual_driver();
 const StationaryDriver& linear_driver();
+const StationaryDriver& staggered_driver();
 
 namespace {
 
 /// Drivers of a table first (they build on a stationary solve), then the stationary drivers, the
 /// minimization last (it claims every scene that names no residual or linear problem).
-const std::array<const ProblemDriver*, 6>& all_drivers() {
-  static const std::array<const ProblemDriver*, 6> drivers{&dynamics_driver(), &vesicle_driver(), &load_steps_driver(),
-                                                           &residual_driver(),  &linear_driver(),  &minimization_driver()};
+const std::array<const ProblemDriver*, 7>& all_drivers() {
+  static const std::array<const ProblemDriver*, 7> drivers{&dynamics_driver(), &vesicle_driver(), &load_steps_driver(), &staggered_driver(),
+                                                           &residual_driver(), &linear_driver(),  &minimization_driver()};
   return drivers;
 }
 
-const std::array<const StationaryDriver*, 3>& stationary_drivers() {
+/// The solves of the [model] outputs themselves.
+const std::array<const StationaryDriver*, 3>& basic_stationary_drivers() {
   static const std::array<const StationaryDriver*, 3> drivers{&residual_driver(), &linear_driver(), &minimization_driver()};
   return drivers;
 }
@@ -39,10 +41,15 @@ const ProblemDriver& driver_for(const Scene& scene) {
   throw std::logic_error("no problem driver claims the scene " + scene.source);
 }
 
-const StationaryDriver& stationary_driver_for(const Scene& scene) {
-  for (const StationaryDriver* d : stationary_drivers())
+const StationaryDriver& basic_stationary_driver_for(const Scene& scene) {
+  for (const StationaryDriver* d : basic_stationary_drivers())
     if (d->claims(scene)) return *d;
   throw std::logic_error("no stationary driver claims the scene " + scene.source);
+}
+
+const StationaryDriver& stationary_driver_for(const Scene& scene) {
+  if (staggered_driver().claims(scene)) return staggered_driver();
+  return basic_stationary_driver_for(scene);
 }
 
 std::span<const std::string_view> driver_tables() {

@@ -1,0 +1,176 @@
+// Alternate (staggered) minimization: a scene with a [staggered] table splits its unknowns into
+// groups solved in turn, each with the others held, until the state stops changing — the
+// phase-field fracture algorithm (u, then the damage), generic for any problem whose [model]
+// outputs a minimization or a residual:
+//
+//   [staggered]
+//   groups = [["u"], ["v"]]    # solved in this order
+//   tolerance = 1e-6           # stop when no group's fields change by more than this (relative)
+//   max_iterations = 200
+//
+// Each group's solve is the problem's own stationary solve (with its bounds), the other groups'
+// dofs fixed. Load steps ([steps]) take it as their stationary solve.
+#include <algorithm>
+#include <cmath>
+
+#include <fmt/format.h>
+#include <fmt/ranges.h>
+
+#include "lmeform/scene_table.hpp"
+#include "problem_registry.hpp"
+#include "stationary.hpp"
+
+namespace lmeform::problems {
+
+const StationaryDriver& basic_stationary_driver_for(const Scene& scene);
+
+namespace {
+
+inline constexpr std::string_view kStaggeredTable = "staggered";
+
+struct StaggeredSettings {
+  std::vector<std::vector<std::string>> groups;
+  double tolerance = 1e-6;
+  int max_iterations = 200;
+  std::string where;
+};
+
+StaggeredSettings read_staggered(const Scene& scene) {
+  const auto t = extension_table(scene, kStaggeredTable, {"groups", "tolerance", "max_iterations"});
+  StaggeredSettings s;
+  s.where = t->where("groups");
+  const toml::node& n = t->require("groups");
+  const auto* a = n.as_array();
+  if (a == nullptr || a->size() < 2) t->fail_key("groups", "must list at least two groups of unknowns, e.g. [[\"u\"], [\"v\"]]");
+  for (std::size_t i = 0; i < a->size(); ++i) {
+    const auto* g = (*a)[i].as_array();
+    if (g == nullptr || g->empty()) t->fail_key("groups", "entry " + std::to_string(i) + " must be a non-empty array of unknown names");
+    std::vector<std::string> names;
+    for (std::size_t k = 0; k < g->size(); ++k) names.push_back(t->string_of("groups[" + std::to_string(i) + "][" + std::to_string(k) + "]", (*g)[k]));
+    s.groups.push_back(std::move(names));
+  }
+  s.tolerance = t->relative_tolerance("tolerance", t->number("tolerance", s.tolerance));
+  s.max_iterations = t->at_least("max_iterations", t->integer("max_iterations", s.max_iterations), 1);
+  return s;
+}
+
+/// The owned dofs of a group's unknowns.
+std::vector<PetscInt> group_dofs(const BoundScene& b, const ProblemSpace& space, const std::vector<std::string>& group) {
+  std::vector<PetscInt> dofs;
+  const int bs = b.layout.dofs_per_node;
+  for (int node = space.disc->owned_begin(); node < space.disc->owned_end(); ++node)
+    for (const std::string& name : group) {
+      const UnknownField& f = b.unknown(name);
+      for (int c = 0; c < f.components; ++c) dofs.push_back(static_cast<PetscInt>(node) * bs + f.offset + c);
+    }
+  std::sort(dofs.begin(), dofs.end());
+  return dofs;
+}
+
+/// The largest change of a group's dofs from `before`, relative to max(1, |u|∞).
+double relative_change(MPI_Comm comm, Vec u, Vec before, const std::vector<PetscInt>& dofs, PetscInt first) {
+  const VecReadView now(u), old(before);
+  double change = 0, size = 1;
+  for (const PetscInt d : dofs) {
+    change = std::max(change, std::abs(now[d - first] - old[d - first]));
+    size = std::max(size, std::abs(now[d - first]));
+  }
+  double both[2] = {change, size};
+  MPI_Allreduce(MPI_IN_PLACE, both, 2, MPI_DOUBLE, MPI_MAX, comm);
+  return both[0] / both[1];
+}
+
+class StaggeredDriver final : public StationaryDriver {
+ public:
+  [[nodiscard]] std::string_view name() const override { return "staggered"; }
+  [[nodiscard]] std::string_view table() const override { return kStaggeredTable; }
+  [[nodiscard]] bool claims(const Scene& scene) const override { return scene.has_extension(kStaggeredTable); }
+  [[nodiscard]] OutputRoles roles(const Scene& scene) const override {
+    if (scene.model.bilinear) throw SceneError(fmt::format("{}: [staggered] alternates the solves of a minimization or a residual; this scene's "
+                                                           "problem is linear",
+                                                           scene.source));
+    return basic_stationary_driver_for(scene).roles(scene);
+  }
+  void solve(MPI_Comm comm, const BoundScene& b, ProblemSpace& space, const ProblemInput& input, Vec u, ProblemResult& result) const override;
+  void residual(const BoundScene& b, ProblemSpace& space, Vec u, const ProblemResult& r, Vec out) const override {
+    basic_stationary_driver_for(*b.scene).residual(b, space, u, r, out);
+  }
+  void describe(const BoundScene& b, const ProblemResult& r, RunReport& report) const override {
+    basic_stationary_driver_for(*b.scene).describe(b, r, report);
+    report.row("staggered", r.message);
+  }
+  void check(const DriverContext& ctx) const override {
+    const StaggeredSettings s = read_staggered(*ctx.scene);
+    const BoundScene b = bind_scene(*ctx.scene, ctx.comm, ctx.log, *this);
+    check_groups(s, b);
+  }
+
+ private:
+  static void check_groups(const StaggeredSettings& s, const BoundScene& b) {
+    std::vector<std::string> seen;
+    for (const auto& group : s.groups)
+      for (const std::string& name : group) {
+        if (!b.layout.has(name)) throw SceneError(fmt::format("{}: '{}' is no unknown of the problem", s.where, name));
+        if (std::find(seen.begin(), seen.end(), name) != seen.end()) throw SceneError(fmt::format("{}: '{}' is in two groups", s.where, name));
+        seen.push_back(name);
+      }
+    for (const auto& f : b.layout.fields)
+      if (std::find(seen.begin(), seen.end(), f.name) == seen.end())
+        throw SceneError(fmt::format("{}: the unknown '{}' is in no group: list every unknown once", s.where, f.name));
+  }
+};
+
+void StaggeredDriver::solve(MPI_Comm comm, const BoundScene& b, ProblemSpace& space, const ProblemInput& input, Vec u,
+                            ProblemResult& result) const {
+  const StaggeredSettings s = read_staggered(*b.scene);
+  check_groups(s, b);
+  const StationaryDriver& inner = basic_stationary_driver_for(*b.scene);
+  const std::vector<PetscInt> prescribed = space.fixed;
+  std::vector<std::vector<PetscInt>> dofs;
+  for (const auto& g : s.groups) dofs.push_back(group_dofs(b, space, g));
+  const PetscInt first = static_cast<PetscInt>(space.disc->owned_begin()) * b.layout.dofs_per_node;
+  PetscVector before = space.primary->create_vector();
+  int iterations = 0, inner_iterations = 0;
+  double change = 0;
+  bool converged = false;
+  std::string failure;
+  for (; iterations < s.max_iterations && !converged && failure.empty(); ++iterations) {
+    change = 0;
+    for (std::size_t g = 0; g < s.groups.size() && failure.empty(); ++g) {
+      // The other groups' dofs are held with the prescribed ones.
+      space.fixed = prescribed;
+      for (std::size_t h = 0; h < s.groups.size(); ++h)
+        if (h != g) space.fixed.insert(space.fixed.end(), dofs[h].begin(), dofs[h].end());
+      std::sort(space.fixed.begin(), space.fixed.end());
+      space.fixed.erase(std::unique(space.fixed.begin(), space.fixed.end()), space.fixed.end());
+      LMEFORM_PETSC_CHECK(VecCopy(u, before));
+      ProblemResult part;
+      inner.solve(comm, b, space, input, u, part);
+      inner_iterations += part.iterations;
+      if (!part.converged) failure = fmt::format("the solve of group {} ({}) did not converge: {}", g, fmt::join(s.groups[g], ", "), part.message);
+      change = std::max(change, relative_change(comm, u, before, dofs[g], first));
+      result.minimization = part.minimization;
+      result.active_lower = part.active_lower;
+      result.active_upper = part.active_upper;
+    }
+    converged = failure.empty() && change <= s.tolerance;
+  }
+  space.fixed = prescribed;
+  result.converged = converged;
+  result.iterations = inner_iterations;
+  result.energy = space.energy_terms.empty() ? std::nan("") : space.energy(u);
+  result.message = !failure.empty() ? failure
+                   : converged      ? fmt::format("converged in {} iterations of the groups (last change {:.2e}, {} Newton steps)", iterations, change,
+                                                  inner_iterations)
+                                    : fmt::format("{} iterations of the groups without the change falling below {:.1e} (last {:.2e})", iterations,
+                                                  s.tolerance, change);
+}
+
+}  // namespace
+
+const StationaryDriver& staggered_driver() {
+  static const StaggeredDriver driver;
+  return driver;
+}
+
+}  // namespace lmeform::problems
