@@ -1,0 +1,159 @@
+// The generic problem drivers and solves of load-stepped, bounded and staggered problems, and the
+// quantities they report: a load-stepped Poisson problem restarted mid-way equals the uninterrupted
+// run; a reaction balances the source; bounds give a known active set; alternate minimization of
+// two coupled fields reaches the monolithic minimizer.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "lmeform/petsc.hpp"
+#include "lmeform/scene.hpp"
+#include "problem_registry.hpp"
+#include "stationary.hpp"
+
+namespace {
+
+using namespace lmeform;
+namespace fs = std::filesystem;
+
+fs::path folder() {
+  const fs::path dir = fs::path(LMEFORM_TEST_TMPDIR) / "steps_and_bounds";
+  fs::create_directories(dir);
+  for (const char* form : {"poisson_mms.form"}) fs::copy_file(fs::path(LMEFORM_DEMOS) / "poisson" / form, dir / form, fs::copy_options::overwrite_existing);
+  fs::copy_file(fs::path(LMEFORM_TEST_DATA) / "two_fields.form", dir / "two_fields.form", fs::copy_options::overwrite_existing);
+  return dir;
+}
+
+/// The manufactured Poisson problem of the demos on 11 x 11 nodes: u = c sin(πx) sin(πy).
+std::string poisson(const std::string& extra) {
+  return "[scene]\nname = \"p\"\ncoordinates = \"cartesian\"\n[domain]\nlower = [0.0, 0.0]\nupper = [1.0, 1.0]\n"
+         "[nodes]\nspacing = 0.1\n[model]\nforms = [\"poisson_mms.form\"]\nbilinear = \"a\"\nlinear = \"l\"\n"
+         "[[dirichlet]]\nboundary = [\"hull\"]\nunknown = \"u\"\nvalue = \"c*sin(pi*x[0])*sin(pi*x[1])\"\n" + extra;
+}
+
+problems::RunReport run(const std::string& name, const std::string& text, const fs::path& output, bool restart = false) {
+  const fs::path path = folder() / name;
+  std::ofstream(path) << text;
+  const Scene scene = load_scene(path, problems::driver_tables());
+  problems::DriverContext ctx;
+  ctx.comm = PETSC_COMM_WORLD;
+  ctx.scene = &scene;
+  ctx.output_directory = output;
+  ctx.restart = restart;
+  return problems::driver_for(scene).run(ctx);
+}
+
+std::string read(const fs::path& p) {
+  std::ifstream in(p);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+const std::string kQuantities = "[quantities]\nflux = { reaction = \"hull\", unknown = \"u\" }\ncentre = { probe = [0.5, 0.5], field = \"u\" }\n";
+
+TEST(Quantities, TheReactionBalancesTheSource) {
+  const problems::RunReport r = run("flux.toml", poisson(kQuantities), "");
+  ASSERT_TRUE(r.success) << r.status;
+  // -Δu = f with f = 2π² sin sin: Σ over the hull of (A u − b) = −Σ_a b_a = −∫ f dx by the basis'
+  // partition of unity, −8 up to the quadrature's error in ∫ f (measured: 1.7e-9 relative).
+  EXPECT_NEAR(r.json["quantities"]["flux"].get<double>(), -8.0, 1e-7);
+  EXPECT_NEAR(r.json["quantities"]["centre"].get<double>(), 1.0, 1e-3);
+}
+
+TEST(LoadSteps, ARestartMidwayEqualsTheUninterruptedRun) {
+  const std::string steps = "[steps]\ncount = 4\nramp = { c = [0.0, 1.0] }\n";
+  const fs::path whole = folder() / "whole", parts = folder() / "parts";
+  fs::remove_all(whole);
+  fs::remove_all(parts);
+  const problems::RunReport a = run("whole.toml", poisson(kQuantities + steps), whole);
+  ASSERT_TRUE(a.success) << a.status;
+  const problems::RunReport first = run("first.toml", poisson(kQuantities + steps + "until = 2\n"), parts);
+  ASSERT_TRUE(first.success) << first.status;
+  EXPECT_NE(first.status.find("steps.until"), std::string::npos) << first.status;
+  const problems::RunReport rest = run("rest.toml", poisson(kQuantities + steps), parts, /*restart=*/true);
+  ASSERT_TRUE(rest.success) << rest.status;
+  // The columns but the wall time agree to every digit.
+  auto strip_times = [](const std::string& csv) {
+    std::string out;
+    std::istringstream in(csv);
+    for (std::string line; std::getline(in, line);) out += line.substr(0, line.rfind(',')) + "\n";
+    return out;
+  };
+  EXPECT_EQ(strip_times(read(whole / "history.csv")), strip_times(read(parts / "history.csv")));
+  // The load is linear in c: the flux at step k is −8 k/4.
+  const auto& last = a.json["steps"].back();
+  EXPECT_EQ(last["step"].get<int>(), 4);
+  EXPECT_NEAR(last["quantities"]["flux"].get<double>(), -8.0, 1e-7);
+  EXPECT_NEAR(a.json["steps"][2]["quantities"]["flux"].get<double>(), 0.5 * last["quantities"]["flux"].get<double>(), 1e-12);
+}
+
+TEST(Bounds, KnownActiveSets) {
+  // The unbounded solution peaks at 1: a bound of 2 holds nowhere, a bound of 0 everywhere (the
+  // source pushes every free dof up), and 0.5 clips the peak.
+  const problems::RunReport none = run("high.toml", poisson(kQuantities + "[bounds]\nu = { upper = 2.0 }\n"), "");
+  const problems::RunReport all = run("zero.toml", poisson(kQuantities + "[bounds]\nu = { upper = 0.0 }\n"), "");
+  const problems::RunReport some = run("half.toml", poisson(kQuantities + "[bounds]\nu = { upper = 0.5 }\n"), "");
+  for (const auto* r : {&none, &all, &some}) ASSERT_TRUE(r->success) << r->status;
+  EXPECT_EQ(none.json["active_set"]["upper"].get<long>(), 0);
+  EXPECT_EQ(all.json["active_set"]["upper"].get<long>(), 81);  // every interior node of 11 x 11
+  const long clipped = some.json["active_set"]["upper"].get<long>();
+  EXPECT_GT(clipped, 0);
+  EXPECT_LT(clipped, 81);
+  // The LME field is a convex combination of its coefficients: at most the bound.
+  EXPECT_LE(some.json["quantities"]["centre"].get<double>(), 0.5 + 1e-12);
+  EXPECT_GT(some.json["quantities"]["centre"].get<double>(), 0.499);
+  // Where the bound is active the problem pushes against it: the flux is weaker than unbounded.
+  EXPECT_GT(some.json["quantities"]["flux"].get<double>(), -8.0);
+}
+
+TEST(Bounds, AStartOutsideTheBoundsAndCrossedBoundsAreRefused) {
+  try {
+    (void)run("outside.toml", poisson("[initial]\nu = 1.0\n[bounds]\nu = { upper = 0.5 }\n"), "");
+    ADD_FAILURE() << "a start above the upper bound was accepted";
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find("the start violates the bounds"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("key 'bounds.u'"), std::string::npos) << e.what();
+  }
+  try {
+    (void)run("crossed.toml", poisson("[bounds]\nu = { lower = 1.0, upper = 0.5 }\n"), "");
+    ADD_FAILURE() << "crossed bounds were accepted";
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find("lies above upper"), std::string::npos) << e.what();
+  }
+}
+
+std::string two_fields(const std::string& extra) {
+  return "[scene]\nname = \"two\"\ncoordinates = \"cartesian\"\n[domain]\nlower = [0.0, 0.0]\nupper = [1.0, 1.0]\n"
+         "[nodes]\nspacing = 0.1\n[model]\nforms = [\"two_fields.form\"]\n"
+         "[[dirichlet]]\nboundary = [\"hull\"]\nunknown = \"u\"\nvalue = 0.0\n"
+         "[[dirichlet]]\nboundary = [\"hull\"]\nunknown = \"v\"\nvalue = 0.0\n"
+         "[quantities]\nmean_v = { integral = \"v\" }\n" + extra;
+}
+
+TEST(Staggered, AlternateMinimizationReachesTheMonolithicMinimizer) {
+  const problems::RunReport mono = run("mono.toml", two_fields(""), "");
+  const problems::RunReport alternate = run("alternate.toml", two_fields("[staggered]\ngroups = [[\"u\"], [\"v\"]]\ntolerance = 1e-10\n"), "");
+  ASSERT_TRUE(mono.success) << mono.status;
+  ASSERT_TRUE(alternate.success) << alternate.status;
+  EXPECT_NEAR(alternate.json["energy"].get<double>(), mono.json["energy"].get<double>(), 1e-12);
+  EXPECT_NEAR(alternate.json["quantities"]["mean_v"].get<double>(), mono.json["quantities"]["mean_v"].get<double>(), 1e-8);
+  try {
+    (void)run("groups.toml", two_fields("[staggered]\ngroups = [[\"u\"], [\"w\"]]\n"), "");
+    ADD_FAILURE() << "a group naming no unknown was accepted";
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find("'w' is no unknown"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  ::testing::InitGoogleTest(&argc, argv);
+  lmeform::PetscSession session(&argc, &argv);
+  return RUN_ALL_TESTS();
+}
