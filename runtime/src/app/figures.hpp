@@ -5,6 +5,7 @@
 
 #include <filesystem>
 #include <string>
+#include <vector>
 
 namespace lmeform::app {
 
@@ -19,7 +20,11 @@ struct FigureResult {
 [[nodiscard]] FigureResult plot_field(const std::filesystem::path& h5, const std::filesystem::path& png, const std::string& field,
                                       bool mirror);
 
-/// The installed plotting script, or empty when it cannot be found.
-[[nodiscard]] std::filesystem::path plot_script();
+/// Draws columns `ys` of a load-stepped run's history.csv against column `x` as a PNG. Never throws.
+[[nodiscard]] FigureResult plot_history(const std::filesystem::path& csv, const std::filesystem::path& png, const std::string& x,
+                                        const std::vector<std::string>& ys);
+
+/// An installed plotting script (plot_field.py, plot_history.py), or empty when it cannot be found.
+[[nodiscard]] std::filesystem::path installed_script(const std::string& name);
 
 }  // namespace lmeform::app

@@ -39,13 +39,16 @@ int main(int argc, char** argv) {
   run_cmd->add_flag("--restart", run_options.restart, "resume a run that writes checkpoints from the last one in the output directory");
   run_cmd->add_flag("--check", run_options.check, "bind the scene to its forms and check it, without solving");
   run_cmd->allow_extras();  // PETSc options (-ksp_type gmres, -snes_monitor, ...) pass through
-  auto* plot_cmd = cli.add_subcommand("plot", "Draw a scalar field of a 2D field file (.h5) as a PNG (needs python3-matplotlib)");
-  std::string plot_file, plot_png, plot_field_name = "phi";
+  auto* plot_cmd = cli.add_subcommand("plot", "Draw a field file (.h5) or columns of a history (.csv) as a PNG (needs python3-matplotlib)");
+  std::string plot_file, plot_png, plot_field_name = "phi", plot_x;
+  std::vector<std::string> plot_y;
   bool plot_mirror = false;
-  plot_cmd->add_option("file", plot_file, "field file written by lmeform run (.h5)")->required()->check(CLI::ExistingFile);
+  plot_cmd->add_option("file", plot_file, "field file (.h5) or history.csv written by lmeform run")->required()->check(CLI::ExistingFile);
   plot_cmd->add_option("png", plot_png, "the figure (default: the file with .png)");
-  plot_cmd->add_option("--field", plot_field_name, "the scalar field to draw (default: phi)");
-  plot_cmd->add_flag("--mirror", plot_mirror, "reflect r -> -r: the full cross-section of an axisymmetric field");
+  plot_cmd->add_option("--field", plot_field_name, "field file: the scalar field to draw (default: phi)");
+  plot_cmd->add_flag("--mirror", plot_mirror, "field file: reflect r -> -r, the full cross-section of an axisymmetric field");
+  plot_cmd->add_option("--x", plot_x, "history: the column on the horizontal axis");
+  plot_cmd->add_option("--y", plot_y, "history: a column on the vertical axis (repeatable)");
 #ifdef LMEFORM_HAVE_CHECK
   CheckCommandOptions check_options;
   auto* check_cmd = add_check_subcommand(cli, check_options);
@@ -57,7 +60,13 @@ int main(int argc, char** argv) {
   }
   if (plot_cmd->parsed()) {
     const std::string png = plot_png.empty() ? std::filesystem::path(plot_file).replace_extension(".png").string() : plot_png;
-    const app::FigureResult r = app::plot_field(plot_file, png, plot_field_name, plot_mirror);
+    const bool history = plot_file.ends_with(".csv");
+    if (history && (plot_x.empty() || plot_y.empty())) {
+      std::cerr << "lmeform plot: a history needs --x COLUMN and --y COLUMN\n";
+      return 1;
+    }
+    const app::FigureResult r = history ? app::plot_history(plot_file, png, plot_x, plot_y)
+                                        : app::plot_field(plot_file, png, plot_field_name, plot_mirror);
     if (r.written) std::cout << png << "\n";
     else std::cerr << "lmeform plot: " << r.warning << "\n";
     return r.written ? 0 : 1;
