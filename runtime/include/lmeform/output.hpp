@@ -83,6 +83,28 @@ struct TimeSeriesStep {
 /// it as one data set with a time slider. The steps' own geometry is used, so moving nodes move.
 void write_xdmf_time_series(const std::filesystem::path& path, std::span<const TimeSeriesStep> steps);
 
+/// A time series being written: each step's fields as `series/<name>_<step>.h5` in a folder, and
+/// the collection `<name>.xmf` over all steps rewritten after each (a run that stops keeps a
+/// readable series).
+class TimeSeriesWriter {
+ public:
+  TimeSeriesWriter(std::filesystem::path directory, std::string name)
+      : directory_(std::move(directory)), name_(std::move(name)) {}
+  /// Writes one step at `time`.
+  void write(double time, int step, const NodeSet& nodes, const BackgroundCells& cells, const FieldViews& fields,
+             const OutputAttributes& attributes);
+  /// The file of a step, relative to the folder.
+  [[nodiscard]] std::filesystem::path file_of(int step) const;
+  /// The steps written so far (a restart puts back those of the run it continues).
+  [[nodiscard]] const std::vector<TimeSeriesStep>& steps() const noexcept { return steps_; }
+  void restore(std::vector<TimeSeriesStep> steps) { steps_ = std::move(steps); }
+
+ private:
+  std::filesystem::path directory_;
+  std::string name_;
+  std::vector<TimeSeriesStep> steps_;
+};
+
 /// Writes a small text file (JSON, CSV, a table) atomically: "<path>.tmp", flushed and fsynced,
 /// then renamed onto `path`. On failure the temporary is removed and std::runtime_error names the
 /// path and the OS error; an existing `path` is left as it was.

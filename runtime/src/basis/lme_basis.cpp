@@ -209,6 +209,17 @@ struct Lme {
   }
 
   // Safeguarded Newton on lambda^ minimising ln Z; leaves p at the solution in ws.p.
+  /// The multipliers λ at x for the neighbours `list`: the point scaled by the local length (len),
+  /// its geometry checked, the Newton iteration on ln Z (ln Z at the solution in lnz).
+  static V solve(const double* coords, const double* beta, std::span<const double> x, std::span<const int> list, LmeWorkspace& ws,
+                 const LmeOptions& opt, double& len, double& lnz) {
+    const int n = static_cast<int>(list.size());
+    len = prepare(coords, beta, x, list, ws);
+    check_geometry(x, n, len, ws, opt);
+    lnz = 0.0;
+    return newton(x, n, ws, opt, lnz);
+  }
+
   static V newton(std::span<const double> x, int n, LmeWorkspace& ws, const LmeOptions& opt, double& lnz) {
     const double* y = ws.y.data();
     const double* c = ws.c.data();
@@ -623,10 +634,8 @@ void LmeBasis::evaluate(std::span<const double> x, std::span<const int> nbrs, in
     constexpr int D = decltype(dc)::value;
     using K = Lme<D>;
     const int ni = static_cast<int>(n_all);
-    const double len = K::prepare(coords_data(), beta_data(), x, list, ws);
-    K::check_geometry(x, ni, len, ws, options_);
-    double lnz = 0.0;
-    const Vec<D> lam = K::newton(x, ni, ws, options_, lnz);
+    double len = 0.0, lnz = 0.0;
+    const Vec<D> lam = K::solve(coords_data(), beta_data(), x, list, ws, options_, len, lnz);
     if (order == 0) {
       std::copy(ws.p.begin(), ws.p.begin() + static_cast<std::ptrdiff_t>(n_all), out);
       return;
@@ -675,10 +684,8 @@ void LmeBasis::solve_record(std::span<const double> x, std::span<const int> nbrs
     constexpr int D = decltype(dc)::value;
     using K = Lme<D>;
     const int ni = static_cast<int>(n_all);
-    const double len = K::prepare(coords_data(), beta_data(), x, list, ws);
-    K::check_geometry(x, ni, len, ws, options_);
-    double lnz = 0.0;
-    const Vec<D> lam = K::newton(x, ni, ws, options_, lnz);
+    double len = 0.0, lnz = 0.0;
+    const Vec<D> lam = K::solve(coords_data(), beta_data(), x, list, ws, options_, len, lnz);
     K::build_record(x, ni, ws, lam, lnz, order, options_.min_rcond, record.data());
     K::unscale_record(order, len, record.data());
   });

@@ -290,31 +290,27 @@ QuadratureRule gauss_legendre(int n) {
   rule.degree = 2 * n - 1;
   rule.points.resize(static_cast<std::size_t>(n));
   rule.weights.resize(static_cast<std::size_t>(n));
+  // P_n(x) and P_n'(x) by the three-term recurrence.
+  const auto legendre = [n](Real x, Real& dp) {
+    Real p0 = 1, p1 = x;
+    for (int k = 2; k <= n; ++k) {
+      const Real pk = ((2 * k - 1) * x * p1 - (k - 1) * p0) / k;
+      p0 = p1;
+      p1 = pk;
+    }
+    dp = n * (x * p1 - p0) / (x * x - 1);
+    return p1;
+  };
   for (int i = 0; i < n; ++i) {
-    // Roots of P_n on [-1, 1] by Newton from the Chebyshev-like estimate; the recurrence gives P_n and P_n'.
+    // Roots of P_n on [-1, 1] by Newton from the Chebyshev-like estimate.
     Real x = std::cos(std::numbers::pi_v<Real> * (i + Real(0.75)) / (n + Real(0.5)));
     Real dp = 1;
     for (int it = 0; it < 100; ++it) {
-      Real p0 = 1, p1 = x;
-      for (int k = 2; k <= n; ++k) {
-        const Real pk = ((2 * k - 1) * x * p1 - (k - 1) * p0) / k;
-        p0 = p1;
-        p1 = pk;
-      }
-      dp = n * (x * p1 - p0) / (x * x - 1);
-      const Real dx = p1 / dp;
+      const Real dx = legendre(x, dp) / dp;
       x -= dx;
       if (std::abs(dx) < 1e-19L) break;
     }
-    {
-      Real p0 = 1, p1 = x;
-      for (int k = 2; k <= n; ++k) {
-        const Real pk = ((2 * k - 1) * x * p1 - (k - 1) * p0) / k;
-        p0 = p1;
-        p1 = pk;
-      }
-      dp = n * (x * p1 - p0) / (x * x - 1);
-    }
+    (void)legendre(x, dp);
     const Real w = 2 / ((1 - x * x) * dp * dp);
     // Map [-1, 1] -> [0, 1]; points increase with i.
     rule.points[static_cast<std::size_t>(i)] = static_cast<double>((1 - x) / 2);

@@ -5,6 +5,8 @@
 #include "io_detail.hpp"
 #include "lmeform/output.hpp"
 
+#include <cstdio>
+
 namespace lmeform::io_detail {
 namespace {
 
@@ -115,6 +117,28 @@ void write_xdmf_time_series(const std::filesystem::path& path, std::span<const T
   items.reserve(steps.size());
   for (const TimeSeriesStep& s : steps) items.push_back({s.time, s.h5_file.generic_string(), s.dim, s.nodes, s.cells, s.fields});
   write_text_atomically(path, io_detail::xdmf_time_series_document(items));
+}
+
+std::filesystem::path TimeSeriesWriter::file_of(int step) const {
+  char buffer[32];
+  std::snprintf(buffer, sizeof buffer, "_%06d.h5", step);
+  return std::filesystem::path("series") / (name_ + buffer);
+}
+
+void TimeSeriesWriter::write(double time, int step, const NodeSet& nodes, const BackgroundCells& cells, const FieldViews& fields,
+                             const OutputAttributes& attributes) {
+  const std::filesystem::path file = file_of(step);
+  std::filesystem::create_directories(directory_ / "series");
+  write_field_hdf5(directory_ / file, nodes, cells, fields, attributes);
+  TimeSeriesStep entry;
+  entry.time = time;
+  entry.h5_file = file;
+  entry.dim = nodes.dim;
+  entry.nodes = nodes.size();
+  entry.cells = cells.size();
+  for (const auto& [field, view] : fields) entry.fields.emplace_back(field, view.components);
+  steps_.push_back(std::move(entry));
+  if (nodes.dim >= 2) write_xdmf_time_series(directory_ / (name_ + ".xmf"), steps_);
 }
 
 }  // namespace lmeform

@@ -69,6 +69,7 @@ DynamicsIntegrator::DynamicsIntegrator(MPI_Comm comm, const Scene& scene, const 
     checkpoint_path_ = output->directory / (output->name + "_checkpoint.h5");
     quadrature_path_ = output->directory / (output->name + "_checkpoint_quadrature.h5");
     history_path_ = output->directory / (output->name + "_history.json");
+    series_.emplace(output->directory, output->name);
   }
 }
 

@@ -118,7 +118,7 @@ class DynamicsIntegrator {
   double t_ = 0, dt_ = 0, target_decrement_ = 0;
   int step_ = 0, steps_since_reset_ = 0, steps_since_remesh_ = 0;
   std::size_t next_report_ = 0;
-  std::vector<TimeSeriesStep> series_;
+  std::optional<TimeSeriesWriter> series_;  ///< with an output folder
   std::vector<double> velocity_;
   std::filesystem::path checkpoint_path_, quadrature_path_, history_path_;
 };

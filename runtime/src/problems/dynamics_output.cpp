@@ -60,19 +60,8 @@ void DynamicsIntegrator::write_series(Vec state) {
   fields.emplace("displacement", FieldView{displacement, dim_});
   fields.emplace("velocity", FieldView{v, dim_});
   for (const auto& [name, values] : scalar_fields_) fields.emplace(name, FieldView{values, 1});
-  const std::string file = fmt::format("series/{}_{:06d}.h5", output_->name, step_);
-  fs::create_directories(output_->directory / "series");
-  write_field_hdf5(output_->directory / file, NodeSet(dim_, positions), run_.cells, fields,
-                   {{"t_star", t_}, {"step", static_cast<std::int64_t>(step_)}, {"energy", run_.history.back().energy}});
-  TimeSeriesStep entry;
-  entry.time = t_;
-  entry.h5_file = file;
-  entry.dim = dim_;
-  entry.nodes = n_nodes_;
-  entry.cells = run_.cells.size();
-  for (const auto& [name, view] : fields) entry.fields.emplace_back(name, view.components);
-  series_.push_back(entry);
-  if (dim_ >= 2) write_xdmf_time_series(output_->directory / (output_->name + ".xmf"), series_);
+  series_->write(t_, step_, NodeSet(dim_, positions), run_.cells, fields,
+                 {{"t_star", t_}, {"step", static_cast<std::int64_t>(step_)}, {"energy", run_.history.back().energy}});
 }
 
 nlohmann::json DynamicsIntegrator::history_json() const {
@@ -96,7 +85,7 @@ nlohmann::json DynamicsIntegrator::history_json() const {
                            {"resets", s.resets},
                            {"wall_s", s.wall_s}});
   js["series"] = nlohmann::json::array();
-  for (const auto& s : series_)
+  for (const auto& s : series_ ? series_->steps() : std::vector<TimeSeriesStep>{})
     js["series"].push_back({{"time", s.time}, {"file", s.h5_file.generic_string()}, {"nodes", s.nodes}, {"cells", s.cells}});
   return js;
 }
@@ -193,6 +182,7 @@ void DynamicsIntegrator::read_history(const fs::path& path) {
     d.wall_s = s.at("wall_s");
     run_.history.push_back(d);
   }
+  std::vector<TimeSeriesStep> series;
   for (const auto& s : js.at("series")) {
     if (s.at("time").get<double>() > t_) break;
     TimeSeriesStep e;
@@ -204,8 +194,9 @@ void DynamicsIntegrator::read_history(const fs::path& path) {
     e.fields = {{"displacement", dim_}, {"velocity", dim_}};
     for (const auto& [name, values] : scalar_fields_) e.fields.emplace_back(name, 1);
     std::sort(e.fields.begin(), e.fields.end());
-    series_.push_back(e);
+    series.push_back(e);
   }
+  series_->restore(std::move(series));
 }
 
 void DynamicsIntegrator::resume() {

@@ -10,7 +10,7 @@
 #include "linear_system.hpp"
 #include "problem_registry.hpp"
 #include "stationary.hpp"
-#include "variational_inequality.hpp"
+#include "nonlinear_solve.hpp"
 
 namespace lmeform::problems {
 
@@ -71,7 +71,7 @@ class LinearDriver final : public StationaryDriver {
         LMEFORM_PETSC_CHECK(VecAXPY(F, -1.0, rhs));
       };
       const auto jacobian = [&](Vec, Mat M) { LMEFORM_PETSC_CHECK(MatCopy(A, M, SAME_NONZERO_PATTERN)); };
-      take_bounded_solve(solve_bounded(comm, space, u, b.scene->solver, residual, jacobian, J), result);
+      take_nonlinear_solve(solve_nonlinear(comm, space, u, b.scene->solver, residual, jacobian, J), result);
       result.energy = std::numeric_limits<double>::quiet_NaN();
       return;
     }

@@ -122,7 +122,7 @@ class LoadStepper {
   double lambda_ = 0;           ///< the converged load
   int first_step_ = 0;
   std::vector<double> multipliers_;
-  std::vector<TimeSeriesStep> series_;
+  std::optional<TimeSeriesWriter> series_;  ///< with an output folder
   LoadStepRun run_;
 };
 
@@ -133,6 +133,7 @@ void LoadStepper::setup() {
   set_load(0.0);  // the expressions of the start and the Dirichlet values at step 0
   space_ = build_problem_space(ctx_.comm, bound_, input_);
   cells_ = delaunay(input_.nodes);
+  if (!ctx_.output_directory.empty()) series_.emplace(ctx_.output_directory, ctx_.scene->name);
   u_ = space_.primary->create_vector();
   trial_ = space_.primary->create_vector();
   set_from_original(*space_.disc, space_.state, bound_.layout.dofs_per_node, u_);
@@ -235,19 +236,14 @@ void LoadStepper::write_outputs(int step) {
   const std::vector<double> state = to_original(*space_.disc, u_, bound_.layout.dofs_per_node);
   if (rank_ != 0) return;
   std::vector<std::vector<double>> values;
+  values.reserve(bound_.layout.fields.size());  // the views below point into it
   FieldViews fields;
   for (const auto& f : bound_.layout.fields) {
     values.push_back(bound_.layout.values(state, f));
     fields.emplace(f.name, FieldView{values.back(), f.components});
   }
-  const std::string file = fmt::format("series/{}_{:06d}.h5", ctx_.scene->name, step);
-  fs::create_directories(ctx_.output_directory / "series");
   const OutputAttributes attributes{{"step", static_cast<std::int64_t>(step)}, {"load", lambda_}};
-  write_field_hdf5(ctx_.output_directory / file, input_.nodes, cells_, fields, attributes);
-  TimeSeriesStep entry{lambda_, file, bound_.dim, input_.nodes.size(), cells_.size(), {}};
-  for (const auto& [name, view] : fields) entry.fields.emplace_back(name, view.components);
-  series_.push_back(entry);
-  if (bound_.dim >= 2) write_xdmf_time_series(path(".xmf"), series_);
+  series_->write(lambda_, step, input_.nodes, cells_, fields, attributes);
   write_history();
   if (settings_.checkpoint_every > 0 && (step % settings_.checkpoint_every == 0 || step == settings_.until))
     write_field_hdf5(path("_checkpoint.h5"), input_.nodes, cells_, {{"state", FieldView{state, bound_.layout.dofs_per_node}}}, attributes);
@@ -267,6 +263,7 @@ void LoadStepper::resume() {
   set_load(lambda_);
   std::ifstream in(history);
   const nlohmann::ordered_json js = nlohmann::ordered_json::parse(in);
+  std::vector<TimeSeriesStep> series;
   for (const auto& row : js.at("steps")) {
     if (row.at("step").get<int>() > step) break;
     LoadStep s;
@@ -279,9 +276,12 @@ void LoadStepper::resume() {
     for (const auto& [name, v] : constants.items()) s.constants.emplace_back(name, v.is_null() ? NAN : v.get<double>());
     for (const auto& [name, v] : quantities.items()) s.quantities.emplace_back(name, v.is_null() ? NAN : v.get<double>());
     run_.history.push_back(s);
-    series_.push_back({s.lambda, fmt::format("series/{}_{:06d}.h5", ctx_.scene->name, s.step), bound_.dim, input_.nodes.size(), cells_.size(), {}});
-    for (const auto& f : bound_.layout.fields) series_.back().fields.emplace_back(f.name, f.components);
+    TimeSeriesStep entry{s.lambda, series_->file_of(s.step), bound_.dim, input_.nodes.size(), cells_.size(), {}};
+    for (const auto& f : bound_.layout.fields) entry.fields.emplace_back(f.name, f.components);
+    std::sort(entry.fields.begin(), entry.fields.end());
+    series.push_back(std::move(entry));
   }
+  series_->restore(std::move(series));
   first_step_ = step + 1;
   if (ctx_.log != nullptr) *ctx_.log << fmt::format("resumed from {} at step {} (load {:.6g})\n", checkpoint.string(), step, lambda_);
 }

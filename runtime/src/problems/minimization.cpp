@@ -3,7 +3,7 @@
 #include <fmt/format.h>
 
 #include "lmeform/constrained_minimizer.hpp"
-#include "variational_inequality.hpp"
+#include "nonlinear_solve.hpp"
 
 namespace lmeform::problems {
 
@@ -21,7 +21,7 @@ void solve_bounded_minimization(MPI_Comm comm, const BoundScene& b, ProblemSpace
     for (Assembler* term : space.energy_terms) terms.push_back({term, 1.0});
     space.primary->matrix_sum(x, terms, A);
   };
-  take_bounded_solve(solve_bounded(comm, space, u, b.scene->solver, gradient, hessian, J), result);
+  take_nonlinear_solve(solve_nonlinear(comm, space, u, b.scene->solver, gradient, hessian, J), result);
   result.energy = space.energy(u);
   result.minimization.energy = result.energy;
   result.minimization.converged = result.converged;

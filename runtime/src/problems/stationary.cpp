@@ -13,7 +13,7 @@
 #include "lmeform/stopwatch.hpp"
 #include "problem_registry.hpp"
 #include "quantities.hpp"
-#include "variational_inequality.hpp"
+#include "nonlinear_solve.hpp"
 
 namespace lmeform::problems {
 
@@ -125,7 +125,7 @@ ReportFields state_fields(const StateLayout& layout, bool axisymmetric, const Pr
   return out;
 }
 
-void take_bounded_solve(const BoundedSolve& solve, ProblemResult& result) {
+void take_nonlinear_solve(const NonlinearSolve& solve, ProblemResult& result) {
   result.converged = solve.converged;
   result.message = solve.message;
   result.iterations = solve.iterations;

@@ -64,8 +64,8 @@ struct ProblemResult {
 /// a figure of that unknown when it is scalar.
 [[nodiscard]] ReportFields state_fields(const StateLayout& layout, bool axisymmetric, const ProblemResult& result);
 
-/// A bounded solve's outcome in a result.
-void take_bounded_solve(const struct BoundedSolve& solve, ProblemResult& result);
+/// A nonlinear solve's outcome in a result.
+void take_nonlinear_solve(const struct NonlinearSolve& solve, ProblemResult& result);
 
 /// The closing rows and JSON keys of a solve of equations (residual, linear): the solver's message,
 /// iterations and residual.

@@ -1,4 +1,4 @@
-#include "variational_inequality.hpp"
+#include "nonlinear_solve.hpp"
 
 #include <petscsnes.h>
 
@@ -10,14 +10,14 @@
 // lmeform::PetscError, not the PETSc function PETSc's macros call.
 namespace {
 
-struct ViContext {
+struct SnesContext {
   const std::function<void(Vec, Vec)>* residual;
   const std::function<void(Vec, Mat)>* jacobian;
   const std::vector<PetscInt>* fixed;
 };
 
-PetscErrorCode vi_residual(SNES, Vec u, Vec r, void* ctx) {
-  auto* c = static_cast<ViContext*>(ctx);
+PetscErrorCode snes_residual(SNES, Vec u, Vec r, void* ctx) {
+  auto* c = static_cast<SnesContext*>(ctx);
   try {
     (*c->residual)(u, r);
     // Fixed dofs hold their values: their equations u_i − g_i = 0 hold from the start.
@@ -31,8 +31,8 @@ PetscErrorCode vi_residual(SNES, Vec u, Vec r, void* ctx) {
   return 0;
 }
 
-PetscErrorCode vi_jacobian(SNES, Vec u, Mat J, Mat, void* ctx) {
-  auto* c = static_cast<ViContext*>(ctx);
+PetscErrorCode snes_jacobian(SNES, Vec u, Mat J, Mat, void* ctx) {
+  auto* c = static_cast<SnesContext*>(ctx);
   try {
     (*c->jacobian)(u, J);
     PetscCall(MatZeroRowsColumns(J, static_cast<PetscInt>(c->fixed->size()), c->fixed->data(), 1.0, nullptr, nullptr));
@@ -62,16 +62,18 @@ std::pair<long, long> active_set(const ProblemSpace& space, Vec u) {
 
 }  // namespace
 
-BoundedSolve solve_bounded(MPI_Comm comm, ProblemSpace& space, Vec u, const SceneSolver& solver,
-                           const std::function<void(Vec, Vec)>& residual, const std::function<void(Vec, Mat)>& jacobian, Mat J) {
-  ViContext ctx{&residual, &jacobian, &space.fixed};
+NonlinearSolve solve_nonlinear(MPI_Comm comm, ProblemSpace& space, Vec u, const SceneSolver& solver,
+                               const std::function<void(Vec, Vec)>& residual, const std::function<void(Vec, Mat)>& jacobian, Mat J) {
+  SnesContext ctx{&residual, &jacobian, &space.fixed};
   PetscNonlinearSolver snes;
   LMEFORM_PETSC_CHECK(SNESCreate(comm, snes.out()));
-  LMEFORM_PETSC_CHECK(SNESSetType(snes, SNESVINEWTONRSLS));
   PetscVector r = space.primary->create_vector();
-  LMEFORM_PETSC_CHECK(SNESSetFunction(snes, r, vi_residual, &ctx));
-  LMEFORM_PETSC_CHECK(SNESSetJacobian(snes, J, J, vi_jacobian, &ctx));
-  LMEFORM_PETSC_CHECK(SNESVISetVariableBounds(snes, space.lower_bound, space.upper_bound));
+  LMEFORM_PETSC_CHECK(SNESSetFunction(snes, r, snes_residual, &ctx));
+  LMEFORM_PETSC_CHECK(SNESSetJacobian(snes, J, J, snes_jacobian, &ctx));
+  if (space.bounded()) {
+    LMEFORM_PETSC_CHECK(SNESSetType(snes, SNESVINEWTONRSLS));
+    LMEFORM_PETSC_CHECK(SNESVISetVariableBounds(snes, space.lower_bound, space.upper_bound));
+  }
   KSP ksp = nullptr;
   LMEFORM_PETSC_CHECK(SNESGetKSP(snes, &ksp));
   configure_direct_solver(ksp);
@@ -84,13 +86,15 @@ BoundedSolve solve_bounded(MPI_Comm comm, ProblemSpace& space, Vec u, const Scen
   LMEFORM_PETSC_CHECK(SNESGetConvergedReason(snes, &reason));
   LMEFORM_PETSC_CHECK(SNESGetIterationNumber(snes, &its));
   LMEFORM_PETSC_CHECK(SNESGetFunctionNorm(snes, &norm));
-  BoundedSolve out;
+  NonlinearSolve out;
   out.converged = reason > 0;
   out.iterations = static_cast<int>(its);
   out.residual_norm = norm;
-  std::tie(out.active_lower, out.active_upper) = active_set(space, u);
-  out.message = fmt::format("SNES VI {} after {} Newton steps, |R| = {:.3e}; active set: {} dofs at the lower bound, {} at the upper",
-                            SNESConvergedReasons[reason], its, norm, out.active_lower, out.active_upper);
+  out.message = fmt::format("SNES {}{} after {} Newton steps, |R| = {:.3e}", space.bounded() ? "VI " : "", SNESConvergedReasons[reason], its, norm);
+  if (space.bounded()) {
+    std::tie(out.active_lower, out.active_upper) = active_set(space, u);
+    out.message += fmt::format("; active set: {} dofs at the lower bound, {} at the upper", out.active_lower, out.active_upper);
+  }
   return out;
 }
 

@@ -1,0 +1,33 @@
+// F(u) = 0 by Newton's method (PETSc SNES, MUMPS LU by default, the options database passed
+// through), the fixed dofs held. Under the problem space's bounds it is a variational inequality:
+// F = 0 where lower < u < upper, F pushing outward where u is at a bound, solved by PETSc's
+// reduced-space active-set Newton (SNESVINEWTONRSLS). A residual problem's F is R, a bounded
+// minimization's ∇E (Jacobian ∇²E), a bounded linear problem's A u − b (Jacobian A).
+#pragma once
+
+#include <mpi.h>
+
+#include <functional>
+#include <string>
+
+#include "lmeform/petsc.hpp"
+#include "lmeform/scene.hpp"
+#include "problem_space.hpp"
+
+namespace lmeform::problems {
+
+struct NonlinearSolve {
+  bool converged = false;
+  std::string message;
+  int iterations = 0;
+  double residual_norm = 0;
+  long active_lower = -1, active_upper = -1;  ///< bounded: free dofs at their lower / upper bound at the end
+};
+
+/// Solves from u (Dirichlet values imposed), the fixed dofs held, under space's bounds if it has
+/// them. `residual(u, F)` and `jacobian(u, J)` assemble the problem without boundary conditions;
+/// J is their matrix.
+[[nodiscard]] NonlinearSolve solve_nonlinear(MPI_Comm comm, ProblemSpace& space, Vec u, const SceneSolver& solver,
+                                         const std::function<void(Vec, Vec)>& residual, const std::function<void(Vec, Mat)>& jacobian, Mat J);
+
+}  // namespace lmeform::problems
