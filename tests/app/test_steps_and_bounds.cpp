@@ -127,6 +127,24 @@ TEST(Bounds, AStartOutsideTheBoundsAndCrossedBoundsAreRefused) {
   }
 }
 
+TEST(Dirichlet, TwoEntriesThatDisagreeAtACornerAreRefused) {
+  const std::string scene = "[scene]\nname = \"p\"\ncoordinates = \"cartesian\"\n[domain]\nlower = [0.0, 0.0]\nupper = [1.0, 1.0]\n"
+                            "[nodes]\nspacing = 0.1\n[model]\nforms = [\"poisson_mms.form\"]\nbilinear = \"a\"\nlinear = \"l\"\n"
+                            "[[dirichlet]]\nboundary = \"x_min\"\nunknown = \"u\"\nvalue = 0.0\n"
+                            "[[dirichlet]]\nboundary = \"y_min\"\nunknown = \"u\"\nvalue = \"x[0]\"\n"
+                            "[[dirichlet]]\nboundary = [\"x_max\", \"y_max\"]\nunknown = \"u\"\nvalue = 0.0\n";
+  // (0, 0) gets 0 from both: accepted; (1, 0) gets 1 from y_min and 0 from x_max: refused.
+  try {
+    (void)run("corner.toml", scene, "");
+    ADD_FAILURE() << "conflicting corner values were accepted";
+  } catch (const SceneError& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("key 'dirichlet[1]'"), std::string::npos) << m;
+    EXPECT_NE(m.find("key 'dirichlet[2]'"), std::string::npos) << m;
+    EXPECT_NE(m.find("(1, 0)"), std::string::npos) << m;
+  }
+}
+
 std::string two_fields(const std::string& extra) {
   return "[scene]\nname = \"two\"\ncoordinates = \"cartesian\"\n[domain]\nlower = [0.0, 0.0]\nupper = [1.0, 1.0]\n"
          "[nodes]\nspacing = 0.1\n[model]\nforms = [\"two_fields.form\"]\n"

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 
 #include <fmt/format.h>
 #include <fmt/ranges.h>
@@ -130,13 +131,25 @@ void impose_dirichlet(const BoundScene& b, const ProblemInput& input, ProblemSpa
     throw std::invalid_argument(fmt::format("build_problem_space: node sets for {} Dirichlet entries, the scene has {}",
                                             space.dirichlet_nodes.size(), b.dirichlet.size()));
   std::vector<double> value(3);
+  // Two entries that fix one dof (a corner shared by two parts) must agree: which of two values a
+  // corner takes is the user's decision, not the order of the entries.
+  std::map<std::pair<int, int>, std::size_t> fixed_by;
   for (std::size_t i = 0; i < b.dirichlet.size(); ++i) {
     const BoundDirichlet& d = b.dirichlet[i];
     for (const int n : space.dirichlet_nodes[i]) {
       dirichlet_value(b, d, nodes.point(std::size_t(n)), value);
       for (const int c : d.components) {
-        state[std::size_t(n) * std::size_t(bs) + std::size_t(d.field.offset + c)] = value[d.field.components == 1 ? 0 : std::size_t(c)];
-        space.fixed_pairs.emplace_back(n, d.field.offset + c);
+        double& slot = state[std::size_t(n) * std::size_t(bs) + std::size_t(d.field.offset + c)];
+        const double v = value[d.field.components == 1 ? 0 : std::size_t(c)];
+        const auto [it, first] = fixed_by.emplace(std::pair{n, d.field.offset + c}, i);
+        if (!first && std::abs(slot - v) > 1e-12 * std::max({1.0, std::abs(slot), std::abs(v)}))
+          throw SceneError(fmt::format("{} and {} prescribe {}{} at the node ({}) as {} and {}: a node on both parts needs one value "
+                                       "(give the entries equal values there, or leave the corner to one of them)",
+                                       b.dirichlet[it->second].where, d.where, d.field.name,
+                                       d.field.components == 1 ? std::string() : fmt::format("[{}]", c),
+                                       fmt::join(nodes.point(std::size_t(n)), ", "), slot, v));
+        slot = v;
+        if (first) space.fixed_pairs.emplace_back(n, d.field.offset + c);
       }
     }
   }
