@@ -25,6 +25,10 @@ namespace lmeform {
 inline constexpr double kLargestSceneNumber = 1e100;
 /// The smallest relative tolerance a scene may ask for: about 50 machine epsilons.
 inline constexpr double kSmallestRelativeTolerance = 1e-14;
+/// The most nodes a node set may have: node indices are 32-bit integers.
+inline constexpr double kLargestNodeCount = 2147483647.0;
+/// The most intervals per axis of a uniform grid from a spacing (uniform_grid refuses more).
+inline constexpr double kLargestGridIntervals = 1e7;
 
 namespace scene_detail {
 

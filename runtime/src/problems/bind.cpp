@@ -1,12 +1,18 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
+#include <span>
+#include <string>
 
 #include <fmt/format.h>
 #include <fmt/ranges.h>
 
 #include "bound_scene.hpp"
+#include "lmeform/node_sets.hpp"
+#include "lmeform/scene_table.hpp"
 #include "problem_registry.hpp"
+#include "problem_space.hpp"
 
 namespace lmeform::problems {
 
@@ -455,6 +461,107 @@ void bind_bounds(const Scene& scene, BoundScene& b) {
                                  b.bounds.front().where));
 }
 
+/// The most nodes at which binding evaluates the scene's expressions (a grid of 4 million nodes
+/// takes about a second; larger grids are left to the run).
+constexpr double kEvaluatedNodes = 4e6;
+
+/// The scene's node set when it is known before a run without work: a uniform grid (nodes.spacing
+/// or nodes.counts) of at most kEvaluatedNodes nodes, or a node file, read now so that a file that
+/// cannot be read, or holds too few points to triangulate, is refused before the solve. A CVT
+/// (nodes.count) is built by the run.
+std::optional<NodeSet> known_nodes(const Scene& scene) {
+  const SceneNodes& n = scene.nodes;
+  const bool grid = n.kind == SceneNodes::Kind::counts || (n.kind == SceneNodes::Kind::spacing && scene.geometry.is_box() && n.refine.empty());
+  if (grid) {
+    double total = 1;
+    for (int i = 0; i < scene.dim(); ++i) {
+      const auto k = std::size_t(i);
+      total *= n.kind == SceneNodes::Kind::counts ? n.counts[k]
+                                                  : std::max(2.0, std::round((scene.domain.hi[k] - scene.domain.lo[k]) / n.spacing) + 1);
+    }
+    if (total > kEvaluatedNodes) return std::nullopt;
+    return n.kind == SceneNodes::Kind::counts ? uniform_grid(scene.domain, n.counts) : uniform_grid(scene.domain, n.spacing);
+  }
+  if (n.kind == SceneNodes::Kind::file) {
+    NodeSet nodes = initial_nodes(scene);  // SceneError naming 'nodes.file' when it cannot be read
+    if (nodes.size() < static_cast<std::size_t>(scene.dim() + 1))
+      throw SceneError(fmt::format("{}: key 'nodes.file': {} holds {} point{}; a triangulation of a {}D domain needs at least {}",
+                                   scene.source, n.file.string(), nodes.size(), nodes.size() == 1 ? "" : "s", scene.dim(),
+                                   scene.dim() + 1));
+    return nodes;
+  }
+  return std::nullopt;
+}
+
+std::string point_text(std::span<const double> x) {
+  std::string s = "(";
+  for (std::size_t i = 0; i < x.size(); ++i) s += (i == 0 ? "" : ", ") + scene_detail::format_number(x[i]);
+  return s + ")";
+}
+
+/// The values an expression of [initial], [coefficients] or [[dirichlet]] takes at the nodes where
+/// the run evaluates it must be finite and at most kLargestSceneNumber in magnitude, like the
+/// scene's numbers: a Dirichlet value of log(x[0]) on a side through x[0] = 0 put -inf into the
+/// right-hand side and the solve returned NaN. `components`: the components the run uses.
+void check_expression_at(const BoundScene& b, const BoundValue& value, const std::string& expression, int size,
+                         const std::vector<int>& components, const NodeSet& nodes, std::span<const int> at, const std::string& where,
+                         const std::string& on) {
+  if (!value.is_expression()) return;
+  std::vector<double> out(static_cast<std::size_t>(size));
+  auto check = [&](std::size_t n) {
+    const auto x = nodes.point(n);
+    b.expressions->evaluate(value.expression, x, out);
+    for (const int c : components) {
+      const double v = out[static_cast<std::size_t>(c)];
+      if (std::isfinite(v) && std::abs(v) <= kLargestSceneNumber) continue;
+      const std::string component = size > 1 ? fmt::format(" (component {})", c) : std::string();
+      throw SceneError(fmt::format("{}: the expression \"{}\" is {}{} at the node {}{}: {}", where, expression,
+                                   scene_detail::format_number(v), component, point_text(x), on,
+                                   std::isfinite(v) ? fmt::format("scene values are at most {} in magnitude (products and squares of "
+                                                                  "larger ones overflow a solve)",
+                                                                  scene_detail::format_number(kLargestSceneNumber))
+                                                    : std::string("a solve needs finite values; change the expression where it is not")));
+    }
+  };
+  if (at.empty())
+    for (std::size_t n = 0; n < nodes.size(); ++n) check(n);
+  else
+    for (const int n : at) check(static_cast<std::size_t>(n));
+}
+
+/// The expressions of the nodal fields and Dirichlet values, at the nodes when they are known.
+void check_expression_values(const Scene& scene, const BoundScene& b) {
+  const std::optional<NodeSet> nodes = known_nodes(scene);
+  if (!nodes) return;
+  auto all = [](int n) {
+    std::vector<int> c(static_cast<std::size_t>(n));
+    for (int i = 0; i < n; ++i) c[static_cast<std::size_t>(i)] = i;
+    return c;
+  };
+  for (std::size_t i = 0; i < b.initial.size(); ++i) {
+    const BoundNodalField& f = b.initial[i];
+    if (!f.file.empty() || !f.value.is_expression()) continue;
+    const int size = b.unknown(f.name).components;
+    check_expression_at(b, f.value, scene.initial[i].value.expression(), size, all(size), *nodes, {}, f.where, "");
+  }
+  for (std::size_t i = 0; i < b.coefficients.size(); ++i) {
+    const BoundNodalField& f = b.coefficients[i];
+    if (!f.file.empty() || !f.value.is_expression()) continue;
+    const auto c = std::find_if(b.coefficient_fields.begin(), b.coefficient_fields.end(),
+                                [&](const UnknownField& x) { return x.name == f.name; });
+    check_expression_at(b, f.value, scene.coefficients[i].value.expression(), c->components, all(c->components), *nodes, {}, f.where, "");
+  }
+  for (std::size_t i = 0; i < b.dirichlet.size(); ++i) {
+    const BoundDirichlet& d = b.dirichlet[i];
+    if (!d.value.is_expression()) continue;
+    for (const auto& part : d.parts) {
+      const std::vector<int> on = boundary_nodes(b.geometry, *nodes, part);
+      check_expression_at(b, d.value, scene.dirichlet[i].value.expression(), d.field.components, d.components, *nodes, on,
+                          scene.dirichlet[i].value.where, " on '" + part + "'");
+    }
+  }
+}
+
 }  // namespace
 
 std::vector<const BoundOutput*> BoundScene::outputs() const {
@@ -503,6 +610,7 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
   bind_reference(scene, comm, log, expression_constants, b);
   bind_quantities(scene, comm, log, expression_constants, b);
   b.expressions->compile(comm, log);
+  check_expression_values(scene, b);
   return b;
 }
 

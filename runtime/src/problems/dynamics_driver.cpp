@@ -8,6 +8,7 @@
 #include <fmt/format.h>
 
 #include "dynamics.hpp"
+#include "dynamics_integrator.hpp"
 
 namespace lmeform::problems {
 
@@ -85,7 +86,7 @@ class DynamicsDriver final : public ProblemDriver {
     const DynamicsSettings settings = *read_dynamics(*ctx.scene);
     OutputRoles extra;
     extra.auxiliary = {settings.dissipation};
-    (void)bind_scene(*ctx.scene, ctx.comm, ctx.log, extra);
+    DynamicsIntegrator::check_scene(*ctx.scene, settings, bind_scene(*ctx.scene, ctx.comm, ctx.log, extra));
   }
 
   [[nodiscard]] RunReport run(const DriverContext& ctx) const override {

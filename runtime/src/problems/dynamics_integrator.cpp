@@ -64,7 +64,7 @@ DynamicsIntegrator::DynamicsIntegrator(MPI_Comm comm, const Scene& scene, const 
   euler_ = settings.method == DynamicsSettings::Method::forward_euler;
   resets_ = settings.reset_every > 0 || settings.reset_distortion > 0;
   jets_ = field_jets(bound_);
-  check_scene();
+  check_scene(scene, settings, bound_);
   if (output != nullptr) {
     checkpoint_path_ = output->directory / (output->name + "_checkpoint.h5");
     quadrature_path_ = output->directory / (output->name + "_checkpoint_quadrature.h5");
@@ -77,34 +77,34 @@ DynamicsIntegrator::~DynamicsIntegrator() = default;
 
 /// What the integrator needs of the bound scene: energies, a vector deformation as the only
 /// unknown, a dissipation reading it, schedules of known constants, jets a reset can push forward.
-void DynamicsIntegrator::check_scene() const {
-  const Scene& scene = scene_;
-  if (bound_.energy.empty())
+void DynamicsIntegrator::check_scene(const Scene& scene, const DynamicsSettings& settings, const BoundScene& bound) {
+  const int dim = scene.dim();
+  if (bound.energy.empty())
     throw SceneError(fmt::format("{}: [dynamics] moves the minimizer of energies: name energies in model.energy", scene.source));
-  const auto& fields = bound_.layout.fields;
-  if (fields.size() != 1 || fields.front().name != settings_.deformation || fields.front().components != dim_)
+  const auto& fields = bound.layout.fields;
+  if (fields.size() != 1 || fields.front().name != settings.deformation || fields.front().components != dim)
     throw SceneError(fmt::format("{}: key 'dynamics.deformation': '{}' must be the problem's only unknown, a vector of {} components (the "
                                  "current positions y of the reference points)",
-                                 scene.source, settings_.deformation, dim_));
-  const kernel::FormKernels& dissipation = bound_.auxiliary.front().first();
+                                 scene.source, settings.deformation, dim));
+  const kernel::FormKernels& dissipation = bound.auxiliary.front().first();
   bool reads_deformation = false;
-  for (int i = 0; i < dissipation.n_coefficients; ++i) reads_deformation |= dissipation.coefficients[i].name == settings_.deformation;
+  for (int i = 0; i < dissipation.n_coefficients; ++i) reads_deformation |= dissipation.coefficients[i].name == settings.deformation;
   if (!reads_deformation)
     throw SceneError(fmt::format("{}: the dissipation {}.{} does not read the deformation as `coefficient {} : vector`",
-                                 settings_.dissipation.where, dissipation.module, dissipation.name, settings_.deformation));
+                                 settings.dissipation.where, dissipation.module, dissipation.name, settings.deformation));
   std::vector<std::string> names;
-  for (const auto& [n, v] : bound_.constants) names.push_back(n);
-  for (const auto& c : settings_.schedule)
-    if (!bound_.constants.contains(c.name))
+  for (const auto& [n, v] : bound.constants) names.push_back(n);
+  for (const auto& c : settings.schedule)
+    if (!bound.constants.contains(c.name))
       throw SceneError(fmt::format("{}: '{}' is no constant of the forms{}", c.where, c.name, did_you_mean(c.name, names)));
-  if (settings_.remesh_every > 0 &&
-      std::none_of(bound_.coefficient_fields.begin(), bound_.coefficient_fields.end(),
-                   [&](const UnknownField& c) { return c.name == settings_.remesh_field && c.components == 1; }))
+  if (settings.remesh_every > 0 &&
+      std::none_of(bound.coefficient_fields.begin(), bound.coefficient_fields.end(),
+                   [&](const UnknownField& c) { return c.name == settings.remesh_field && c.components == 1; }))
     throw SceneError(fmt::format("{}: key 'dynamics.remesh_field': '{}' is no scalar field of [coefficients] (the re-mesh adapts the "
                                  "nodes to its gradient)",
-                                 scene.source, settings_.remesh_field));
-  if (resets_)
-    for (const auto& [field, j] : jets_)
+                                 scene.source, settings.remesh_field));
+  if (settings.reset_every > 0 || settings.reset_distortion > 0)
+    for (const auto& [field, j] : field_jets(bound))
       if (!j.hessian.empty() && j.gradient.empty())
         throw SceneError(fmt::format("{}: a reset pushes the Hessian of '{}' forward with its gradient: give [qdata] {{ field = \"{}\", jet = "
                                      "\"gradient\" }} too",

@@ -46,12 +46,15 @@ class DynamicsIntegrator {
   /// From the start (or the checkpoint) to t_end, a failure or max_steps.
   [[nodiscard]] DynamicsRun run();
 
+  /// What the integrator needs of the bound scene (SceneError otherwise); `lmeform run --check`
+  /// calls it without building the integrator.
+  static void check_scene(const Scene& scene, const DynamicsSettings& settings, const BoundScene& bound);
+
  private:
   /// The outcome of one attempt at a step.
   struct Attempt;
 
   // Setup
-  void check_scene() const;
   [[nodiscard]] std::unique_ptr<ReferenceConfiguration> build_reference(const NodeSet& nodes, const std::vector<double>& state,
                                                            std::optional<CarriedQuadrature> carried,
                                                            std::map<std::string, std::vector<double>, std::less<>> qdata, bool keep_targets,

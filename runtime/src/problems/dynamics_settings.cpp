@@ -35,6 +35,55 @@ ScheduledConstant read_schedule_segment(const SceneTable& sched, const std::stri
   return c;
 }
 
+/// The deformation maps the reference nodes to their current positions. A map that sends a
+/// region to one point folds (det F = 0 there), and no step from it can be taken: the start must
+/// be given, and not as a number; a Dirichlet number on every component sends a side to a point.
+void check_motion(const Scene& s, const DynamicsSettings& d) {
+  // Without model.energy the problem is every energy output of the forms, the dissipation's too
+  // (a run without it stopped on "forms with coefficients can only be summed as the first term").
+  if (s.model.energy.empty())
+    throw SceneError(fmt::format("{}: missing key 'model.energy': [dynamics] moves the minimizer of the energies model.energy names; "
+                                 "without it every energy output of the forms would be minimized, the dissipation '{}' among them",
+                                 s.source, d.dissipation.name));
+  for (const auto& e : s.model.energy)
+    if (e.name == d.dissipation.name)
+      throw SceneError(fmt::format("{} = '{}' is the dissipation ('dynamics.dissipation'): it weighs the motion of a step, it is not "
+                                   "an energy the motion lowers; name the energies only",
+                                   e.where, e.name));
+  const auto start =
+      std::find_if(s.initial.begin(), s.initial.end(), [&](const SceneInitialField& f) { return f.unknown == d.deformation; });
+  if (start == s.initial.end())
+    throw SceneError(fmt::format("{}: missing key 'initial.{}': [dynamics] moves the deformation '{}' from the positions [initial] gives "
+                                 "(unset, every node would start at 0, a folded map); give {} = \"x\", the identity, or a previous "
+                                 "run's {{file, field}}",
+                                 s.source, d.deformation, d.deformation, d.deformation));
+  if (start->kind == SceneInitialField::Kind::value && start->value.is_number())
+    throw SceneError(fmt::format("{} = {} maps every node to one point (a folded map, det F = 0): the deformation '{}' starts from "
+                                 "positions; give \"x\", the identity, or an expression of x",
+                                 start->where, scene_detail::format_number(start->value.number()), d.deformation));
+  for (const auto& b : s.dirichlet) {
+    if (b.unknown != d.deformation || !b.value.is_number()) continue;
+    // An axisymmetric motion keeps the axis on the axis: y_r = 0 at r = 0 (y_r is odd in r). On
+    // r = -1 the first step failed 13 times and the run stopped.
+    const bool radial = b.components.empty() || std::find(b.components.begin(), b.components.end(), 0) != b.components.end();
+    if (s.axisymmetric() && s.domain.lo[0] == 0 && radial && b.value.number() != 0 &&
+        std::find(b.boundary.begin(), b.boundary.end(), "axis") != b.boundary.end())
+      throw SceneError(fmt::format("{} = {} moves the axis off itself: in an axisymmetric motion the radial component of the "
+                                   "deformation '{}' is 0 on the axis r = 0; give value = 0 with components = [0]",
+                                   b.value.where, scene_detail::format_number(b.value.number()), d.deformation));
+    bool every = true;  // no components listed: every one
+    for (int c = 0; c < s.dim() && !b.components.empty(); ++c)
+      if (std::find(b.components.begin(), b.components.end(), c) == b.components.end()) every = false;
+    if (!every) continue;
+    std::string parts;
+    for (const auto& p : b.boundary) parts += (parts.empty() ? "'" : ", '") + p + "'";
+    throw SceneError(fmt::format("{} = {} gives every component of the deformation '{}' one number: the nodes of {} all go to one point "
+                                 "(a folded map, det F = 0); give a number to some components only (components = [0]) or an "
+                                 "expression of x (\"x\" holds the side in place)",
+                                 b.value.where, scene_detail::format_number(b.value.number()), d.deformation, parts));
+  }
+}
+
 std::optional<DynamicsSettings> read_dynamics(const Scene& s) {
   const auto t = extension_table(
       s, kDynamicsExtension,
@@ -118,6 +167,7 @@ std::optional<DynamicsSettings> read_dynamics(const Scene& s) {
       }
     }
   }
+  check_motion(s, d);
   return d;
 }
 

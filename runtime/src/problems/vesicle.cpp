@@ -159,6 +159,19 @@ void check_fits_domain(const Scene& s, const SceneTable& t, const VesicleModel& 
                                      *m.area, m.width, *m.area * m.eps, measure));
 }
 
+/// The vesicle (phi = 1) lies inside the domain (its initial shape and its targets fit it), so the
+/// phase field is -1, the outside phase, on the boundary. Another prescribed value puts an
+/// interface along the boundary that the constraints cannot absorb: phi = 0 there ran 772
+/// augmented-Lagrangian iterations in 94 s before stopping on its tolerance.
+void check_boundary_values(const Scene& s, const VesicleModel& m) {
+  for (const auto& d : s.dirichlet) {
+    if (d.unknown != m.field || !d.value.is_number() || d.value.number() == -1.0) continue;
+    throw SceneError(fmt::format("{} = {} prescribes the phase field '{}' off its outside phase: [vesicle] keeps the vesicle (phi = 1) "
+                                 "inside the domain, so phi is -1 on the boundary; give value = -1",
+                                 d.value.where, format_number(d.value.number()), m.field));
+  }
+}
+
 }  // namespace
 
 std::optional<VesicleModel> read_vesicle(const Scene& s) {
@@ -201,6 +214,7 @@ std::optional<VesicleModel> read_vesicle(const Scene& s) {
     t->fail_key("reduced_volume", "needs the sphere it refers to: add 'vesicle.radius'");
   }
   if (m.area) check_fits_domain(s, *t, m);
+  check_boundary_values(s, m);
   for (const auto& c : s.constraints) {
     if ((c.name == "area" && m.area && c.target) || (c.name == "volume" && m.volume && c.target))
       throw SceneError(fmt::format("{}: the target is already set by [vesicle] (radius / reduced_volume); give it once",
@@ -223,6 +237,20 @@ std::optional<VesicleModel> read_vesicle(const Scene& s) {
   if (const auto adapt = t->optional_table("adaptivity", {"stages", "lloyd_iterations", "start", "samples_per_node", "band", "grading", "coarsening", "max_nodes", "fit_iterations"})) {
     if (s.dim() != 2) adapt->fail_key("stages", "CVT adaptivity is available in 2D and axisymmetric scenes only");
     read_adaptivity(*adapt, m);
+  }
+  // The sphere of the targets must be wider than the interface at least at the schedule's finest
+  // eps: a diffuse interface wider than the vesicle leaves it no inside phase (radius 1e-14 in the
+  // tiny scene ran 40 multiplier updates and stopped; 1e-4 stalled in KKT Newton).
+  if (t->has("radius")) {
+    double finest = m.eps;
+    if (m.adaptivity)
+      for (const auto& st : m.adaptivity->stages) finest = std::min(finest, st.eps);
+    const double r = t->number("radius");
+    if (r < finest)
+      t->fail_key("radius", fmt::format("= {} is below the interface width {} = {}{}: a diffuse interface wider than the vesicle leaves "
+                                        "it no inside phase; give a radius of at least {} or a narrower interface",
+                                        format_number(r), m.width, format_number(finest),
+                                        m.adaptivity ? " (the finest of the schedule)" : "", format_number(finest)));
   }
   // The first solve must be resolved by the grid when the scene describes it completely (with
   // initial.resolve, [nodes] only samples the initial profile).

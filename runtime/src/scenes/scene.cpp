@@ -10,6 +10,7 @@
 #include <limits>
 #include <sstream>
 
+#include "lmeform/lme_basis.hpp"
 #include "lmeform/quadrature.hpp"
 #include "lmeform/scene_table.hpp"
 #include "scene_domain.hpp"
@@ -61,22 +62,45 @@ void read_nodes(const Section& root, const std::filesystem::path& folder, Scene&
   double extent = std::numeric_limits<double>::infinity();
   for (int i = 0; i < s.dim(); ++i)
     extent = std::min(extent, s.domain.hi[std::size_t(i)] - s.domain.lo[std::size_t(i)]);
+  // A uniform grid's node count: node indices are 32-bit integers.
+  auto check_grid_size = [&](const char* key, const std::array<double, 3>& per_axis) {
+    double total = 1;
+    for (int i = 0; i < s.dim(); ++i) total *= per_axis[std::size_t(i)];
+    if (total > kLargestNodeCount)
+      t.fail_key(key, "gives a grid of " + format_number(total) + " nodes, more than node indices (32-bit integers) can number (" +
+                          format_number(kLargestNodeCount) + "): give fewer nodes");
+  };
   if (t.has("spacing")) {
     n.kind = SceneNodes::Kind::spacing;
     n.spacing = t.positive("spacing", t.number("spacing"));
     if (n.spacing > extent)
       t.fail_key("spacing", "= " + format_number(n.spacing) + " exceeds the smallest extent of the domain (" + format_number(extent) +
                                 ")");
+    std::array<double, 3> per_axis{1, 1, 1};
+    for (int i = 0; i < s.dim(); ++i) {
+      const auto k = std::size_t(i);
+      // uniform_grid's own limit: round(L / spacing) intervals per axis, at most kLargestGridIntervals.
+      const double intervals = std::round((s.domain.hi[k] - s.domain.lo[k]) / n.spacing);
+      if (intervals > kLargestGridIntervals)
+        t.fail_key("spacing", "= " + format_number(n.spacing) + " gives " + format_number(intervals) + " intervals on axis " +
+                                  axis_name(s.axisymmetric(), s.dim(), i) + ", more than the " + format_number(kLargestGridIntervals) +
+                                  " a uniform grid takes per axis: give a larger spacing");
+      per_axis[k] = std::max(1.0, intervals) + 1;
+    }
+    check_grid_size("spacing", per_axis);
   } else if (t.has("counts")) {
     if (!s.geometry.is_box()) t.fail_key("counts", "makes a grid of a box; a polygon or polyhedron takes 'nodes.spacing' or 'nodes.file'");
     n.kind = SceneNodes::Kind::counts;
     const std::vector<int> c = t.integers("counts", s.dim());
+    std::array<double, 3> per_axis{1, 1, 1};
     for (std::size_t i = 0; i < c.size(); ++i) {
       if (c[i] < 2)
         t.fail_key("counts", "must have at least 2 nodes per axis, got " + std::to_string(c[i]) + " on axis " +
                                  axis_name(s.axisymmetric(), s.dim(), int(i)));
       n.counts[i] = c[i];
+      per_axis[i] = c[i];
     }
+    check_grid_size("counts", per_axis);
   } else if (t.has("count")) {
     n.kind = SceneNodes::Kind::count;
     if (!s.geometry.is_box()) t.fail_key("count", "places a CVT in a box; a polygon or polyhedron takes 'nodes.spacing' or 'nodes.file'");
@@ -98,6 +122,14 @@ void read_nodes(const Section& root, const std::filesystem::path& folder, Scene&
       if (r.spacing > n.spacing) t.fail_key("refine", "asks for a spacing " + format_number(r.spacing) + " coarser than nodes.spacing = " + format_number(n.spacing));
   }
   n.gamma = t.positive("gamma", t.number("gamma", n.gamma));
+  // The LME support radius is h sqrt(-ln(tol0) / gamma): above -ln(tol0) it is shorter than the
+  // nodal spacing h, and a node sees no other node (gamma = 20 on the Poisson demo's grid failed
+  // its first LME evaluation with 1 neighbour; 50 and 1e100 did not converge).
+  const double largest_gamma = -std::log(LmeOptions{}.tol0);
+  if (n.gamma > largest_gamma)
+    t.fail_key("gamma", "= " + format_number(n.gamma) + " makes the LME support (radius h sqrt(" + format_number(largest_gamma) +
+                            " / gamma)) shorter than the nodal spacing h: give at most " + format_number(largest_gamma) +
+                            " (0.5 to 4 are usual)");
   n.spacing_smoothing = t.at_least("spacing_smoothing", t.integer("spacing_smoothing", n.spacing_smoothing), 0);
   // Default: a positive rule of degree 4 in 2D (6 points), degree 5 in 3D (14 points).
   n.quadrature_points = t.integer("quadrature_points", s.dim() == 3 ? 14 : n.quadrature_points);
@@ -371,6 +403,14 @@ void read_solver(const Section& root, Scene& s) {
   o.kkt_first = t->choice_of("start", t->optional_string("start").value_or("kkt"), {"kkt", "augmented"}) == "kkt";
   o.penalty = t->positive("penalty", t->number("penalty", o.penalty));
   o.augmented_tolerance = t->relative_tolerance("augmented_tolerance", t->number("augmented_tolerance", o.augmented_tolerance));
+  // When KKT Newton stalls, the minimizer resumes the augmented Lagrangian with its tolerance
+  // 100 times tighter, twice at most: that must stay reachable (from 1e-14 the tiny vesicle ran
+  // 40 multiplier updates, 74 s, towards 1e-16 and stopped).
+  if (o.augmented_tolerance < kSmallestRelativeTolerance * 1e4)
+    t->fail_key("augmented_tolerance", "= " + format_number(o.augmented_tolerance) +
+                                           " leaves no room for the minimizer's fallback, which tightens it 100-fold twice when KKT "
+                                           "Newton stalls (below double precision): give at least " +
+                                           format_number(kSmallestRelativeTolerance * 1e4));
   o.inner_tolerance = t->relative_tolerance("inner_tolerance", t->number("inner_tolerance", o.inner_tolerance));
   o.max_outer_iterations = t->at_least("max_outer_iterations", t->integer("max_outer_iterations", o.max_outer_iterations), 1);
   o.max_inner_iterations = t->at_least("max_inner_iterations", t->integer("max_inner_iterations", o.max_inner_iterations), 1);
