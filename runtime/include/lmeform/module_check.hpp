@@ -46,11 +46,15 @@ struct SlopeResult {
   [[nodiscard]] std::string text() const;  ///< "2.00", "exact", "kink", "n/a"
 };
 
-/// One row of the table: an output in one dimension, worst case over the check cells.
+/// One row of the table: one kernel of an output (an output has one per integration domain) in
+/// one dimension, worst case over the check cells.
 struct CheckRecord {
   std::string form;
   std::string output;
-  std::string kind;                      ///< energy, constraint, residual, bilinear, linear
+  std::string kind;                      ///< energy, constraint, residual, bilinear, linear, point
+  std::string domain = "cells";          ///< cells or boundary
+  std::string boundary_part;             ///< the boundary part ("" for the whole boundary, ds)
+  std::string measure;                   ///< dx, ds, ds(top); empty for a point output
   int dim = 0;
   std::string coordinates;
   int cells = 0;
@@ -93,6 +97,9 @@ struct ModuleCheck {
   double seconds = 0.0;                  ///< the whole check
   [[nodiscard]] bool passed() const;
 };
+
+/// "E" for a kernel over the cells (or a point output), "E [ds(top)]" for one over the boundary.
+[[nodiscard]] std::string kernel_label(const CheckRecord& record);
 
 /// Axisymmetric when the module's name ends in `_axisymmetric` or its source (or a file it
 /// includes, searched next to the including file and in include_dirs) includes `axisymmetric.inc`;
