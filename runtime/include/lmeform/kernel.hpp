@@ -170,7 +170,7 @@ struct FormKernels {
 
   double flops_value = 0.0;            ///< per cell, as functions of n and nq: a*n*nq + b*nq ...
   double flops_vector = 0.0;           ///< (estimates for n = 1, nq = 1 scaled by the runtime)
-  double flops_matrix = 0.0;           ///< (Point: flops_value and flop_model_value are the point kernel's)
+  double flops_matrix = 0.0;
 
   /// Flop model of each kernel: flops(n, nq) = nq * (per_point + n*per_node_point + n*n*per_node_pair_point).
   struct FlopModel {
@@ -181,6 +181,7 @@ struct FormKernels {
       return nq * (per_point + n * per_node_point + double(n) * n * per_node_pair_point);
     }
   };
+  /// A point output's one kernel is modelled in flops_value and flop_model_value.
   FlopModel flop_model_value{}, flop_model_vector{}, flop_model_matrix{};
   const char* source = "";             ///< the .form file the kernels were generated from
   /// The matrix kernel adds nothing (a functional linear in its unknowns, e.g. a volume):

@@ -1,6 +1,7 @@
 // The derivative check of a whole form module (`lmeform check`): every output in every declared
 // dimension, on the graded LME cells of form_check_setup.hpp with generic random states, one record
-// per output and dimension; the table printed by the command and the JSON records of --json.
+// per kernel (an output has one per integration domain) and dimension; the table printed by the
+// command and the JSON records of --json.
 #pragma once
 
 #include <cstdint>
