@@ -58,11 +58,34 @@ std::string literal(double v) {
 
 }  // namespace
 
-KernelPlan plan_kernel(const CompiledForm& form, const OutputDecl& output, int dim) {
+namespace {
+
+/// A point output reads jets but has no derivatives: its plan is its components and basis orders.
+KernelPlan plan_point(const CompiledForm& form, const OutputDecl& output, int dim) {
+  const ir::Graph& g = *form.graphs.at(dim);
+  KernelPlan plan;
+  plan.output = &output;
+  plan.dim = dim;
+  plan.point = output.point.at(dim);
+  field_offsets(form, ir::Role::Unknown, dim, &plan.row_dofs);
+  for (NodeId id : g.reachable(plan.point.components)) {
+    if (g.node(id).op != Op::Jet) continue;
+    const auto v = g.jet_var(id);
+    int& order = v.role == ir::Role::Coefficient ? plan.coefficient_order : plan.basis_order;
+    order = std::max(order, ir::slot_order(v.slot, dim));
+  }
+  return plan;
+}
+
+}  // namespace
+
+KernelPlan plan_kernel(const CompiledForm& form, const OutputDecl& output, int dim, int domain) {
+  if (output.kind == OutputKind::Point) return plan_point(form, output, dim);
   ir::Graph& g = *form.graphs.at(dim);
   KernelPlan plan;
   plan.output = &output;
   plan.dim = dim;
+  plan.domain = domain;
   plan.row_role = row_role_of(output.kind);
   plan.symmetric = output.kind == OutputKind::Energy || output.kind == OutputKind::Constraint;
   const bool has_cols = output.kind != OutputKind::Linear;
@@ -70,7 +93,7 @@ KernelPlan plan_kernel(const CompiledForm& form, const OutputDecl& output, int d
   const auto row_off = field_offsets(form, plan.row_role, dim, &plan.row_dofs);
   std::vector<int> col_off;
   if (has_cols) col_off = field_offsets(form, plan.col_role, dim, &plan.col_dofs);
-  const NodeId f = output.integrand.at(dim);
+  const NodeId f = output.integrand(dim, domain);
   if (plan.symmetric) plan.value = f;
 
   // The differentiation variables: jets of the row and column fields that occur in f.
@@ -185,6 +208,7 @@ class KernelWriter {
       case Op::Coord: return "x_" + std::to_string(n.arg[0]);
       case Op::Param: return "k_" + std::to_string(n.arg[0]);
       case Op::Qdata: return "qd_" + std::to_string(n.arg[0]);
+      case Op::Normal: return "nrm_" + std::to_string(n.arg[0]);
       default: {
         if (const auto it = inlined_.find(id); it != inlined_.end()) return "(" + it->second + ")";
         return "t" + std::to_string(id);
@@ -233,9 +257,11 @@ class KernelWriter {
     }
   }
 
-  /// Writes the quadrature loop: terminals, nodes, then `sink(os)` for the outputs.
+  /// Writes the quadrature loop: terminals, nodes, then `sink(os)` for the outputs; `weighted`:
+  /// the loop reads the weight w (point kernels do not, and may be given none).
   /// Returns the flop estimate per point and the number of nodal jets evaluated.
-  std::pair<double, int> point_loop(std::ostream& os, const std::vector<NodeId>& roots, const std::string& sink) {
+  std::pair<double, int> point_loop(std::ostream& os, const std::vector<NodeId>& roots, const std::string& sink,
+                                    bool weighted = true) {
     const auto order = g_.reachable(roots);
     // A node used once, by another node, is written into its user's expression rather than as a
     // temporary of its own (up to kInlineDepth levels): fewer lines to parse, the same operations.
@@ -251,21 +277,23 @@ class KernelWriter {
     for (NodeId r : roots) uses[r] += 2;  // the sink names every root
     std::set<int> params;
     std::vector<NodeId> jets;
-    std::set<int> coords, qdata;
+    std::set<int> coords, qdata, normals;
     double flops = 0;
     for (NodeId id : order) {
       const ir::Node& n = g_.node(id);
       if (n.op == Op::Param) params.insert(n.arg[0]);
       if (n.op == Op::Coord) coords.insert(n.arg[0]);
       if (n.op == Op::Qdata) qdata.insert(n.arg[0]);
+      if (n.op == Op::Normal) normals.insert(n.arg[0]);
       if (n.op == Op::Jet) jets.push_back(id);
       flops += ir::flop_cost(n.op);
     }
     for (int p : params) os << "  const double k_" << p << " = in.constants[" << p << "];\n";
     os << "  for (int q = 0; q < nq; ++q) {\n";
-    os << "    [[maybe_unused]] const double w = in.weights[q];\n";
+    if (weighted) os << "    [[maybe_unused]] const double w = in.weights[q];\n";
     os << "    [[maybe_unused]] const double* Bq = in.basis + std::size_t(q) * std::size_t(J) * std::size_t(n);\n";
     for (int c : coords) os << "    const double x_" << c << " = in.points[std::size_t(q) * " << plan_.dim << " + " << c << "];\n";
+    for (int i : normals) os << "    const double nrm_" << i << " = in.normals[std::size_t(q) * " << plan_.dim << " + " << i << "];\n";
     const int qpp = form_.qdata_per_point(plan_.dim);
     for (int o : qdata) os << "    const double qd_" << o << " = in.qdata[std::size_t(q) * " << qpp << " + " << o << "];\n";
     if (!jets.empty()) {
@@ -342,7 +370,7 @@ struct FlopModel {
 struct EmittedKernel {
   std::string symbol;
   KernelPlan plan;
-  FlopModel value, vector, matrix;
+  FlopModel value, vector, matrix, point;
   bool has_value = false, has_vector = false, has_matrix = false;
   int n_blocks = 0;
   int line = 0;
@@ -375,6 +403,28 @@ std::string slot_name(int slot, int dim) {
   return "slot" + std::to_string(slot);
 }
 
+/// "energy E", or "energy E [ds(top)]" for a kernel of an output integrated over several domains.
+std::string kernel_label(const CompiledForm& form, const KernelPlan& p) {
+  std::string s = std::string(to_string(p.output->kind)) + " " + p.output->name;
+  const auto terms = p.output->integrands.find(p.dim);
+  if (p.domain != kCellDomain || (terms != p.output->integrands.end() && terms->second.size() > 1))
+    s += " [" + form.domains[static_cast<std::size_t>(p.domain)].measure() + "]";
+  return s;
+}
+
+/// "scalar", "vector[3]", "tensor3[2x2x2]": the shape of a point output.
+std::string point_shape_name(const std::vector<int>& shape) {
+  static const char* names[] = {"scalar", "vector", "matrix", "tensor3"};
+  std::string s = names[shape.size()];
+  for (std::size_t i = 0; i < shape.size(); ++i) {
+    s += i == 0 ? '[' : 'x';
+    s += std::to_string(shape[i]);
+  }
+  return shape.empty() ? s : s + "]";
+}
+
+std::size_t point_values(const KernelPlan& p) { return p.point.components.size(); }
+
 /// The per-kernel cost report of `lmeformc --report`.
 std::string cost_report(const CompiledForm& form, const std::vector<EmittedKernel>& kernels, long total_lines) {
   std::ostringstream r;
@@ -385,11 +435,16 @@ std::string cost_report(const CompiledForm& form, const std::vector<EmittedKerne
     << "  the basis contractions (B_q^T D_q B_q) rather than in the point-wise derivatives\n";
   for (const auto& k : kernels) {
     const KernelPlan& p = k.plan;
-    r << "\n" << to_string(p.output->kind) << " " << p.output->name << ", dimension " << p.dim << " (" << form.sources.where(p.output->loc)
+    r << "\n" << kernel_label(form, p) << ", dimension " << p.dim << " (" << form.sources.where(p.output->loc)
       << "): " << k.generated_lines << " generated lines\n";
     std::string src = form.sources.line_text(p.output->loc);
     if (src.size() > 100) src = src.substr(0, 97) + "...";
     r << "  | " << src << "\n";
+    if (p.is_point()) {
+      r << "  point values: " << point_values(p) << " per point (" << point_shape_name(p.point.shape)
+        << "); flops/point " << static_cast<long>(k.point.per_point) << "\n";
+      continue;
+    }
     r << "  jet components (m = " << p.vector.size() << "):";
     for (std::size_t e = 0; e < p.vector.size(); ++e)
       r << (e ? ", " : " ") << row_name(form, p, p.vector[e].row) << " " << slot_name(p.slots[static_cast<std::size_t>(p.vector[e].slot_index)], p.dim);
@@ -437,288 +492,437 @@ std::string flop_cxx(const FlopModel& f) {
   return s.str();
 }
 
-}  // namespace
+/// The C++ name of a kernel: `<output>_<D>d` over the cells, `<output>_ds[_<part>]_<D>d` on the boundary.
+std::string kernel_symbol(const CompiledForm& form, const OutputDecl& output, int dim, int domain) {
+  const Domain& d = form.domains[static_cast<std::size_t>(domain)];
+  std::string s = output.name;
+  if (d.boundary) s += d.part.empty() ? std::string("_ds") : "_ds_" + d.part;
+  return s + "_" + std::to_string(dim) + "d";
+}
 
-GeneratedModule generate(const CompiledForm& form, const std::string& source_name) {
-  GeneratedModule out;
-  std::ostringstream h, ir_text;
-  const std::string& m = form.module;
-  h << "// Generated by lmeformc from " << source_name << " -- do not edit.\n"
-    << "// Every kernel block below carries `// file:line: source` comments mapping it back to the form.\n"
-    << "#pragma once\n\n#include <cmath>\n#include <cstddef>\n\n#include <lmeform/kernel.hpp>\n\n"
-    << "namespace " << m << "_detail {\n\n";
-  std::vector<EmittedKernel> kernels;
+/// Writes the header, IR dump and metadata of one module, kernel by kernel.
+class ModuleWriter {
+ public:
+  ModuleWriter(const CompiledForm& form, const std::string& source_name)
+      : form_(form), source_(source_name), m_(form.module) {}
 
-  auto fields_array = [&](ir::Role role, int dim) {
+  GeneratedModule run() {
+    preamble();
+    for (const auto& output : form_.outputs)
+      for (int dim : form_.dims) {
+        if (output.kind == OutputKind::Point) kernel(output, dim, kCellDomain);
+        else
+          for (const auto& [domain, f] : output.integrands.at(dim)) kernel(output, dim, domain);
+      }
+    h_ << "}  // namespace " << m_ << "_detail\n\n";
+    require_distinct_symbols();
+    for (const auto& k : kernels_) descriptor(k);
+    module_table();
+    GeneratedModule out;
+    out.header = h_.str();
+    out.ir = ir_.str();
+    out.json = json();
+    out.report = cost_report(form_, kernels_, static_cast<long>(std::count(out.header.begin(), out.header.end(), '\n')));
+    return out;
+  }
+
+ private:
+  const CompiledForm& form_;
+  const std::string& source_;
+  const std::string& m_;
+  std::ostringstream h_, ir_;
+  std::vector<EmittedKernel> kernels_;
+
+  std::string fields_array(ir::Role role, int dim) const {
     std::ostringstream s;
-    for (const auto* f : form.fields_of(role)) s << "{\"" << f->name << "\", " << f->components(dim) << "}, ";
+    for (const auto* f : form_.fields_of(role)) s << "{\"" << f->name << "\", " << f->components(dim) << "}, ";
     return s.str();
-  };
-  for (int dim : form.dims) {
-    static const std::pair<ir::Role, const char*> roles[] = {{ir::Role::Unknown, "unknowns"}, {ir::Role::Test, "tests"},
-                                                             {ir::Role::Trial, "trials"}, {ir::Role::Coefficient, "coefficients"}};
-    for (const auto& [role, nm] : roles)
-      if (!form.fields_of(role).empty())
-        h << "inline constexpr lmeform::kernel::FieldInfo " << nm << "_" << dim << "d[] = {" << fields_array(role, dim) << "};\n";
-    if (!form.qdata.empty()) {
-      h << "inline constexpr lmeform::kernel::QdataInfo qdata_" << dim << "d[] = {";
-      for (const auto& q : form.qdata) h << "{\"" << q.name << "\", " << q.size(dim) << "}, ";
-      h << "};\n";
-    }
   }
-  if (!form.constants.empty()) {
-    h << "inline constexpr const char* constant_names[] = {";
-    for (const auto& c : form.constants) h << "\"" << c.name << "\", ";
-    h << "};\n";
-    h << "inline const double constant_defaults[] = {";
-    for (const auto& c : form.constants) {
-      if (c.default_value) h << literal(*c.default_value) << ", ";
-      else h << "__builtin_nan(\"\"), ";
-    }
-    h << "};\n";
-  }
-  h << "\n";
 
-  for (const auto& output : form.outputs) {
-    for (int dim : form.dims) {
-      EmittedKernel k;
-      const std::size_t kernel_start = h.tellp() < 0 ? 0 : static_cast<std::size_t>(h.tellp());
-      k.plan = plan_kernel(form, output, dim);
-      const KernelPlan& p = k.plan;
-      k.symbol = output.name + "_" + std::to_string(dim) + "d";
-      k.line = form.sources.line_col(output.loc).first;
-      KernelWriter w(form, p);
-      const int S = static_cast<int>(p.slots.size());
-      const int R = p.row_dofs, C = p.col_dofs;
-      std::ostringstream slots;
-      for (int i = 0; i < S; ++i) slots << (i ? ", " : "") << p.slots[static_cast<std::size_t>(i)];
-      const std::string head = "  const int n = in.n_nodes;\n  const int nq = in.n_points;\n"
-                               "  [[maybe_unused]] const int J = lmeform::kernel::jet_size(" + std::to_string(dim) + ", in.basis_order);\n";
-      h << "// ---- " << to_string(output.kind) << " " << output.name << ", dimension " << dim << " ("
-        << form.sources.where(output.loc) << ")\n";
-      ir_text << "== " << to_string(output.kind) << " " << output.name << " (dim " << dim << "): slots {" << slots.str() << "}\n";
-      auto terminal_name = [&](NodeId id) { return w.ref(id); };
-      auto dump = [&](const std::vector<NodeId>& roots) {
-        for (NodeId id : form.graphs.at(dim)->reachable(roots))
-          if (!ir::is_terminal(form.graphs.at(dim)->node(id).op)) ir_text << "  " << ir::describe(*form.graphs.at(dim), id, terminal_name) << "\n";
-      };
-      if (p.has_value()) {
-        k.has_value = true;
-        h << "inline double " << k.symbol << "_value(const lmeform::kernel::CellInputs& in) {\n" << head
-          << "  double result = 0.0;\n";
-        const auto [fl, nj] = w.point_loop(h, {p.value}, "    result += w * " + w.ref(p.value) + ";\n");
-        h << "  return result;\n}\n\n";
-        k.value = {fl + 2, 2.0 * nj, 0};
-        ir_text << " value:\n";
-        dump({p.value});
-        ir_text << "  f = " << w.ref(p.value) << "\n";
+  void preamble() {
+    h_ << "// Generated by lmeformc from " << source_ << " -- do not edit.\n"
+       << "// Every kernel block below carries `// file:line: source` comments mapping it back to the form.\n"
+       << "#pragma once\n\n#include <cmath>\n#include <cstddef>\n\n#include <lmeform/kernel.hpp>\n\n"
+       << "namespace " << m_ << "_detail {\n\n";
+    for (int dim : form_.dims) {
+      static const std::pair<ir::Role, const char*> roles[] = {{ir::Role::Unknown, "unknowns"}, {ir::Role::Test, "tests"},
+                                                               {ir::Role::Trial, "trials"}, {ir::Role::Coefficient, "coefficients"}};
+      for (const auto& [role, nm] : roles)
+        if (!form_.fields_of(role).empty())
+          h_ << "inline constexpr lmeform::kernel::FieldInfo " << nm << "_" << dim << "d[] = {" << fields_array(role, dim) << "};\n";
+      if (!form_.qdata.empty()) {
+        h_ << "inline constexpr lmeform::kernel::QdataInfo qdata_" << dim << "d[] = {";
+        for (const auto& q : form_.qdata) h_ << "{\"" << q.name << "\", " << q.size(dim) << "}, ";
+        h_ << "};\n";
       }
-      if (p.output->kind != OutputKind::Bilinear) {
-        k.has_vector = true;
-        std::vector<NodeId> roots;
-        std::ostringstream sink;
-        sink << "    double* Gq = G + std::size_t(q) * " << S * R << ";\n";
-        for (const auto& e : p.vector) {
-          roots.push_back(e.node);
-          sink << "    Gq[" << e.slot_index * R + e.row << "] = w * " << w.ref(e.node) << ";\n";
-        }
-        h << "inline void " << k.symbol << "_vector(const lmeform::kernel::CellInputs& in, double* local_vector) {\n" << head
-          << "  static constexpr int slots[] = {" << slots.str() << "};\n"
-          << "  double* Bs = in.workspace;  // gathered basis rows (nq*S x n)\n"
-          << "  double* G = Bs + std::size_t(nq) * " << S << " * std::size_t(n);  // w_q df/dJ (nq*S x R)\n"
-          << "  for (std::size_t i = 0; i < std::size_t(nq) * " << S * R << "; ++i) G[i] = 0.0;\n";
-        const auto [fl, nj] = w.point_loop(h, roots, sink.str());
-        h << "  lmeform::kernel::gather_slots(in, " << dim << ", " << S << ", slots, Bs);\n"
-          << "  lmeform::kernel::contract_vector(in, n, nq, " << S << ", " << R << ", Bs, G, local_vector);\n}\n\n";
-        k.vector = {fl + static_cast<double>(p.vector.size()), 2.0 * nj + 2.0 * S * R, 0};
-        ir_text << " vector (df/dJ):\n";
-        dump(roots);
-        for (const auto& e : p.vector) ir_text << "  df/dJ[row " << e.row << ", slot " << p.slots[static_cast<std::size_t>(e.slot_index)] << "] = " << w.ref(e.node) << "\n";
-      }
-      if (p.has_matrix()) {
-        k.has_matrix = true;
-        std::vector<NodeId> roots;
-        std::ostringstream sink;
-        const int ld = C * S;
-        sink << "    double* Dq = D + std::size_t(q) * " << R * S * ld << ";\n";
-        std::set<std::pair<int, int>> blocks;
-        for (const auto& e : p.matrix) {
-          roots.push_back(e.node);
-          blocks.insert({e.row, e.col});
-        }
-        // Symmetric forms: emit only the upper blocks' entries and mirror them in the contraction.
-        std::set<std::pair<int, int>> emitted;
-        for (const auto& e : p.matrix) {
-          if (p.symmetric && e.row > e.col) continue;
-          sink << "    Dq[" << (e.row * S + e.row_slot) * ld + e.col * S + e.col_slot << "] = w * " << w.ref(e.node) << ";\n";
-        }
-        std::ostringstream bl;
-        int nb = 0;
-        for (const auto& [r, c] : blocks) {
-          if (p.symmetric && r > c) continue;
-          bl << "{" << r << ", " << c << ", " << (p.symmetric && r != c ? "true" : "false") << ", "
-             << (p.symmetric && r == c ? "true" : "false") << "}, ";
-          ++nb;
-        }
-        k.n_blocks = nb;
-        double matrix_point_flops = 0;
-        int matrix_jets = 0;
-        const std::size_t dsize = static_cast<std::size_t>(R) * S * ld;
-        h << "inline void " << k.symbol << "_matrix(const lmeform::kernel::CellInputs& in, double* local_matrix) {\n";
-        if (nb == 0) {
-          // Structurally zero (e.g. a functional linear in the unknowns): nothing to accumulate.
-          h << "  (void)in;\n  (void)local_matrix;\n}\n\n";
-        } else {
-          h << head << "  static constexpr int slots[] = {" << slots.str() << "};\n"
-            << "  static constexpr lmeform::kernel::MatrixBlock blocks[] = {" << bl.str() << "};\n"
-            << "  double* Bs = in.workspace;  // gathered basis rows (nq*S x n)\n"
-            << "  double* D = Bs + std::size_t(nq) * " << S << " * std::size_t(n);  // w_q d2f/dJ2 per point\n"
-            << "  double* work = D + std::size_t(nq) * " << dsize << ";\n"
-            << "  for (std::size_t i = 0; i < std::size_t(nq) * " << dsize << "; ++i) D[i] = 0.0;\n";
-          const auto [fl, nj] = w.point_loop(h, roots, sink.str());
-          h << "  lmeform::kernel::gather_slots(in, " << dim << ", " << S << ", slots, Bs);\n"
-            << "  lmeform::kernel::contract_matrix(in, n, nq, " << S << ", " << R << ", " << C
-            << ", Bs, D, blocks, " << nb << ", work, local_matrix);\n}\n\n";
-          matrix_point_flops = fl;
-          matrix_jets = nj;
-        }
-        const double mirror_blocks = static_cast<double>(blocks.size());
-        k.matrix = {matrix_point_flops + static_cast<double>(p.matrix.size()), 2.0 * matrix_jets + 2.0 * S * S * nb,
-                    2.0 * S * nb + (mirror_blocks - nb)};
-        ir_text << " matrix (d2f/dJ2):\n";
-        dump(roots);
-        for (const auto& e : p.matrix)
-          ir_text << "  d2f/dJ2[row " << e.row << " slot " << p.slots[static_cast<std::size_t>(e.row_slot)] << ", col " << e.col << " slot "
-                  << p.slots[static_cast<std::size_t>(e.col_slot)] << "] = " << w.ref(e.node) << "\n";
-      }
-      // Workspace: the larger of the vector and matrix kernels' needs.
-      const std::size_t dsize = static_cast<std::size_t>(R) * S * C * S;
-      h << "inline std::size_t " << k.symbol << "_workspace(int n, int nq) {\n"
-        << "  const std::size_t N = std::size_t(n), Q = std::size_t(nq);\n"
-        << "  const std::size_t vec = Q * " << S << " * N + Q * " << S * R << ";\n"
-        << "  const std::size_t mat = " << (p.has_matrix() ? "Q * " + std::to_string(S) + " * N + Q * " + std::to_string(dsize) +
-                                                                   " + lmeform::kernel::contract_matrix_workspace(n, nq, " + std::to_string(S) + ")"
-                                                             : std::string("0"))
-        << ";\n  return vec > mat ? vec : mat;\n}\n\n";
-      k.generated_lines = count_lines(h.str(), kernel_start);
-      kernels.push_back(std::move(k));
     }
+    if (!form_.constants.empty()) {
+      h_ << "inline constexpr const char* constant_names[] = {";
+      for (const auto& c : form_.constants) h_ << "\"" << c.name << "\", ";
+      h_ << "};\n";
+      h_ << "inline const double constant_defaults[] = {";
+      for (const auto& c : form_.constants) {
+        if (c.default_value) h_ << literal(*c.default_value) << ", ";
+        else h_ << "__builtin_nan(\"\"), ";
+      }
+      h_ << "};\n";
+    }
+    h_ << "\n";
   }
-  h << "}  // namespace " << m << "_detail\n\n";
 
-  // Descriptors.
-  for (const auto& k : kernels) {
+  static std::string head(int dim) {
+    return "  const int n = in.n_nodes;\n  const int nq = in.n_points;\n"
+           "  [[maybe_unused]] const int J = lmeform::kernel::jet_size(" + std::to_string(dim) + ", in.basis_order);\n";
+  }
+
+  std::string slot_list(const KernelPlan& p) const {
+    std::ostringstream slots;
+    for (std::size_t i = 0; i < p.slots.size(); ++i) slots << (i ? ", " : "") << p.slots[i];
+    return slots.str();
+  }
+
+  void dump(const KernelWriter& w, int dim, const std::vector<NodeId>& roots) {
+    const ir::Graph& g = *form_.graphs.at(dim);
+    auto terminal_name = [&](NodeId id) { return w.ref(id); };
+    for (NodeId id : g.reachable(roots))
+      if (!ir::is_terminal(g.node(id).op)) ir_ << "  " << ir::describe(g, id, terminal_name) << "\n";
+  }
+
+  /// The kernels of one output over one domain in one dimension.
+  void kernel(const OutputDecl& output, int dim, int domain) {
+    EmittedKernel k;
+    const std::size_t kernel_start = h_.tellp() < 0 ? 0 : static_cast<std::size_t>(h_.tellp());
+    k.plan = plan_kernel(form_, output, dim, domain);
     const KernelPlan& p = k.plan;
-    const int dim = p.dim;
-    const ir::Role urole = p.output->kind == OutputKind::Bilinear ? ir::Role::Trial
-                         : p.output->kind == OutputKind::Linear   ? ir::Role::Test : ir::Role::Unknown;
-    const char* unm = urole == ir::Role::Trial ? "trials" : urole == ir::Role::Test ? "tests" : "unknowns";
-    int udofs = 0, cdofs = 0;
-    field_offsets(form, urole, dim, &udofs);
-    field_offsets(form, ir::Role::Coefficient, dim, &cdofs);
-    static const char* kinds[] = {"Energy", "Constraint", "Residual", "Bilinear", "Linear"};
-    const std::string d = m + "_detail::";
-    h << "inline const lmeform::kernel::FormKernels " << m << "_" << k.symbol << " = [] {\n"
-      << "  lmeform::kernel::FormKernels k;\n"
-      << "  k.module = \"" << m << "\";\n  k.name = \"" << p.output->name << "\";\n"
-      << "  k.kind = lmeform::kernel::FunctionalKind::" << kinds[static_cast<int>(p.output->kind)] << ";\n"
-      << "  k.dim = " << dim << ";\n  k.basis_order = " << p.basis_order << ";\n";
-    if (!form.fields_of(urole).empty())
-      h << "  k.unknowns = " << d << unm << "_" << dim << "d;\n  k.n_unknowns = " << form.fields_of(urole).size() << ";\n";
-    h << "  k.dofs_per_node = " << udofs << ";\n";
-    if (!form.fields_of(ir::Role::Coefficient).empty())
-      h << "  k.coefficients = " << d << "coefficients_" << dim << "d;\n  k.n_coefficients = "
-        << form.fields_of(ir::Role::Coefficient).size() << ";\n";
-    h << "  k.coefficient_components_per_node = " << cdofs << ";\n  k.coefficient_basis_order = " << p.coefficient_order << ";\n";
-    if (!form.qdata.empty())
-      h << "  k.qdata = " << d << "qdata_" << dim << "d;\n  k.n_qdata = " << form.qdata.size() << ";\n";
-    h << "  k.qdata_per_point = " << form.qdata_per_point(dim) << ";\n";
-    if (!form.constants.empty())
-      h << "  k.constants = " << d << "constant_names;\n  k.n_constants = " << form.constants.size() << ";\n"
-        << "  k.constant_defaults = " << d << "constant_defaults;\n";
-    h << "  k.workspace_doubles = &" << d << k.symbol << "_workspace;\n";
-    if (k.has_value) h << "  k.value = &" << d << k.symbol << "_value;\n";
-    if (k.has_vector) h << "  k.vector = &" << d << k.symbol << "_vector;\n";
-    if (k.has_matrix) h << "  k.matrix = &" << d << k.symbol << "_matrix;\n";
-    if (k.has_matrix && k.n_blocks == 0) h << "  k.matrix_structurally_zero = true;\n";
-    if (p.output->kind == OutputKind::Constraint)
-      h << "  k.target_constant = " << p.output->target_constant << ";\n  k.target_value = " << literal(p.output->target_value) << ";\n";
-    auto total = [](const FlopModel& f) { return f.per_point + f.per_node_point + f.per_node_pair_point; };
-    h << "  k.flops_value = " << total(k.value) << ";\n  k.flops_vector = " << total(k.vector) << ";\n  k.flops_matrix = " << total(k.matrix) << ";\n"
-      << "  k.flop_model_value = " << flop_cxx(k.value) << ";\n  k.flop_model_vector = " << flop_cxx(k.vector)
-      << ";\n  k.flop_model_matrix = " << flop_cxx(k.matrix) << ";\n"
-      << "  k.source = \"" << json_escape(source_name) << "\";\n  return k;\n}();\n\n";
+    k.symbol = kernel_symbol(form_, output, dim, domain);
+    k.line = form_.sources.line_col(output.loc).first;
+    KernelWriter w(form_, p);
+    h_ << "// ---- " << kernel_label(form_, p) << ", dimension " << dim << " (" << form_.sources.where(output.loc) << ")\n";
+    ir_ << "== " << kernel_label(form_, p) << " (dim " << dim << "): slots {" << slot_list(p) << "}\n";
+    if (p.is_point()) {
+      point_kernel(k, w);
+    } else {
+      if (p.has_value()) value_kernel(k, w);
+      if (p.has_vector()) vector_kernel(k, w);
+      if (p.has_matrix()) matrix_kernel(k, w);
+    }
+    workspace(k);
+    k.generated_lines = count_lines(h_.str(), kernel_start);
+    kernels_.push_back(std::move(k));
   }
-  h << "/// Every functional of the module, for registration by name.\n"
-    << "inline const lmeform::kernel::FormKernels* const " << m << "_all_kernels[] = {";
-  for (const auto& k : kernels) h << "&" << m << "_" << k.symbol << ", ";
-  h << "};\ninline constexpr int " << m << "_n_kernels = " << kernels.size() << ";\n"
-    << "inline const lmeform::kernel::ModuleTable " << m << "_module{lmeform::kernel::kContractVersion, \"" << m << "\", \""
-    << json_escape(source_name) << "\", " << m << "_all_kernels, " << m << "_n_kernels};\n\n"
-    << "// A module compiled into a shared object (JIT) exports its table through one C symbol.\n"
-    << "#ifdef LMEFORM_MODULE_ENTRY\n"
-    << "extern \"C\" __attribute__((visibility(\"default\"))) const lmeform::kernel::ModuleTable* lmeform_module_table() {\n"
-    << "  return &" << m << "_module;\n}\n#endif\n";
-  out.header = h.str();
-  out.ir = ir_text.str();
 
-  // JSON metadata.
+  void value_kernel(EmittedKernel& k, KernelWriter& w) {
+    const KernelPlan& p = k.plan;
+    k.has_value = true;
+    h_ << "inline double " << k.symbol << "_value(const lmeform::kernel::CellInputs& in) {\n" << head(p.dim)
+       << "  double result = 0.0;\n";
+    const auto [fl, nj] = w.point_loop(h_, {p.value}, "    result += w * " + w.ref(p.value) + ";\n");
+    h_ << "  return result;\n}\n\n";
+    k.value = {fl + 2, 2.0 * nj, 0};
+    ir_ << " value:\n";
+    dump(w, p.dim, {p.value});
+    ir_ << "  f = " << w.ref(p.value) << "\n";
+  }
+
+  void vector_kernel(EmittedKernel& k, KernelWriter& w) {
+    const KernelPlan& p = k.plan;
+    const int S = static_cast<int>(p.slots.size()), R = p.row_dofs;
+    k.has_vector = true;
+    h_ << "inline void " << k.symbol << "_vector(const lmeform::kernel::CellInputs& in, double* local_vector) {\n";
+    if (S == 0) {
+      // The integrand reads no row field (a boundary term constant in the unknowns): nothing to add.
+      h_ << "  (void)in;\n  (void)local_vector;\n}\n\n";
+      return;
+    }
+    std::vector<NodeId> roots;
+    std::ostringstream sink;
+    sink << "    double* Gq = G + std::size_t(q) * " << S * R << ";\n";
+    for (const auto& e : p.vector) {
+      roots.push_back(e.node);
+      sink << "    Gq[" << e.slot_index * R + e.row << "] = w * " << w.ref(e.node) << ";\n";
+    }
+    h_ << head(p.dim) << "  static constexpr int slots[] = {" << slot_list(p) << "};\n"
+       << "  double* Bs = in.workspace;  // gathered basis rows (nq*S x n)\n"
+       << "  double* G = Bs + std::size_t(nq) * " << S << " * std::size_t(n);  // w_q df/dJ (nq*S x R)\n"
+       << "  for (std::size_t i = 0; i < std::size_t(nq) * " << S * R << "; ++i) G[i] = 0.0;\n";
+    const auto [fl, nj] = w.point_loop(h_, roots, sink.str());
+    h_ << "  lmeform::kernel::gather_slots(in, " << p.dim << ", " << S << ", slots, Bs);\n"
+       << "  lmeform::kernel::contract_vector(in, n, nq, " << S << ", " << R << ", Bs, G, local_vector);\n}\n\n";
+    k.vector = {fl + static_cast<double>(p.vector.size()), 2.0 * nj + 2.0 * S * R, 0};
+    ir_ << " vector (df/dJ):\n";
+    dump(w, p.dim, roots);
+    for (const auto& e : p.vector)
+      ir_ << "  df/dJ[row " << e.row << ", slot " << p.slots[static_cast<std::size_t>(e.slot_index)] << "] = " << w.ref(e.node) << "\n";
+  }
+
+  void matrix_kernel(EmittedKernel& k, KernelWriter& w) {
+    const KernelPlan& p = k.plan;
+    const int S = static_cast<int>(p.slots.size()), R = p.row_dofs, C = p.col_dofs;
+    k.has_matrix = true;
+    std::vector<NodeId> roots;
+    std::ostringstream sink;
+    const int ld = C * S;
+    sink << "    double* Dq = D + std::size_t(q) * " << R * S * ld << ";\n";
+    std::set<std::pair<int, int>> blocks;
+    for (const auto& e : p.matrix) {
+      roots.push_back(e.node);
+      blocks.insert({e.row, e.col});
+    }
+    // Symmetric forms: emit only the upper blocks' entries and mirror them in the contraction.
+    for (const auto& e : p.matrix) {
+      if (p.symmetric && e.row > e.col) continue;
+      sink << "    Dq[" << (e.row * S + e.row_slot) * ld + e.col * S + e.col_slot << "] = w * " << w.ref(e.node) << ";\n";
+    }
+    std::ostringstream bl;
+    int nb = 0;
+    for (const auto& [r, c] : blocks) {
+      if (p.symmetric && r > c) continue;
+      bl << "{" << r << ", " << c << ", " << (p.symmetric && r != c ? "true" : "false") << ", "
+         << (p.symmetric && r == c ? "true" : "false") << "}, ";
+      ++nb;
+    }
+    k.n_blocks = nb;
+    double matrix_point_flops = 0;
+    int matrix_jets = 0;
+    const std::size_t dsize = static_cast<std::size_t>(R) * S * ld;
+    h_ << "inline void " << k.symbol << "_matrix(const lmeform::kernel::CellInputs& in, double* local_matrix) {\n";
+    if (nb == 0) {
+      // Structurally zero (e.g. a functional linear in the unknowns): nothing to accumulate.
+      h_ << "  (void)in;\n  (void)local_matrix;\n}\n\n";
+    } else {
+      h_ << head(p.dim) << "  static constexpr int slots[] = {" << slot_list(p) << "};\n"
+         << "  static constexpr lmeform::kernel::MatrixBlock blocks[] = {" << bl.str() << "};\n"
+         << "  double* Bs = in.workspace;  // gathered basis rows (nq*S x n)\n"
+         << "  double* D = Bs + std::size_t(nq) * " << S << " * std::size_t(n);  // w_q d2f/dJ2 per point\n"
+         << "  double* work = D + std::size_t(nq) * " << dsize << ";\n"
+         << "  for (std::size_t i = 0; i < std::size_t(nq) * " << dsize << "; ++i) D[i] = 0.0;\n";
+      const auto [fl, nj] = w.point_loop(h_, roots, sink.str());
+      h_ << "  lmeform::kernel::gather_slots(in, " << p.dim << ", " << S << ", slots, Bs);\n"
+         << "  lmeform::kernel::contract_matrix(in, n, nq, " << S << ", " << R << ", " << C
+         << ", Bs, D, blocks, " << nb << ", work, local_matrix);\n}\n\n";
+      matrix_point_flops = fl;
+      matrix_jets = nj;
+    }
+    const double mirror_blocks = static_cast<double>(blocks.size());
+    k.matrix = {matrix_point_flops + static_cast<double>(p.matrix.size()), 2.0 * matrix_jets + 2.0 * S * S * nb,
+                2.0 * S * nb + (mirror_blocks - nb)};
+    ir_ << " matrix (d2f/dJ2):\n";
+    dump(w, p.dim, roots);
+    for (const auto& e : p.matrix)
+      ir_ << "  d2f/dJ2[row " << e.row << " slot " << p.slots[static_cast<std::size_t>(e.row_slot)] << ", col " << e.col << " slot "
+          << p.slots[static_cast<std::size_t>(e.col_slot)] << "] = " << w.ref(e.node) << "\n";
+  }
+
+  /// values[q * n_values + i] = component i (row-major) at point q: overwritten, no weights.
+  void point_kernel(EmittedKernel& k, KernelWriter& w) {
+    const KernelPlan& p = k.plan;
+    const std::size_t nv = point_values(p);
+    std::ostringstream sink;
+    sink << "    double* vq = values + std::size_t(q) * " << nv << ";\n";
+    for (std::size_t i = 0; i < nv; ++i) sink << "    vq[" << i << "] = " << w.ref(p.point.components[i]) << ";\n";
+    h_ << "inline void " << k.symbol << "_point(const lmeform::kernel::CellInputs& in, double* values) {\n" << head(p.dim);
+    const auto [fl, nj] = w.point_loop(h_, p.point.components, sink.str(), false);
+    h_ << "}\n\n";
+    k.point = {fl, 2.0 * nj, 0};
+    ir_ << " point values:\n";
+    dump(w, p.dim, p.point.components);
+    for (std::size_t i = 0; i < nv; ++i) ir_ << "  value[" << i << "] = " << w.ref(p.point.components[i]) << "\n";
+  }
+
+  /// Workspace: the larger of the vector and matrix kernels' needs (point kernels need none).
+  void workspace(const EmittedKernel& k) {
+    const KernelPlan& p = k.plan;
+    if (p.is_point()) {
+      h_ << "inline std::size_t " << k.symbol << "_workspace(int, int) { return 0; }\n\n";
+      return;
+    }
+    const int S = static_cast<int>(p.slots.size()), R = p.row_dofs, C = p.col_dofs;
+    const std::size_t dsize = static_cast<std::size_t>(R) * S * C * S;
+    h_ << "inline std::size_t " << k.symbol << "_workspace(int n, int nq) {\n"
+       << "  const std::size_t N = std::size_t(n), Q = std::size_t(nq);\n"
+       << "  const std::size_t vec = Q * " << S << " * N + Q * " << S * R << ";\n"
+       << "  const std::size_t mat = " << (p.has_matrix() ? "Q * " + std::to_string(S) + " * N + Q * " + std::to_string(dsize) +
+                                                                 " + lmeform::kernel::contract_matrix_workspace(n, nq, " + std::to_string(S) + ")"
+                                                           : std::string("0"))
+       << ";\n  return vec > mat ? vec : mat;\n}\n\n";
+  }
+
+  /// Output names are free, so `E` over ds and an output named `E_ds` could collide: refuse it.
+  void require_distinct_symbols() const {
+    std::map<std::string, const OutputDecl*> seen;
+    for (const auto& k : kernels_) {
+      const auto [it, fresh] = seen.emplace(k.symbol, k.plan.output);
+      if (!fresh)
+        fail_at(form_.sources, k.plan.output->loc,
+                "the kernels of " + kernel_label(form_, k.plan) + " and of " + to_string(it->second->kind) + " '" +
+                    it->second->name + "' would both be named '" + m_ + "_" + k.symbol + "'; rename one of the outputs");
+    }
+  }
+
+  /// The basis orders of an output's kernels in one dimension: the largest over its domains, so
+  /// that every kernel of the output reads one tabulation and dof layout.
+  std::pair<int, int> output_orders(const KernelPlan& p) const {
+    std::pair<int, int> orders{0, 0};
+    for (const auto& k : kernels_)
+      if (k.plan.output == p.output && k.plan.dim == p.dim) {
+        orders.first = std::max(orders.first, k.plan.basis_order);
+        orders.second = std::max(orders.second, k.plan.coefficient_order);
+      }
+    return orders;
+  }
+
+  void descriptor(const EmittedKernel& k);
+  void module_table();
+  std::string json() const;
+  std::string kernel_json(const EmittedKernel& k) const;
+};
+
+void ModuleWriter::descriptor(const EmittedKernel& k) {
+  const KernelPlan& p = k.plan;
+  const int dim = p.dim;
+  const ir::Role urole = p.output->kind == OutputKind::Bilinear ? ir::Role::Trial
+                       : p.output->kind == OutputKind::Linear   ? ir::Role::Test : ir::Role::Unknown;
+  const char* unm = urole == ir::Role::Trial ? "trials" : urole == ir::Role::Test ? "tests" : "unknowns";
+  int udofs = 0, cdofs = 0;
+  field_offsets(form_, urole, dim, &udofs);
+  field_offsets(form_, ir::Role::Coefficient, dim, &cdofs);
+  static const char* kinds[] = {"Energy", "Constraint", "Residual", "Bilinear", "Linear", "Point"};
+  const auto [basis_order, coefficient_order] = output_orders(p);
+  const Domain& domain = form_.domains[static_cast<std::size_t>(p.domain)];
+  const std::string d = m_ + "_detail::";
+  h_ << "inline const lmeform::kernel::FormKernels " << m_ << "_" << k.symbol << " = [] {\n"
+     << "  lmeform::kernel::FormKernels k;\n"
+     << "  k.module = \"" << m_ << "\";\n  k.name = \"" << p.output->name << "\";\n"
+     << "  k.kind = lmeform::kernel::FunctionalKind::" << kinds[static_cast<int>(p.output->kind)] << ";\n"
+     << "  k.dim = " << dim << ";\n  k.basis_order = " << basis_order << ";\n";
+  if (!form_.fields_of(urole).empty())
+    h_ << "  k.unknowns = " << d << unm << "_" << dim << "d;\n  k.n_unknowns = " << form_.fields_of(urole).size() << ";\n";
+  h_ << "  k.dofs_per_node = " << udofs << ";\n";
+  if (!form_.fields_of(ir::Role::Coefficient).empty())
+    h_ << "  k.coefficients = " << d << "coefficients_" << dim << "d;\n  k.n_coefficients = "
+       << form_.fields_of(ir::Role::Coefficient).size() << ";\n";
+  h_ << "  k.coefficient_components_per_node = " << cdofs << ";\n  k.coefficient_basis_order = " << coefficient_order << ";\n";
+  if (!form_.qdata.empty()) h_ << "  k.qdata = " << d << "qdata_" << dim << "d;\n  k.n_qdata = " << form_.qdata.size() << ";\n";
+  h_ << "  k.qdata_per_point = " << form_.qdata_per_point(dim) << ";\n";
+  if (!form_.constants.empty())
+    h_ << "  k.constants = " << d << "constant_names;\n  k.n_constants = " << form_.constants.size() << ";\n"
+       << "  k.constant_defaults = " << d << "constant_defaults;\n";
+  h_ << "  k.workspace_doubles = &" << d << k.symbol << "_workspace;\n";
+  if (k.has_value) h_ << "  k.value = &" << d << k.symbol << "_value;\n";
+  if (k.has_vector) h_ << "  k.vector = &" << d << k.symbol << "_vector;\n";
+  if (k.has_matrix) h_ << "  k.matrix = &" << d << k.symbol << "_matrix;\n";
+  if (k.has_matrix && k.n_blocks == 0) h_ << "  k.matrix_structurally_zero = true;\n";
+  if (p.output->kind == OutputKind::Constraint)
+    h_ << "  k.target_constant = " << p.output->target_constant << ";\n  k.target_value = " << literal(p.output->target_value) << ";\n";
+  if (domain.boundary)
+    h_ << "  k.domain = lmeform::kernel::IntegralDomain::Boundary;\n  k.boundary_part = \"" << domain.part << "\";\n";
+  if (p.is_point()) {
+    h_ << "  k.point = &" << d << k.symbol << "_point;\n  k.n_values = " << point_values(p) << ";\n  k.point_rank = "
+       << p.point.shape.size() << ";\n";
+    for (std::size_t i = 0; i < p.point.shape.size(); ++i) h_ << "  k.point_extents[" << i << "] = " << p.point.shape[i] << ";\n";
+  }
+  // A point kernel's cost is reported as the value's: it is the one kernel of a point output.
+  const FlopModel& value = p.is_point() ? k.point : k.value;
+  auto total = [](const FlopModel& f) { return f.per_point + f.per_node_point + f.per_node_pair_point; };
+  h_ << "  k.flops_value = " << total(value) << ";\n  k.flops_vector = " << total(k.vector) << ";\n  k.flops_matrix = " << total(k.matrix) << ";\n"
+     << "  k.flop_model_value = " << flop_cxx(value) << ";\n  k.flop_model_vector = " << flop_cxx(k.vector)
+     << ";\n  k.flop_model_matrix = " << flop_cxx(k.matrix) << ";\n"
+     << "  k.source = \"" << json_escape(source_) << "\";\n  return k;\n}();\n\n";
+}
+
+void ModuleWriter::module_table() {
+  h_ << "/// Every functional of the module, for registration by name.\n"
+     << "inline const lmeform::kernel::FormKernels* const " << m_ << "_all_kernels[] = {";
+  for (const auto& k : kernels_) h_ << "&" << m_ << "_" << k.symbol << ", ";
+  h_ << "};\ninline constexpr int " << m_ << "_n_kernels = " << kernels_.size() << ";\n"
+     << "inline const lmeform::kernel::ModuleTable " << m_ << "_module{lmeform::kernel::kContractVersion, \"" << m_ << "\", \""
+     << json_escape(source_) << "\", " << m_ << "_all_kernels, " << m_ << "_n_kernels};\n\n"
+     << "// A module compiled into a shared object (JIT) exports its table through one C symbol.\n"
+     << "#ifdef LMEFORM_MODULE_ENTRY\n"
+     << "extern \"C\" __attribute__((visibility(\"default\"))) const lmeform::kernel::ModuleTable* lmeform_module_table() {\n"
+     << "  return &" << m_ << "_module;\n}\n#endif\n";
+}
+
+std::string ModuleWriter::kernel_json(const EmittedKernel& k) const {
+  const auto& p = k.plan;
+  const Domain& domain = form_.domains[static_cast<std::size_t>(p.domain)];
+  const auto [basis_order, coefficient_order] = output_orders(p);
+  std::ostringstream j;
+  j << "    {\"symbol\": \"" << m_ << "_" << k.symbol << "\", \"output\": \"" << p.output->name << "\", \"kind\": \""
+    << to_string(p.output->kind) << "\", \"dim\": " << p.dim << ", \"domain\": \"" << (domain.boundary ? "boundary" : "cells")
+    << "\", \"boundary_part\": \"" << domain.part << "\", \"measure\": \"" << (p.is_point() ? "" : domain.measure())
+    << "\", \"line\": " << k.line << ", \"basis_order\": " << basis_order << ", \"coefficient_basis_order\": " << coefficient_order
+    << ", \"jet_slots\": [";
+  for (std::size_t s = 0; s < p.slots.size(); ++s) j << (s ? ", " : "") << p.slots[s];
+  // Jet components used per row component (structurally non-zero gradient entries).
+  j << "], \"jet_components\": [";
+  for (std::size_t e = 0; e < p.vector.size(); ++e)
+    j << (e ? ", " : "") << "{\"component\": " << p.vector[e].row << ", \"slot\": " << p.slots[static_cast<std::size_t>(p.vector[e].slot_index)] << "}";
+  j << "], \"hessian_entries\": " << p.matrix.size() << ", \"matrix_blocks\": " << k.n_blocks;
+  if (p.output->kind == OutputKind::Constraint) {
+    j << ", \"target\": ";
+    if (p.output->target_constant >= 0) j << "\"" << form_.constants[static_cast<std::size_t>(p.output->target_constant)].name << "\"";
+    else j << p.output->target_value;
+  }
+  if (p.is_point()) {
+    j << ", \"point\": {\"shape\": \"" << point_shape_name(p.point.shape) << "\", \"rank\": " << p.point.shape.size() << ", \"extents\": [";
+    for (std::size_t i = 0; i < p.point.shape.size(); ++i) j << (i ? ", " : "") << p.point.shape[i];
+    j << "], \"n_values\": " << point_values(p) << "}";
+  }
+  j << ",\n     \"flops\": {";
+  bool first = true;
+  auto add = [&](bool have, const char* nm, const FlopModel& f) {
+    if (!have) return;
+    j << (first ? "" : ", ") << "\"" << nm << "\": " << flop_json(f);
+    first = false;
+  };
+  add(k.has_value, "value", k.value);
+  add(k.has_vector, "vector", k.vector);
+  add(k.has_matrix, "matrix", k.matrix);
+  add(p.is_point(), "point", k.point);
+  j << "}}";
+  return j.str();
+}
+
+std::string ModuleWriter::json() const {
   std::ostringstream j;
   auto fields_json = [&](ir::Role role) {
     std::string s = "[";
-    for (const auto* f : form.fields_of(role))
+    for (const auto* f : form_.fields_of(role))
       s += std::string(s.size() > 1 ? ", " : "") + "{\"name\": \"" + f->name + "\", \"shape\": \"" + (f->is_vector ? "vector" : "scalar") + "\"}";
     return s + "]";
   };
-  j << "{\n  \"module\": \"" << m << "\",\n  \"source\": \"" << json_escape(source_name) << "\",\n  \"dimensions\": [";
-  for (std::size_t i = 0; i < form.dims.size(); ++i) j << (i ? ", " : "") << form.dims[i];
+  j << "{\n  \"module\": \"" << m_ << "\",\n  \"source\": \"" << json_escape(source_) << "\",\n  \"dimensions\": [";
+  for (std::size_t i = 0; i < form_.dims.size(); ++i) j << (i ? ", " : "") << form_.dims[i];
   j << "],\n  \"unknowns\": " << fields_json(ir::Role::Unknown) << ",\n  \"tests\": " << fields_json(ir::Role::Test)
     << ",\n  \"trials\": " << fields_json(ir::Role::Trial) << ",\n  \"coefficients\": " << fields_json(ir::Role::Coefficient)
     << ",\n  \"constants\": [";
-  for (std::size_t i = 0; i < form.constants.size(); ++i) {
-    const auto& c = form.constants[i];
+  for (std::size_t i = 0; i < form_.constants.size(); ++i) {
+    const auto& c = form_.constants[i];
     j << (i ? ", " : "") << "{\"name\": \"" << c.name << "\"";
     if (c.default_value) j << ", \"default\": " << std::setprecision(17) << *c.default_value;
     j << "}";
   }
   static const char* qshapes[] = {"scalar", "vector", "matrix", "tensor3"};
   j << "],\n  \"qdata\": [";
-  for (std::size_t i = 0; i < form.qdata.size(); ++i)
-    j << (i ? ", " : "") << "{\"name\": \"" << form.qdata[i].name << "\", \"shape\": \"" << qshapes[form.qdata[i].rank] << "\"}";
-  j << "],\n  \"coordinate\": \"" << form.coordinate << "\",\n  \"kernels\": [\n";
-  for (std::size_t i = 0; i < kernels.size(); ++i) {
-    const auto& k = kernels[i];
-    const auto& p = k.plan;
-    j << "    {\"symbol\": \"" << m << "_" << k.symbol << "\", \"output\": \"" << p.output->name << "\", \"kind\": \""
-      << to_string(p.output->kind) << "\", \"dim\": " << p.dim << ", \"line\": " << k.line
-      << ", \"basis_order\": " << p.basis_order << ", \"coefficient_basis_order\": " << p.coefficient_order << ", \"jet_slots\": [";
-    for (std::size_t s = 0; s < p.slots.size(); ++s) j << (s ? ", " : "") << p.slots[s];
-    // Jet components used per row component (structurally non-zero gradient entries).
-    j << "], \"jet_components\": [";
-    for (std::size_t e = 0; e < p.vector.size(); ++e)
-      j << (e ? ", " : "") << "{\"component\": " << p.vector[e].row << ", \"slot\": " << p.slots[static_cast<std::size_t>(p.vector[e].slot_index)] << "}";
-    j << "], \"hessian_entries\": " << p.matrix.size() << ", \"matrix_blocks\": " << k.n_blocks;
-    if (p.output->kind == OutputKind::Constraint) {
-      j << ", \"target\": ";
-      if (p.output->target_constant >= 0) j << "\"" << form.constants[static_cast<std::size_t>(p.output->target_constant)].name << "\"";
-      else j << p.output->target_value;
-    }
-    j << ",\n     \"flops\": {";
-    bool first = true;
-    auto add = [&](bool have, const char* nm, const FlopModel& f) {
-      if (!have) return;
-      j << (first ? "" : ", ") << "\"" << nm << "\": " << flop_json(f);
-      first = false;
-    };
-    add(k.has_value, "value", k.value);
-    add(k.has_vector, "vector", k.vector);
-    add(k.has_matrix, "matrix", k.matrix);
-    j << "}}" << (i + 1 < kernels.size() ? "," : "") << "\n";
-  }
+  for (std::size_t i = 0; i < form_.qdata.size(); ++i)
+    j << (i ? ", " : "") << "{\"name\": \"" << form_.qdata[i].name << "\", \"shape\": \"" << qshapes[form_.qdata[i].rank] << "\"}";
+  // The named boundary parts that kernels integrate over: what a scene must provide.
+  j << "],\n  \"coordinate\": \"" << form_.coordinate << "\",\n  \"boundary_parts\": [";
+  std::set<int> parts;
+  for (const auto& k : kernels_)
+    if (!form_.domains[static_cast<std::size_t>(k.plan.domain)].part.empty()) parts.insert(k.plan.domain);
+  for (const int d : parts) j << (d == *parts.begin() ? "" : ", ") << "\"" << form_.domains[static_cast<std::size_t>(d)].part << "\"";
+  j << "],\n  \"kernels\": [\n";
+  for (std::size_t i = 0; i < kernels_.size(); ++i) j << kernel_json(kernels_[i]) << (i + 1 < kernels_.size() ? "," : "") << "\n";
   j << "  ]\n}\n";
-  out.json = j.str();
-  out.report = cost_report(form, kernels, static_cast<long>(std::count(out.header.begin(), out.header.end(), '\n')));
-  return out;
+  return j.str();
+}
+
+}  // namespace
+
+GeneratedModule generate(const CompiledForm& form, const std::string& source_name) {
+  return ModuleWriter(form, source_name).run();
 }
 
 }  // namespace lmeform::compiler

@@ -11,11 +11,11 @@
 
 namespace lmeform::compiler::ir {
 
-bool is_terminal(Op op) { return op <= Op::Qdata; }
+bool is_terminal(Op op) { return op <= Op::Normal; }
 
 int flop_cost(Op op) {
   switch (op) {
-    case Op::Const: case Op::Jet: case Op::Coord: case Op::Param: case Op::Qdata: return 0;
+    case Op::Const: case Op::Jet: case Op::Coord: case Op::Param: case Op::Qdata: case Op::Normal: return 0;
     case Op::Sqrt: case Op::Div: return 4;
     case Op::Exp: case Op::Log: case Op::Sin: case Op::Cos: case Op::Tanh: case Op::Pow: return 20;
     default: return 1;
@@ -43,6 +43,10 @@ NodeId Graph::intern(const Node& n) {
   const auto id = static_cast<NodeId>(nodes_.size());
   nodes_.push_back(n);
   origins_.push_back(current_origin_);
+  bool normal = n.op == Op::Normal;
+  if (!is_terminal(n.op))
+    for (int a : n.arg) normal = normal || (a >= 0 && reads_normal_[static_cast<std::size_t>(a)] != 0);
+  reads_normal_.push_back(normal ? 1 : 0);
   table_.emplace(n, id);
   return id;
 }
@@ -72,6 +76,7 @@ static Node leaf(Op op, int i) {
 NodeId Graph::coord(int i) { return intern(leaf(Op::Coord, i)); }
 NodeId Graph::param(int i) { return intern(leaf(Op::Param, i)); }
 NodeId Graph::qdata(int i) { return intern(leaf(Op::Qdata, i)); }
+NodeId Graph::normal(int i) { return intern(leaf(Op::Normal, i)); }
 
 static Node op2(Op op, NodeId a, NodeId b) {
   Node n;
@@ -276,7 +281,7 @@ NodeId Differentiator::apply_rule(NodeId id, const Node& n) {
   const NodeId a = n.arg[0], b = n.arg[1];
   switch (n.op) {
     case Op::Const: d = g_.zero(); break;
-    case Op::Jet: case Op::Coord: case Op::Param: case Op::Qdata: d = rule_(g_, id); break;
+    case Op::Jet: case Op::Coord: case Op::Param: case Op::Qdata: case Op::Normal: d = rule_(g_, id); break;
     case Op::Add: d = g_.add(D(a), D(b)); break;
     case Op::Mul: d = g_.add(g_.mul(D(a), b), g_.mul(a, D(b))); break;
     case Op::Neg: d = g_.neg(D(a)); break;
@@ -577,7 +582,7 @@ std::vector<double> Interpreter::evaluate(std::span<const NodeId> roots,
     double r = 0;
     switch (n.op) {
       case Op::Const: r = n.value; break;
-      case Op::Jet: case Op::Coord: case Op::Param: case Op::Qdata: r = terminal(n); break;
+      case Op::Jet: case Op::Coord: case Op::Param: case Op::Qdata: case Op::Normal: r = terminal(n); break;
       case Op::Add: r = A(0) + A(1); break;
       case Op::Mul: r = A(0) * A(1); break;
       case Op::Neg: r = -A(0); break;

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <numbers>
 #include <fstream>
+#include <limits>
 #include <set>
 #include <map>
 #include <sstream>
@@ -23,6 +24,7 @@ const char* to_string(OutputKind k) {
     case OutputKind::Residual: return "residual";
     case OutputKind::Bilinear: return "bilinear";
     case OutputKind::Linear: return "linear";
+    case OutputKind::Point: return "point";
   }
   return "?";
 }
@@ -49,12 +51,14 @@ using ast::StmtKind;
 using ir::NodeId;
 using ir::Op;
 
-/// A tensor-valued expression: components (row-major) of IR nodes.
+/// A tensor-valued expression: components (row-major) of IR nodes. A measure is a sum of
+/// integrals over domains: then `c` holds one integrand per domain of `domains` (ascending).
 struct Value {
   std::vector<int> shape;
   std::vector<NodeId> c;
   bool measure = false;
   bool condition = false;
+  std::vector<int> domains;  ///< measures: index into CompiledForm::domains of each integrand
   int rank() const { return static_cast<int>(shape.size()); }
   bool scalar() const { return shape.empty(); }
 };
@@ -108,10 +112,12 @@ int builtin_arity(const std::string& name) {
     if (n == name) return a;
   return -1;
 }
-bool is_builtin_value(const std::string& n) { return n == "pi" || n == "identity" || n == "I" || n == "dx"; }
+bool is_builtin_value(const std::string& n) { return n == "pi" || n == "identity" || n == "I" || n == "dx" || n == "ds"; }
 /// Builtins that a declaration may hide: short names that forms already use for their own things
-/// (`let e = sym(grad(u))`), so reserving them would break such forms.
-bool is_predefined(const std::string& n) { return n == "e" || n == "dim"; }
+/// (`let e = sym(grad(u))`, `unknown n`), so reserving them would break such forms.
+bool is_predefined(const std::string& n) { return n == "e" || n == "dim" || n == "n"; }
+
+constexpr const char* kNormalOnCells = "the normal n exists only on the boundary: this term is integrated with dx";
 
 constexpr const char* kDefScopeRule = "a def body may use only its parameters and names declared before the def";
 
@@ -164,10 +170,58 @@ class Lowering {
   std::map<std::string, int> constant_index_;
   std::map<std::string, int> qdata_index_;
   std::vector<int> qdata_offset_;  ///< per qdata, at this dimension
+  /// Where the current statement first names the normal and a measure (file -1: not yet), for
+  /// diagnostics about a whole output.
+  Loc normal_use_{-1, 0}, measure_use_{-1, 0};
 
   [[noreturn]] void fail(const Loc& loc, const std::string& msg) const { fail_at(form_.sources, loc, msg); }
 
-  Value scalar(NodeId n) const { return Value{{}, {n}}; }
+  Value scalar(NodeId n) const {
+    Value v;
+    v.c = {n};
+    return v;
+  }
+
+  // ---- measures -----------------------------------------------------------------------------
+  int domain_index(const Domain& d) {
+    const auto it = std::find(form_.domains.begin(), form_.domains.end(), d);
+    if (it != form_.domains.end()) return static_cast<int>(it - form_.domains.begin());
+    form_.domains.push_back(d);
+    return static_cast<int>(form_.domains.size()) - 1;
+  }
+
+  /// The measure of one domain with integrand 1 (`dx`, `ds`, `ds(top)`).
+  Value unit_measure(const Domain& d, const Loc& use) {
+    if (measure_use_.file < 0) measure_use_ = use;
+    Value v = scalar(g_->one());
+    v.measure = true;
+    v.domains = {domain_index(d)};
+    return v;
+  }
+
+  /// Two measures combined domain by domain (a domain that one of them lacks counts as zero there).
+  template <class Combine>
+  Value merge_measures(const Value& a, const Value& b, Combine combine) {
+    Value r = a;
+    r.c.clear();
+    r.domains.clear();
+    constexpr int kNone = std::numeric_limits<int>::max();
+    std::size_t i = 0, j = 0;
+    while (i < a.domains.size() || j < b.domains.size()) {
+      const bool take_a = i < a.domains.size(), take_b = j < b.domains.size();
+      const int da = take_a ? a.domains[i] : kNone, db = take_b ? b.domains[j] : kNone;
+      const int d = std::min(da, db);
+      r.domains.push_back(d);
+      r.c.push_back(combine(da == d ? a.c[i++] : g_->zero(), db == d ? b.c[j++] : g_->zero()));
+    }
+    return r;
+  }
+
+  /// The normal exists at boundary points only: a cell integrand must not read it.
+  void require_no_normal_on_cells(const Value& m, const Loc& term) const {
+    for (std::size_t i = 0; i < m.domains.size(); ++i)
+      if (!form_.domains[static_cast<std::size_t>(m.domains[i])].boundary && g_->reads_normal(m.c[i])) fail(term, kNormalOnCells);
+  }
 
   // ---- declarations -------------------------------------------------------------------------
   void declare(const std::string& name, const Loc& loc, Symbol sym) {
@@ -190,6 +244,7 @@ class Lowering {
 
   void statement(const Stmt& s) {
     g_->set_origin(s.loc);
+    normal_use_ = measure_use_ = Loc{-1, 0};
     switch (s.kind) {
       case StmtKind::Form: case StmtKind::Dimension: case StmtKind::Include: break;
       case StmtKind::Field: {
@@ -239,15 +294,18 @@ class Lowering {
       case StmtKind::Measure: {
         Value v = expr(*s.body);
         if (!v.measure)
-          fail(s.body->loc, "measure '" + s.name + "' must be a weighted measure such as 2*pi*x[0]*dx; found " +
+          fail(s.body->loc, "measure '" + s.name + "' must be a weighted measure such as 2*pi*x[0]*dx or 2*pi*x[0]*ds; found " +
                                 shape_name(v));
         declare(s.name, s.name_loc, Symbol{SymKind::Measure, s.name_loc, std::move(v), nullptr});
         break;
       }
       case StmtKind::Def: {
         std::set<std::string> seen;
-        for (std::size_t i = 0; i < s.params.size(); ++i)
+        for (std::size_t i = 0; i < s.params.size(); ++i) {
+          if (is_builtin_value(s.params[i]) || builtin_arity(s.params[i]) >= 0)
+            fail(s.param_locs[i], "'" + s.params[i] + "' is a builtin name and cannot be a parameter");
           if (!seen.insert(s.params[i]).second) fail(s.param_locs[i], "duplicate parameter '" + s.params[i] + "'");
+        }
         declare(s.name, s.name_loc, Symbol{SymKind::Def, s.name_loc, {}, &s});
         break;
       }
@@ -259,11 +317,19 @@ class Lowering {
     auto it = std::find_if(form_.outputs.begin(), form_.outputs.end(), [&](const OutputDecl& o) { return o.name == s.name; });
     OutputDecl& out = *it;
     const Value v = expr(*s.body);
+    if (out.kind == OutputKind::Point) return point_output(s, out, v);
     if (!v.measure)
       fail(s.body->loc, std::string("the right-hand side of ") + to_string(out.kind) + " '" + s.name +
-                            "' must be an integral (a scalar times dx or a declared measure); found " + shape_name(v));
-    out.integrand[dim_] = v.c[0];
-    const auto vars = used_roles(v.c[0]);
+                            "' must be an integral (a scalar times dx, ds or a declared measure); found " + shape_name(v));
+    // Terms that vanish (`0*ds`, a branch not taken in this dimension) generate no kernel; if every
+    // one does, the first stays, and the checks below say what the output lacks.
+    std::map<int, NodeId>& terms = out.integrands[dim_];
+    for (std::size_t i = 0; i < v.c.size(); ++i)
+      if (!g_->is_const(v.c[i], 0.0)) terms[v.domains[i]] = v.c[i];
+    if (terms.empty()) terms[v.domains[0]] = v.c[0];
+    std::vector<NodeId> roots;
+    for (const auto& [domain, f] : terms) roots.push_back(f);
+    const auto vars = used_roles(roots);
     const bool has_u = vars.count(ir::Role::Unknown), has_v = vars.count(ir::Role::Test),
                has_w = vars.count(ir::Role::Trial);
     const std::string what = std::string(to_string(out.kind)) + " '" + s.name + "'";
@@ -285,10 +351,31 @@ class Lowering {
         if (!has_v) fail(s.body->loc, what + " must use a test function");
         if (has_u || has_w) fail(s.body->loc, what + " must not depend on unknowns or trial functions");
         break;
+      case OutputKind::Point: break;
     }
-    if (out.kind == OutputKind::Residual || out.kind == OutputKind::Linear || out.kind == OutputKind::Bilinear)
-      require_linear(v.c[0], ir::Role::Test, what, "test");
-    if (out.kind == OutputKind::Bilinear) require_linear(v.c[0], ir::Role::Trial, what, "trial");
+    for (const NodeId f : roots) {
+      if (out.kind == OutputKind::Residual || out.kind == OutputKind::Linear || out.kind == OutputKind::Bilinear)
+        require_linear(f, ir::Role::Test, what, "test");
+      if (out.kind == OutputKind::Bilinear) require_linear(f, ir::Role::Trial, what, "trial");
+    }
+  }
+
+  /// `point NAME = EXPR`: a value at each quadrature point of the cells, of any shape up to tensor3.
+  void point_output(const Stmt& s, OutputDecl& out, const Value& v) {
+    const std::string what = "point output '" + s.name + "'";
+    if (v.measure)
+      fail(measure_use_.file >= 0 ? measure_use_ : s.body->loc,
+           what + " must not contain a measure: it is a value at each quadrature point (remove dx or ds)");
+    if (v.condition) fail(s.body->loc, what + " must be a value, not a condition (write if ... then 1 else 0)");
+    if (v.rank() > 3) fail(s.body->loc, what + " must be a scalar, vector, matrix or tensor3; found " + shape_name(v));
+    const auto roles = used_roles(v.c);
+    if (roles.count(ir::Role::Test) || roles.count(ir::Role::Trial))
+      fail(s.body->loc, what + " must not use test or trial functions (it has no derivatives)");
+    for (const NodeId c : v.c)
+      if (g_->reads_normal(c))
+        fail(normal_use_.file >= 0 ? normal_use_ : s.body->begin,
+             "the normal n exists only on the boundary: " + what + " is evaluated at the cells' quadrature points");
+    out.point[dim_] = PointValue{v.shape, v.c};
   }
 
   /// Fails, pointing at the offending term, unless the integrand f is linear in the fields of
@@ -361,9 +448,8 @@ class Lowering {
     return origin;
   }
 
-  std::set<ir::Role> used_roles(NodeId root) const {
+  std::set<ir::Role> used_roles(std::span<const NodeId> roots) const {
     std::set<ir::Role> roles;
-    const NodeId roots[] = {root};
     for (NodeId id : g_->reachable(roots))
       if (g_->node(id).op == Op::Jet) roles.insert(g_->jet_var(id).role);
     return roles;
@@ -377,7 +463,7 @@ class Lowering {
     if (!scopes_.empty())
       for (const auto& [n, v] : scopes_.back().params) names.push_back(n);
     for (const auto& [n, a] : builtin_functions()) names.push_back(n);
-    for (const char* n : {"pi", "identity", "I", "dx", "e", "dim"}) names.push_back(n);
+    for (const char* n : {"pi", "identity", "I", "dx", "ds", "e", "dim", "n"}) names.push_back(n);
     return names;
   }
 
@@ -441,7 +527,7 @@ class Lowering {
   }
 
   Value cond_value(NodeId n) const {
-    Value v{{}, {n}};
+    Value v = scalar(n);
     v.condition = true;
     return v;
   }
@@ -466,6 +552,11 @@ class Lowering {
   Value select(const Value& c, const Value& a, const Value& b, const Loc& loc) {
     if (a.shape != b.shape || a.measure != b.measure || a.condition || b.condition)
       fail(loc, "the branches of a conditional must have the same shape; found " + shape_name(a) + " and " + shape_name(b));
+    if (a.measure) {
+      const Value r = merge_measures(a, b, [&](NodeId x, NodeId y) { return g_->select(c.c[0], x, y); });
+      require_no_normal_on_cells(r, loc);
+      return r;
+    }
     Value r = a;
     for (std::size_t i = 0; i < r.c.size(); ++i) r.c[i] = g_->select(c.c[0], a.c[i], b.c[i]);
     return r;
@@ -479,19 +570,37 @@ class Lowering {
     if (const Symbol* sym = global(e.name, e.loc)) {
       if (sym->kind == SymKind::Def)
         fail(e.loc, "'" + e.name + "' is a function; call it with arguments: " + e.name + "(...)");
+      if (sym->value.measure && measure_use_.file < 0) measure_use_ = e.loc;
       return sym->value;
     }
     if (e.name == "pi") return scalar(g_->constant(std::numbers::pi));
     if (e.name == "dim") return scalar(g_->constant(dim_));
     if (e.name == "identity" || e.name == "I") return identity();
-    if (e.name == "dx") {
-      Value v = scalar(g_->one());
-      v.measure = true;
+    if (e.name == "dx") return unit_measure(Domain{}, e.loc);
+    if (e.name == "ds") return unit_measure(Domain{true, ""}, e.loc);
+    if (e.name == "n") {
+      if (normal_use_.file < 0) normal_use_ = e.loc;
+      Value v;
+      v.shape = {dim_};
+      for (int i = 0; i < dim_; ++i) v.c.push_back(g_->normal(i));
       return v;
     }
     if (builtin_arity(e.name) >= 0 || e.name == "e")
       fail(e.loc, "'" + e.name + "' is a function; call it with arguments: " + e.name + "(...)");
     unknown_name(e.loc, e.name);
+  }
+
+  /// ds(part): the measure of a named part of the boundary. The part is a name the runtime resolves
+  /// (a scene's boundary), not an expression: it is not looked up.
+  Value boundary_measure(const Expr& e) {
+    if (e.args.size() != 1)
+      fail(e.loc, e.args.empty() ? "ds() needs the name of a boundary part: write ds for the whole boundary, ds(top) for a part"
+                                 : "ds takes one boundary part name, got " + std::to_string(e.args.size()) + " arguments");
+    const Expr& arg = *e.args[0];
+    if (arg.kind != ExprKind::Name)
+      fail(arg.begin, std::string("the argument of ds must be the name of a boundary part (an identifier such as top); found ") +
+                          (arg.kind == ExprKind::Number ? "a number" : "an expression"));
+    return unit_measure(Domain{true, arg.name}, e.loc);
   }
 
   /// e(i): the i-th Cartesian unit vector of the current dimension.
@@ -601,14 +710,17 @@ class Lowering {
       if (a.shape != b.shape || a.measure != b.measure)
         fail(e.loc, std::string("cannot ") + (op == "+" ? "add " : "subtract ") + shape_name(b) + (op == "+" ? " to " : " from ") +
                         shape_name(a) + (a.measure != b.measure ? " (write every term as integrand * dx)" : ""));
+      if (a.measure)
+        return merge_measures(a, b, [&](NodeId x, NodeId y) { return op == "+" ? g_->add(x, y) : g_->sub(x, y); });
       for (std::size_t i = 0; i < a.c.size(); ++i) a.c[i] = op == "+" ? g_->add(a.c[i], b.c[i]) : g_->sub(a.c[i], b.c[i]);
       return a;
     }
-    if (op == "*") return multiply(a, b, e.loc);
+    if (op == "*") return multiply(a, b, e);
     if (op == "/") {
       if (!b.scalar() || b.measure)
         fail(e.loc, "division needs a scalar divisor; found " + shape_name(a) + " / " + shape_name(b));
       for (auto& c : a.c) c = g_->div(c, b.c[0]);
+      if (a.measure) require_no_normal_on_cells(a, e.begin);
       return a;
     }
     if (op == "^") {
@@ -625,15 +737,18 @@ class Lowering {
     return t;
   }
 
-  Value multiply(const Value& a, const Value& b, const Loc& loc) {
+  /// a * b; `e` is the product, whose extent is the term a diagnostic about the integrand names.
+  Value multiply(const Value& a, const Value& b, const Expr& e) {
+    const Loc& loc = e.loc;
     if (a.measure && b.measure) fail(loc, "cannot multiply two measures");
-    if (a.scalar() || b.scalar()) {
-      Value r = a.scalar() ? scale(b, a.c[0]) : scale(a, b.c[0]);
-      r.measure = a.measure || b.measure;
-      if (r.measure && !r.scalar()) fail(loc, "a measure can only multiply a scalar integrand; found " + shape_name(a.scalar() ? b : a));
+    if (a.measure || b.measure) {
+      const Value& factor = a.measure ? b : a;
+      if (!factor.scalar()) fail(loc, "a measure can only multiply a scalar integrand; found " + shape_name(factor));
+      Value r = scale(a.measure ? a : b, factor.c[0]);
+      require_no_normal_on_cells(r, e.begin);
       return r;
     }
-    if (a.measure || b.measure) fail(loc, "a measure can only multiply a scalar integrand");
+    if (a.scalar() || b.scalar()) return a.scalar() ? scale(b, a.c[0]) : scale(a, b.c[0]);
     if (a.rank() == 2 && (b.rank() == 1 || b.rank() == 2) && a.shape[1] == b.shape[0]) return contract(a, b);
     std::string hint;
     if (a.rank() == 1 && b.rank() == 1) hint = "; use dot(a, b) for the scalar product or outer(a, b) for the tensor product";
@@ -719,6 +834,9 @@ class Lowering {
       return call_def(e, *sym);
     }
     if (e.name == "e") return unit_vector(e);
+    if (e.name == "ds") return boundary_measure(e);
+    if (e.name == "dx") fail(e.loc, "dx takes no argument: it is the measure of the cells (ds(part) is that of a boundary part)");
+    if (e.name == "n") fail(e.loc, "'n' is the outward normal, a vector, not a function: write n[0] for a component");
     const int arity = builtin_arity(e.name);
     if (arity < 0) {
       std::vector<std::string> fns;
@@ -876,6 +994,7 @@ class Lowering {
     for (const auto& p : def.params) {
       const Value& v = scope.params.at(p);
       key << '|' << v.measure << v.condition << ':';
+      for (const int d : v.domains) key << d << ';';
       for (const int d : v.shape) key << d << 'x';
       key << ':';
       for (const NodeId id : v.c) key << id << ',';
@@ -1019,7 +1138,7 @@ void collect_declarations(CompiledForm& form, const std::vector<const Stmt*>& st
         o.loc = s->loc;
         o.kind = s->keyword == "energy" ? OutputKind::Energy : s->keyword == "constraint" ? OutputKind::Constraint
                : s->keyword == "residual" ? OutputKind::Residual : s->keyword == "bilinear" ? OutputKind::Bilinear
-               : OutputKind::Linear;
+               : s->keyword == "linear"   ? OutputKind::Linear : OutputKind::Point;
         if (s->target) {
           if (s->target->kind == ExprKind::Number) {
             o.target_value = s->target->number;
@@ -1046,7 +1165,8 @@ void collect_declarations(CompiledForm& form, const std::vector<const Stmt*>& st
   if (form.module.empty())
     fail_at(form.sources, Loc{0, 0}, "a form compiled without a file name needs a module name: add 'form NAME'");
   if (form.dims.empty()) form.dims.push_back(2);
-  if (form.outputs.empty()) fail_at(form.sources, Loc{0, 0}, "the form defines no output (energy, constraint, residual, bilinear or linear)");
+  if (form.outputs.empty())
+    fail_at(form.sources, Loc{0, 0}, "the form defines no output (energy, constraint, residual, bilinear, linear or point)");
   // Residuals and bilinear forms pair test functions with unknowns / trials, in order.
   auto tests = form.fields_of(ir::Role::Test);
   for (const auto& o : form.outputs) {

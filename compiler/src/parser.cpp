@@ -41,7 +41,7 @@ const std::set<std::string>& keywords() {
   static const std::set<std::string> k = {
       "form", "dimension", "unknown", "test", "trial", "coefficient", "qdata", "constant",
       "coordinate", "let", "def", "measure", "include", "energy", "constraint", "residual",
-      "bilinear", "linear", "if", "then", "else", "and", "or", "not"};
+      "bilinear", "linear", "point", "if", "then", "else", "and", "or", "not"};
   return k;
 }
 
@@ -366,7 +366,7 @@ const auto statement =
     (kw("measure")[begin_stmt(StmtKind::Measure)] > stmt_name > '=' > body) |
     (kw("def")[begin_stmt(StmtKind::Def)] > stmt_name > '(' > param_list > ')' > '=' > body) |
     (kw("include")[begin_stmt(StmtKind::Include)] > include_path) |
-    (tok({"energy", "residual", "bilinear", "linear"}, true)[begin_stmt(StmtKind::Output)] > stmt_name > '=' >
+    (tok({"energy", "residual", "bilinear", "linear", "point"}, true)[begin_stmt(StmtKind::Output)] > stmt_name > '=' >
      body) |
     (kw("constraint")[begin_stmt(StmtKind::Output)] > stmt_name > '=' > sum_body > equals_target >
      target);
@@ -464,7 +464,7 @@ std::vector<Stmt> parse_form(const SourceSet& sources, int file) {
     const std::string found = w == first ? std::string(1, *first) : std::string(first, w);
     fail_at(sources, Loc{file, static_cast<std::size_t>(first - text.begin())},
             "expected a statement (form, dimension, unknown, test, trial, coefficient, qdata, constant, "
-            "coordinate, let, def, measure, include, energy, constraint, residual, bilinear, linear), found '" +
+            "coordinate, let, def, measure, include, energy, constraint, residual, bilinear, linear, point), found '" +
                 found + "'");
   }
   return std::move(st.statements);

@@ -1,13 +1,15 @@
 // `lmeform check` and its library (runtime/src/check): every built-in module passes in every
 // declared dimension (2D and 3D, Cartesian and axisymmetric) with generic states; corrupted kernels
 // fail with the offending output named (and exit code 1 from the command); residual, bilinear and
-// linear outputs are checked for what applies to them; non-smooth forms report kinks, not failures.
+// linear outputs are checked for what applies to them; non-smooth forms report kinks, not failures;
+// boundary kernels are checked like cell kernels and named with their domain, point outputs evaluated.
 #include "check_command.hpp"
 
 #include <lmeform/form_check_setup.hpp>
 #include <lmeform/form_registry.hpp>
 #include <lmeform/module_check.hpp>
 
+#include <check_boundary_kernels.hpp>
 #include <check_elastic_kernels.hpp>
 #include <check_kinks_kernels.hpp>
 #include <check_weak_kernels.hpp>
@@ -17,6 +19,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -38,9 +41,10 @@ std::span<const FormKernels* const> kernels_of(const ModuleTable& t) {
   return {t.kernels, static_cast<std::size_t>(t.n_kernels)};
 }
 
-const fc::CheckRecord* find_record(const fc::ModuleCheck& check, const std::string& output, int dim) {
+const fc::CheckRecord* find_record(const fc::ModuleCheck& check, const std::string& output, int dim,
+                                  const std::string& measure = "") {
   for (const auto& r : check.records)
-    if (r.output == output && r.dim == dim) return &r;
+    if (r.output == output && r.dim == dim && (measure.empty() || r.measure == measure)) return &r;
   return nullptr;
 }
 
@@ -83,14 +87,16 @@ void matrix_reading_unknowns(const CellInputs& in, double* m) {
   for (std::size_t i = 0; i < A.size(); ++i) m[i] += A[i] * (1.0 + 1e-3 * in.unknowns[0]);
 }
 
-/// A module table with `replaced` standing in for the kernel of the same output and dimension.
+/// A module table with `replaced` standing in for the kernel of the same output, dimension and domain.
 struct PatchedModule {
   std::vector<const FormKernels*> kernels;
   ModuleTable table;
   PatchedModule(const ModuleTable& original, const FormKernels& replaced) : table(original) {
     for (int i = 0; i < original.n_kernels; ++i) {
       const FormKernels* k = original.kernels[i];
-      kernels.push_back(std::string(k->name) == replaced.name && k->dim == replaced.dim ? &replaced : k);
+      const bool same = std::string(k->name) == replaced.name && k->dim == replaced.dim && k->domain == replaced.domain &&
+                        std::strcmp(k->boundary_part, replaced.boundary_part) == 0;
+      kernels.push_back(same ? &replaced : k);
     }
     table.kernels = kernels.data();
   }
@@ -237,6 +243,128 @@ TEST(ModuleCheck, ResidualOfAVectorUnknown) {
   std::printf("%s\n", fc::format_table(check).c_str());
   EXPECT_TRUE(check.passed());
   for (const auto& r : check.records) EXPECT_GT(r.min_det, 0.5) << r.dim << "d";
+}
+
+// ---- Boundary kernels and point outputs --------------------------------------------------------------
+
+TEST(ModuleCheck, BoundaryKernelsAreCheckedWithTheirDomain) {
+  const fc::ModuleCheck check = fc::check_module("check_boundary", "", kernels_of(check_boundary_module), {});
+  const std::string table = fc::format_table(check);
+  std::printf("%s\n", table.c_str());
+  EXPECT_TRUE(check.passed());
+  EXPECT_EQ(check.records.size(), static_cast<std::size_t>(check_boundary_module.n_kernels));
+  for (const int dim : {2, 3}) {
+    SCOPED_TRACE(dim);
+    const auto* cells = find_record(check, "E", dim, "dx");
+    const auto* top = find_record(check, "E", dim, "ds(top)");
+    const auto* weighted = find_record(check, "E", dim, "ds");
+    const auto* flux = find_record(check, "R", dim, "ds(left)");
+    const auto* fourth = find_record(check, "W", dim, "ds");
+    const auto* point = find_record(check, "P", dim);
+    ASSERT_TRUE(cells && top && weighted && flux && fourth && point);
+    EXPECT_EQ(cells->domain, "cells");
+    EXPECT_EQ(top->domain, "boundary");
+    EXPECT_EQ(top->boundary_part, "top");
+    EXPECT_EQ(fc::kernel_label(*top), "E [ds(top)]");
+    EXPECT_EQ(weighted->boundary_part, "");
+    // The boundary kernels get every check of their kind: gradients, Hessians, Jacobians, slopes.
+    for (const auto* r : {top, weighted, fourth}) {
+      EXPECT_LT(r->gradient_rel_error, 1e-6) << fc::kernel_label(*r);
+      EXPECT_NE(r->taylor_slope_gradient.kind, fc::SlopeResult::Kind::not_applicable);
+    }
+    EXPECT_EQ(top->taylor_slope_gradient.kind, fc::SlopeResult::Kind::exact) << "linear in u";
+    EXPECT_LT(weighted->hessian_rel_error, 1e-6);
+    EXPECT_EQ(weighted->taylor_slope_hessian.kind, fc::SlopeResult::Kind::exact) << "quadratic in u";
+    EXPECT_LT(fourth->hessian_rel_error, 1e-6);
+    EXPECT_NEAR(fourth->taylor_slope_second_order.value, 3.0, 0.2);
+    EXPECT_LT(flux->hessian_rel_error, 1e-6);
+    EXPECT_LT(flux->linearity_error, 1e-10);
+    EXPECT_EQ(point->kind, "point");
+    EXPECT_EQ(point->status, "pass");
+    EXPECT_NE(std::find(point->notes.begin(), point->notes.end(), "point output, evaluated (finite)"), point->notes.end());
+  }
+  EXPECT_NE(table.find("E [ds(top)]"), std::string::npos);
+  EXPECT_NE(table.find("R [ds(left)]"), std::string::npos);
+  EXPECT_NE(table.find("[ds...]: a boundary kernel"), std::string::npos);
+}
+
+TEST(CheckCommand, JsonNamesTheDomainOfEachKernel) {
+  const fs::path json = fs::temp_directory_path() / "lmeform_check_boundary.json";
+  lmeform::CheckCommandOptions o;
+  o.module = &check_boundary_module;
+  o.json = json.string();
+  std::ostringstream out, err;
+  o.out = &out;
+  o.err = &err;
+  EXPECT_EQ(lmeform::run_check_command(o), 0) << out.str() << err.str();
+  const auto records = nlohmann::json::parse(std::ifstream(json));
+  ASSERT_EQ(records.size(), static_cast<std::size_t>(check_boundary_module.n_kernels));
+  std::vector<std::string> labels;
+  for (const auto& r : records) {
+    for (const char* key : {"domain", "boundary_part", "measure", "label"}) EXPECT_TRUE(r.contains(key)) << key;
+    labels.push_back(r["label"].get<std::string>() + " " + std::to_string(r["dim"].get<int>()) + "d");
+    if (r["domain"] == "boundary") {
+      EXPECT_EQ(r["measure"].get<std::string>().substr(0, 2), "ds");
+    }
+  }
+  for (const char* label : {"energy E 2d", "energy E [ds(top)] 2d", "energy E [ds] 3d", "residual R [ds(left)] 3d",
+                            "energy W [ds] 2d", "point P 3d"})
+    EXPECT_NE(std::find(labels.begin(), labels.end(), label), labels.end()) << label;
+}
+
+TEST(CheckCommand, BoundaryFormByPathIsCompiledAndChecked) {
+  const fs::path cache = fs::temp_directory_path() / "lmeform_check_test_cache";
+  ::setenv("LMEFORM_CACHE_DIR", cache.c_str(), 1);
+  const fs::path json = fs::temp_directory_path() / "lmeform_check_boundary_jit.json";
+  lmeform::CheckCommandOptions o;
+  o.form = std::string(LMEFORM_CHECK_TEST_FORMS) + "/check_boundary.form";
+  o.json = json.string();
+  std::ostringstream out, err;
+  o.out = &out;
+  o.err = &err;
+  const int code = lmeform::run_check_command(o);
+  std::printf("%s%s", out.str().c_str(), err.str().c_str());
+  EXPECT_EQ(code, 0);
+  const auto records = nlohmann::json::parse(std::ifstream(json));
+  int boundary_2d = 0, boundary_3d = 0;
+  for (const auto& r : records)
+    if (r["domain"] == "boundary") (r["dim"] == 2 ? boundary_2d : boundary_3d) += 1;
+  EXPECT_EQ(boundary_2d, 4);  // E [ds(top)], E [ds], R [ds(left)], W [ds]
+  EXPECT_EQ(boundary_3d, 4);
+}
+
+TEST(CheckCommand, CorruptedBoundaryKernelFailsNamingItsDomain) {
+  FormKernels bad = check_boundary_R_ds_left_2d;
+  g_original = &check_boundary_R_ds_left_2d;
+  bad.matrix = &matrix_with_one_wrong_entry;
+  const PatchedModule patched(check_boundary_module, bad);
+  lmeform::CheckCommandOptions options;
+  options.module = &patched.table;
+  std::ostringstream out, err;
+  options.out = &out;
+  options.err = &err;
+  EXPECT_EQ(lmeform::run_check_command(options), 1);
+  std::printf("%s%s", out.str().c_str(), err.str().c_str());
+  EXPECT_NE(out.str().find("FAIL R [ds(left)] 2d"), std::string::npos);
+  EXPECT_NE(err.str().find("R [ds(left)] (2d)"), std::string::npos);
+  EXPECT_EQ(err.str().find("R (2d)"), std::string::npos) << "the cells' kernel of R is untouched";
+}
+
+TEST(FormCheck, PointKernelMustWriteFiniteValues) {
+  const fc::CheckGeometry geometry(fc::GeometryOptions{});
+  const fc::Cell cell = geometry.check_cells(2).front();
+  fc::State state;
+  state.unknowns.assign(static_cast<std::size_t>(cell.n), 0.5);
+  state.constants = {1.5};
+  FormKernels silent = check_boundary_P_2d;
+  silent.point = [](const CellInputs&, double*) {};  // writes nothing
+  const fc::Report rep = fc::check_form(silent, cell, state, {}, fc::Options{});
+  ASSERT_FALSE(rep.ok());
+  EXPECT_NE(rep.failures.front().find("not written, or not finite"), std::string::npos) << rep.failures.front();
+  FormKernels greedy = check_boundary_P_2d;
+  greedy.n_values = 1;  // the kernel writes two per point
+  EXPECT_THROW((void)fc::check_form(greedy, cell, state, {}, fc::Options{}), std::runtime_error);
+  EXPECT_TRUE(fc::check_form(check_boundary_P_2d, cell, state, {}, fc::Options{}).ok());
 }
 
 // ---- Non-smooth forms ----------------------------------------------------------------------------

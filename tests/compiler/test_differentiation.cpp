@@ -93,7 +93,7 @@ double eval_minus_u(const CompiledForm& form, int dim, NodeId root, const Fields
 
 NodeId output(const CompiledForm& form, const std::string& name, int dim) {
   for (const auto& o : form.outputs)
-    if (o.name == name) return o.integrand.at(dim);
+    if (o.name == name) return o.integrand(dim);
   throw std::runtime_error("no output " + name);
 }
 
@@ -196,7 +196,7 @@ TEST(SpatialChainRule, LaplacianDivergenceAndHessianIdentities) {
 TEST(SpatialChainRule, GradOfCoordinateIsIdentity) {
   const auto form = compile_source("form t\nunknown u\ncoordinate x\nenergy e = (u + grad(x)[0,0] + 10*grad(x)[0,1])*dx\n", "t.form");
   Fields F = random_fields(form, 2, *std::make_unique<std::mt19937>(1));
-  const NodeId e = form.outputs[0].integrand.at(2);
+  const NodeId e = form.outputs[0].integrand(2);
   EXPECT_NEAR(eval_at(form, 2, e, F, {0.3, 0.4}) - F.f[0][0].jet(0, {0.3, 0.4}), 1.0, 1e-14);
 }
 
@@ -240,7 +240,7 @@ void check_variational(const std::string& src, int dim) {
         }
       })[0];
     };
-    const NodeId f = out.integrand.at(dim);
+    const NodeId f = out.integrand(dim);
     eval(f);  // fixes the jet values
     // Map a (row dof component, slot) to the jet key of its field.
     auto key_of = [&](ir::Role role, int comp, int slot) {
@@ -357,7 +357,7 @@ void check_reverse_mode(const std::string& src, int dim) {
   };
   for (const auto& out : form.outputs) {
     SCOPED_TRACE(out.name);
-    const NodeId f = out.integrand.at(dim);
+    const NodeId f = out.integrand(dim);
     std::vector<NodeId> jets;
     const NodeId roots[] = {f};
     for (NodeId id : g.reachable(roots))
@@ -397,7 +397,7 @@ TEST(ReverseModeGradient, SkipsTerminalsTheFunctionDoesNotDependOn) {
   ir::Graph& g = *form.graphs.at(2);
   const NodeId u = g.jet({ir::Role::Unknown, 0, 0, 0}), w = g.jet({ir::Role::Unknown, 1, 0, 0});
   const NodeId wrt[] = {w, u};
-  const auto grad = ir::gradient(g, form.outputs[0].integrand.at(2), wrt);
+  const auto grad = ir::gradient(g, form.outputs[0].integrand(2), wrt);
   ASSERT_EQ(grad.size(), 1u);
   EXPECT_EQ(grad[0].first, 1u);
 }
@@ -419,7 +419,7 @@ TEST(HessianStrategies, EdgePushingAgreesWithRowSweepsOnEveryForm) {
       for (const int dim : form.dims) {
         SCOPED_TRACE(out.name + " " + std::to_string(dim) + "D");
         ir::Graph& g = *form.graphs.at(dim);
-        const NodeId f = out.integrand.at(dim);
+        const NodeId f = out.integrand(dim);
         const NodeId root[] = {f};
         std::vector<NodeId> vars;
         for (const NodeId id : g.reachable(root))

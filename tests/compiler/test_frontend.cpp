@@ -8,6 +8,8 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <map>
 #include <numbers>
 #include <sstream>
 
@@ -42,6 +44,16 @@ std::string compile_error(const std::string& text, const fs::path& path = "t.for
   return {};
 }
 
+/// The message of the CompileError that compiling and generating `text` throws; empty if none.
+std::string compile_error_generating(const std::string& text, const fs::path& path = "t.form") {
+  try {
+    generate(compile_source(text, path), path.string());
+  } catch (const CompileError& e) {
+    return e.what();
+  }
+  return {};
+}
+
 /// A fresh directory for one test's files.
 fs::path scratch_dir(const std::string& name) {
   const fs::path dir = fs::temp_directory_path() / ("lmeform_frontend_" + name + "_" + std::to_string(::getpid()));
@@ -60,7 +72,7 @@ void write_text(const fs::path& p, const std::string& text) {
 double evaluate_integrand(const CompiledForm& form, int dim, const std::vector<double>& x,
                           const std::function<double(int field, int component)>& jet) {
   const ir::Graph& g = *form.graphs.at(dim);
-  const ir::NodeId roots[] = {form.outputs.at(0).integrand.at(dim)};
+  const ir::NodeId roots[] = {form.outputs.at(0).integrand(dim)};
   return ir::Interpreter(g).evaluate(roots, [&](const ir::Node& n) {
     if (n.op == ir::Op::Coord) return x.at(static_cast<std::size_t>(n.arg[0]));
     if (n.op == ir::Op::Jet && n.arg[3] == 0) return jet(n.arg[1], n.arg[2]);
@@ -112,7 +124,7 @@ TEST(CompilerFrontend, BrokenFormsGiveTheGoldenDiagnostics) {
     EXPECT_EQ(message, slurp(expected_file));
     ++count;
   }
-  EXPECT_GE(count, 26);
+  EXPECT_GE(count, 32);
 }
 
 TEST(CompilerFrontend, ErrorFormatHasLocationLineAndCaret) {
@@ -249,6 +261,194 @@ TEST(CompilerFrontend, UnitVectorErrorsAndPredefinedNames) {
   EXPECT_EQ(compile_error("unknown y : vector\nlet e = sym(grad(y))\nconstant dim = 4\nenergy E = (inner(e, e) + dim)*dx\n"), "");
   // ... but a def body, which only sees earlier names, keeps the builtin meaning of a later one.
   EXPECT_EQ(compile_error("unknown y : vector\ndef first(v) = dot(v, e(0))\nlet e = 2\nenergy E = e*first(y)^2*dx\n"), "");
+}
+
+// ---- boundary measures, the normal, point outputs ---------------------------------------------
+
+namespace {
+
+/// Evaluates root with every terminal given: jets by (field, component, slot), the coordinate x,
+/// the normal nrm, constants 1.
+double evaluate(const CompiledForm& form, int dim, ir::NodeId root, const std::vector<double>& x, const std::vector<double>& nrm,
+                const std::function<double(int field, int component, int slot)>& jet) {
+  const ir::NodeId roots[] = {root};
+  return ir::Interpreter(*form.graphs.at(dim)).evaluate(roots, [&](const ir::Node& n) {
+    switch (n.op) {
+      case ir::Op::Coord: return x.at(static_cast<std::size_t>(n.arg[0]));
+      case ir::Op::Normal: return nrm.at(static_cast<std::size_t>(n.arg[0]));
+      case ir::Op::Jet: return jet(n.arg[1], n.arg[2], n.arg[3]);
+      case ir::Op::Param: return 1.0;
+      default: ADD_FAILURE() << "unexpected terminal"; return 0.0;
+    }
+  })[0];
+}
+
+/// A smooth jet: value 1 + field + component/10 + slot/7.
+double some_jet(int field, int component, int slot) { return 1.0 + field + component / 10.0 + slot / 7.0; }
+
+}  // namespace
+
+TEST(CompilerFrontend, BoundaryMeasuresSplitAnOutputByDomain) {
+  const auto form = compile_source(
+      "dimension 2, 3\nunknown u\ncoordinate x\nmeasure dS = 2*pi*x[0]*ds\n"
+      "energy E = 0.5*inner(grad(u), grad(u))*dx - u*x[1]*ds(top) + 2*u*ds(top) + u^2*dS + 0*ds(bottom)\n",
+      "t.form");
+  ASSERT_EQ(form.domains.size(), 4u);  // cells, ds, ds(top), ds(bottom): in order of first use
+  EXPECT_FALSE(form.domains[0].boundary);
+  EXPECT_EQ(form.domains[1].measure(), "ds");
+  EXPECT_EQ(form.domains[2].measure(), "ds(top)");
+  EXPECT_EQ(form.domains[3].measure(), "ds(bottom)");
+  const OutputDecl& E = form.outputs.at(0);
+  const std::vector<double> x = {0.3, 0.7, 1.1}, nrm = {0.6, 0.8, 0.0};
+  for (int dim : {2, 3}) {
+    SCOPED_TRACE(dim);
+    // Two terms over ds(top) are one integrand; the vanishing ds(bottom) term generates nothing.
+    ASSERT_EQ(E.integrands.at(dim).size(), 3u);
+    EXPECT_FALSE(E.integrands.at(dim).contains(3));
+    const double u = some_jet(0, 0, 0);
+    double gg = 0;
+    for (int i = 0; i < dim; ++i) gg += some_jet(0, 0, 1 + i) * some_jet(0, 0, 1 + i);
+    EXPECT_NEAR(evaluate(form, dim, E.integrand(dim), x, nrm, some_jet), 0.5 * gg, 1e-14);
+    EXPECT_NEAR(evaluate(form, dim, E.integrand(dim, 1), x, nrm, some_jet), 2 * std::numbers::pi * x[0] * u * u, 1e-14);
+    EXPECT_NEAR(evaluate(form, dim, E.integrand(dim, 2), x, nrm, some_jet), -u * x[1] + 2 * u, 1e-14);
+    // One kernel per domain, all named E.
+    const auto plan = plan_kernel(form, E, dim, 2);
+    EXPECT_EQ(plan.domain, 2);
+    EXPECT_EQ(plan.slots, (std::vector<int>{0}));
+    EXPECT_TRUE(plan.matrix.empty()) << "linear in u over ds(top)";
+  }
+  const auto gen = generate(form, "t.form");
+  for (const char* text : {"inline const lmeform::kernel::FormKernels t_E_2d = ", "inline const lmeform::kernel::FormKernels t_E_ds_2d = ",
+                           "inline const lmeform::kernel::FormKernels t_E_ds_top_3d = ", "k.boundary_part = \"top\";",
+                           "k.domain = lmeform::kernel::IntegralDomain::Boundary;", "k.matrix_structurally_zero = true;"})
+    EXPECT_NE(gen.header.find(text), std::string::npos) << text;
+  EXPECT_EQ(gen.header.find("bottom"), std::string::npos);
+  EXPECT_NE(gen.json.find("\"boundary_parts\": [\"top\"]"), std::string::npos) << gen.json;
+  EXPECT_NE(gen.json.find("\"domain\": \"boundary\", \"boundary_part\": \"top\", \"measure\": \"ds(top)\""), std::string::npos);
+  EXPECT_NE(gen.report.find("energy E [ds(top)], dimension 3"), std::string::npos) << gen.report;
+  EXPECT_NE(gen.report.find("energy E [dx], dimension 2"), std::string::npos) << gen.report;
+}
+
+TEST(CompilerFrontend, TheNormalAtBoundaryPoints) {
+  // Volume fields keep their jets at boundary points: normal derivatives of first and second order.
+  const auto form = compile_source(
+      "dimension 2, 3\nunknown u, w\ntest v, z\ncoordinate x\n"
+      "energy E = (dot(grad(u), n) + dot(dot(hess(w), n), n) + inner(grad(n), grad(n)))*ds\n"
+      "residual R = (dot(grad(u), grad(v)) + w*z)*dx - dot(grad(u), n)*v*ds(left)\n",
+      "t.form");
+  const std::vector<double> x = {0.3, 0.7, 1.1}, nrm = {0.6, 0.0, 0.8};
+  for (int dim : {2, 3}) {
+    SCOPED_TRACE(dim);
+    double expected = 0;
+    for (int i = 0; i < dim; ++i) {
+      expected += some_jet(0, 0, 1 + i) * nrm[static_cast<std::size_t>(i)];
+      for (int j = 0; j < dim; ++j)
+        expected += some_jet(1, 0, ir::hessian_slot(i, j, dim)) * nrm[static_cast<std::size_t>(i)] * nrm[static_cast<std::size_t>(j)];
+    }
+    const OutputDecl& E = form.outputs.at(0);
+    ASSERT_EQ(E.integrands.at(dim).size(), 1u);
+    EXPECT_NEAR(evaluate(form, dim, E.integrand(dim, 1), x, nrm, some_jet), expected, 1e-13) << "grad(n) = 0";
+    EXPECT_EQ(plan_kernel(form, E, dim, 1).basis_order, 2);
+    EXPECT_EQ(form.outputs.at(1).integrands.at(dim).size(), 2u);
+  }
+  // `n` is predefined, not reserved: a declaration hides it, and then dx terms may use it.
+  EXPECT_EQ(compile_error("unknown u, n\nenergy E = u*n*dx\n"), "");
+  EXPECT_EQ(compile_error("unknown u\nlet n = e(0)\nenergy E = dot(grad(u), n)*dx\n"), "");
+}
+
+TEST(CompilerFrontend, TheNormalOnCellsIsAnErrorAtTheTerm) {
+  const std::string message = "error: the normal n exists only on the boundary: this term is integrated with dx";
+  // Through a let, the term that integrates it is named.
+  EXPECT_EQ(compile_error("unknown u\nlet flux = dot(grad(u), n)\nenergy E = u^2*ds + flux*u*dx\n"),
+            "t.form:3:21: " + message + "\nenergy E = u^2*ds + flux*u*dx\n                    ^\n");
+  // In a measure over the cells, a condition of a conditional measure, a divisor.
+  EXPECT_NE(compile_error("unknown u\nmeasure dA = n[0]*dx\nenergy E = u*dA\n").find("t.form:2:14: " + message), std::string::npos);
+  EXPECT_NE(compile_error("unknown u\nenergy E = (if n[0] > 0 then u*dx else 2*u*dx)\n").find(message), std::string::npos);
+  EXPECT_NE(compile_error("unknown u\nenergy E = u*dx/n[0]\n").find(message), std::string::npos);
+  EXPECT_NE(compile_error("unknown u\nenergy E = n[0]*(u*ds + u*dx)\n").find(message), std::string::npos);
+  // The same integrand over the boundary is fine.
+  EXPECT_EQ(compile_error("unknown u\nenergy E = n[0]*(u*ds + u*ds(top))\n"), "");
+  EXPECT_NE(compile_error("unknown u\nenergy E = u*n(0)*ds\n").find("'n' is the outward normal, a vector, not a function"),
+            std::string::npos);
+}
+
+TEST(CompilerFrontend, BoundaryMeasureErrors) {
+  EXPECT_EQ(compile_error("unknown u\nenergy E = u*ds(1)\n"),
+            "t.form:2:17: error: the argument of ds must be the name of a boundary part (an identifier such as top); found a number\n"
+            "energy E = u*ds(1)\n                ^\n");
+  EXPECT_NE(compile_error("unknown u\nenergy E = u*ds(x[0])\n").find("found an expression"), std::string::npos);
+  EXPECT_NE(compile_error("unknown u\nenergy E = u*ds()\n").find("t.form:2:14: error: ds() needs the name of a boundary part"),
+            std::string::npos);
+  EXPECT_NE(compile_error("unknown u\nenergy E = u*ds(top, bottom)\n").find("ds takes one boundary part name, got 2 arguments"),
+            std::string::npos);
+  EXPECT_NE(compile_error("unknown u\nenergy E = u*dx(top)\n").find("dx takes no argument"), std::string::npos);
+  // ds is reserved like dx: no declaration, let or parameter may take the name.
+  for (const char* text : {"unknown ds\nenergy E = ds*dx\n", "unknown u\nlet ds = 2*u\nenergy E = ds*dx\n",
+                                  "unknown u\nconstant ds\nenergy E = u*dx\n", "unknown u\nmeasure ds = 2*dx\nenergy E = u*dx\n"})
+    EXPECT_NE(compile_error(text).find("error: 'ds' is a builtin name and cannot be redeclared"), std::string::npos) << text;
+  EXPECT_NE(compile_error("unknown u\ndef f(ds) = ds*u\nenergy E = f(1)*dx\n").find("t.form:2:7: error: 'ds' is a builtin name and cannot be a parameter"),
+            std::string::npos);
+  // A measure alone is still required of an integral output, and ds counts as one.
+  EXPECT_NE(compile_error("unknown u\nenergy E = u^2\n").find("must be an integral (a scalar times dx, ds or a declared measure)"),
+            std::string::npos);
+  EXPECT_EQ(compile_error("unknown u\ntest v\nlinear l = v*ds(right)\n"), "");
+  // A vanishing term in one dimension leaves the domain out there.
+  const auto form = compile_source("dimension 2, 3\nunknown u\nenergy E = u^2*dx + (if dim == 3 then u*ds else 0*ds)\n", "t.form");
+  EXPECT_EQ(form.outputs[0].integrands.at(2).size(), 1u);
+  EXPECT_EQ(form.outputs[0].integrands.at(3).size(), 2u);
+}
+
+TEST(CompilerFrontend, PointOutputs) {
+  const auto form = compile_source(
+      "dimension 2, 3\nunknown y : vector\ncoefficient c\nqdata g0 : vector\ncoordinate x\nconstant k = 2\n"
+      "let F = grad(y)\n"
+      "point Y = y\npoint FF = F\npoint J = k*det(F)\npoint H = hess(y)\npoint K = dot(g0, hess(y))\n"
+      "point G = transpose(inv(F))*g0\npoint X = x + c*e(0)\n",
+      "t.form");
+  const std::map<std::string, std::vector<int>> shapes2 = {{"Y", {2}}, {"FF", {2, 2}}, {"J", {}}, {"H", {2, 2, 2}},
+                                                           {"K", {2, 2}}, {"G", {2}}, {"X", {2}}};
+  for (const auto& o : form.outputs) {
+    SCOPED_TRACE(o.name);
+    EXPECT_EQ(o.kind, OutputKind::Point);
+    EXPECT_TRUE(o.integrands.empty());
+    EXPECT_EQ(o.point.at(2).shape, shapes2.at(o.name));
+    std::size_t n3 = 1;
+    for (const int e : o.point.at(3).shape) n3 *= static_cast<std::size_t>(e);
+    EXPECT_EQ(o.point.at(3).components.size(), n3);
+  }
+  EXPECT_EQ(plan_kernel(form, form.outputs[3], 3).basis_order, 2);  // hess(y)
+  EXPECT_EQ(plan_kernel(form, form.outputs[1], 3).basis_order, 1);
+  EXPECT_EQ(plan_kernel(form, form.outputs[6], 2).coefficient_order, 0);
+  const auto gen = generate(form, "t.form");
+  for (const char* text : {"inline void H_3d_point(const lmeform::kernel::CellInputs& in, double* values) {",
+                           "k.kind = lmeform::kernel::FunctionalKind::Point;", "k.n_values = 27;", "k.point_rank = 3;",
+                           "k.point_extents[2] = 3;", "double* vq = values + std::size_t(q) * 4;"})
+    EXPECT_NE(gen.header.find(text), std::string::npos) << text;
+  EXPECT_EQ(gen.header.find("in.weights"), std::string::npos) << "point kernels read no weights";
+  EXPECT_NE(gen.json.find("\"point\": {\"shape\": \"tensor3[3x3x3]\", \"rank\": 3, \"extents\": [3, 3, 3], \"n_values\": 27}"),
+            std::string::npos);
+  EXPECT_NE(gen.report.find("point values: 8 per point (tensor3[2x2x2])"), std::string::npos) << gen.report;
+  // Errors: a measure (at the measure), a condition, rank 4, test functions, the normal.
+  EXPECT_EQ(compile_error("unknown y : vector\npoint J = det(grad(y))*dx\n"),
+            "t.form:2:24: error: point output 'J' must not contain a measure: it is a value at each quadrature point (remove dx or ds)\n"
+            "point J = det(grad(y))*dx\n                       ^\n");
+  EXPECT_NE(compile_error("unknown u\npoint c = u > 0\n").find("point output 'c' must be a value, not a condition"), std::string::npos);
+  EXPECT_NE(compile_error("unknown y : vector\npoint Q = outer(grad(y), grad(y))\n")
+                .find("point output 'Q' must be a scalar, vector, matrix or tensor3; found tensor4[2x2x2x2]"),
+            std::string::npos);
+  EXPECT_NE(compile_error("unknown u\ntest v\npoint P = u*v\n").find("point output 'P' must not use test or trial functions"),
+            std::string::npos);
+  EXPECT_EQ(compile_error("unknown u\npoint P = u + n[0]\n"),
+            "t.form:2:15: error: the normal n exists only on the boundary: point output 'P' is evaluated at the cells' "
+            "quadrature points\npoint P = u + n[0]\n              ^\n");
+  // `point` is a keyword now.
+  EXPECT_NE(compile_error("unknown point\nenergy E = point*dx\n"), "");
+}
+
+TEST(CompilerFrontend, KernelNamesOfDomainsMustNotCollide) {
+  EXPECT_NE(compile_error_generating("unknown u\nenergy E_ds = u^2*dx\nenergy E = u^2*dx + u*ds\n")
+                .find("t.form:3:1: error: the kernels of energy E [ds] and of energy 'E_ds' would both be named 't_E_ds_2d'"),
+            std::string::npos);
 }
 
 // ---- hostile inputs -----------------------------------------------------------------------------

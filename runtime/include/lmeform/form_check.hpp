@@ -15,7 +15,13 @@
 //     (b) J against central differences of R; (c) r3 with R and J;
 //     (d) linearity in the test function (below);
 //   bilinear (matrix A), linear (vector l):
-//     (d) linearity in the test (and trial) functions, (e) independence of the unknowns.
+//     (d) linearity in the test (and trial) functions, (e) independence of the unknowns;
+//   point outputs (values at the points, no derivatives):
+//     (f) the kernel writes n_values finite values per point, and nothing beyond them.
+//
+// Boundary kernels (FormKernels::domain) are checked like cell kernels on a cell whose points carry
+// outward normals (Cell::normals): derivatives with respect to nodal values hold for any unit
+// vectors there, so the cell's own quadrature points serve.
 //
 // Slopes are least-squares fits of log r against log h over the smallest steps whose remainder
 // stands clear of the round-off floor; a remainder at the floor for every step is "exact" (the
@@ -50,6 +56,7 @@ struct Cell {
   std::vector<double> weights;  ///< [nq]
   std::vector<double> points;   ///< [nq * dim]
   std::vector<double> basis;    ///< [nq * jet_size(dim, basis_order) * n]
+  std::vector<double> normals;  ///< [nq * dim] unit normals for boundary kernels (empty: none)
 
   /// The same tabulation restricted to a lower derivative order (re-laid out per point).
   [[nodiscard]] Cell restricted(int order) const;
@@ -141,6 +148,8 @@ class Evaluator {
   [[nodiscard]] double value(const std::vector<double>& u);
   [[nodiscard]] std::vector<double> vector(const std::vector<double>& u);
   [[nodiscard]] std::vector<double> matrix(const std::vector<double>& u);
+  /// A point kernel's values, [nq * n_values]; throws std::runtime_error if it writes beyond them.
+  [[nodiscard]] std::vector<double> point(const std::vector<double>& u);
   [[nodiscard]] const Cell& cell() const { return cell_; }
   [[nodiscard]] const kernel::FormKernels& form() const { return form_; }
 

@@ -102,6 +102,11 @@ class CheckGeometry {
 [[nodiscard]] std::vector<double> near_identity_field(const Cell& cell, double amplitude, double noise,
                                                       Coordinates coordinates, std::mt19937_64& rng);
 
+/// Unit normals at the cell's quadrature points ([nq * dim]) for boundary kernels: the outward
+/// normals of the spheres about the feature's centre through the points, so that they turn over
+/// the cell as on a curved boundary (e_0 at a point on the centre).
+[[nodiscard]] std::vector<double> radial_normals(const Cell& cell, const Feature& feature);
+
 /// min over the quadrature points of det(grad y) for the dim components of a nodal vector field
 /// stored at nodal[a * stride + offset + i].
 [[nodiscard]] double min_det_grad(const Cell& cell, const std::vector<double>& nodal, int stride, int offset);

@@ -33,6 +33,9 @@ class FormLoadError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+/// The keyword of an output kind as written in a form ("energy", "point", ...).
+[[nodiscard]] const char* to_string(kernel::FunctionalKind kind) noexcept;
+
 /// A loaded module: its functionals, and how it was obtained.
 struct FormModule {
   std::string name;                      ///< the module name (`form NAME`)

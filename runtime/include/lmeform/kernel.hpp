@@ -5,6 +5,13 @@
 // background cell with the cell's quadrature data and basis tabulation, and scatters the
 // dense local result into PETSc objects. Nothing here depends on PETSc, MPI or the parser.
 //
+// One output may have several FormKernels per dimension, one per integration domain: the same
+// `name`, `kind` (and constraint target), told apart by `domain` and `boundary_part`. An energy
+// `0.5*inner(grad(u), grad(u))*dx - dot(t, u)*ds(top)` gives one kernel over the cells and one over
+// the boundary part "top"; the output is the sum of its kernels over their domains. The kernels of
+// one output share the dof layout (unknowns, coefficients, qdata, constants, basis orders), so
+// that the runtime can gather one cell's inputs once for all of them.
+//
 // Conventions (shared by the compiler's code generator and the runtime's assembly):
 //
 // * Jet layout. For spatial dimension d and basis order k, one quadrature point's tabulation is a
@@ -23,6 +30,13 @@
 //   order, each flattened row-major).
 // * Outputs are accumulated (+=): the runtime zeroes them. The local Hessian/Jacobian is
 //   (n*dofs_per_node) x (n*dofs_per_node), row-major.
+// * Boundary kernels (domain Boundary) are called with the quadrature points of a boundary (part)
+//   and `CellInputs::normals`, the outward unit normal at each point; their weights include the
+//   boundary's measure element. Everything else is as for cells: the volume fields' full jets at
+//   the points, the cell's neighbourhood. Cell kernels never read `normals`.
+// * Point kernels (kind Point) write, for each quadrature point q, the output's n_values
+//   components (row-major, of shape point_extents[0 .. point_rank-1]) to values[q * n_values + i],
+//   overwriting; they read no weights and have no derivatives.
 // * Kernels allocate nothing: the runtime passes `workspace` of at least
 //   `workspace_doubles(n, nq)` doubles.
 // * The dense contractions with the basis (gradient = Bsᵀ G, Hessian blocks Bsᵀ D Bs) are
@@ -35,7 +49,7 @@
 
 namespace lmeform::kernel {
 
-inline constexpr int kContractVersion = 3;
+inline constexpr int kContractVersion = 4;
 
 /// Number of jet slots of a scalar field for dimension d and derivative order k (0, 1, 2).
 constexpr int jet_size(int dim, int order) noexcept {
@@ -56,6 +70,13 @@ enum class FunctionalKind : int {
   Residual = 2,    ///< vector R(u; v) for all test functions; kernels: residual, Jacobian
   Bilinear = 3,    ///< a(w, v): matrix only
   Linear = 4,      ///< l(v): vector only
+  Point = 5,       ///< a value (scalar to tensor3) at each quadrature point: point kernel only
+};
+
+/// Where a kernel integrates.
+enum class IntegralDomain : int {
+  Cells = 0,     ///< the background cells (`dx`)
+  Boundary = 1,  ///< the boundary (`ds`) or a named part of it (`ds(top)`): see boundary_part
 };
 
 /// A field that lives at the nodes: an unknown or a coefficient.
@@ -103,15 +124,13 @@ struct CellInputs {
   const double* constants = nullptr;   ///< [n_constants], in declaration order
   double* workspace = nullptr;         ///< scratch, at least workspace_doubles(n, nq)
   const ContractionRoutines* contractions = nullptr;  ///< null: the plain loops of this header
-  const double* normals = nullptr;     ///< [nq * dim] outward unit normals (boundary integrals; null for cells)
+  const double* normals = nullptr;     ///< [nq * dim] outward unit normals (boundary kernels; else null)
 };
-
-/// Where a kernel integrates: over the background cells (dx) or a boundary part (ds(part)).
-enum class IntegralDomain : int { Cells = 0, Boundary = 1 };
 
 using ValueKernel = double (*)(const CellInputs&);
 using VectorKernel = void (*)(const CellInputs&, double* local_vector);
 using MatrixKernel = void (*)(const CellInputs&, double* local_matrix);
+using PointKernel = void (*)(const CellInputs&, double* values);
 using WorkspaceSize = std::size_t (*)(int n_nodes, int n_points);
 
 /// One generated functional: metadata plus its kernels (null where not generated).
@@ -144,7 +163,8 @@ struct FormKernels {
   VectorKernel vector = nullptr;       ///< gradient (Energy, Constraint), residual, linear form
   MatrixKernel matrix = nullptr;       ///< Hessian (Energy), Jacobian (Residual), bilinear form
 
-  // --- added by the compiler (issue 3); appended so existing initializers stay valid ---
+  // New fields go at the end of the struct, so that positional initializers of the earlier ones
+  // stay valid.
   int target_constant = -1;            ///< Constraint: index into constants of the target, -1 if numeric
   double target_value = 0.0;           ///< Constraint: numeric target when target_constant < 0
 
@@ -161,6 +181,7 @@ struct FormKernels {
       return nq * (per_point + n * per_node_point + double(n) * n * per_node_pair_point);
     }
   };
+  /// A point output's one kernel is modelled in flops_value and flop_model_value.
   FlopModel flop_model_value{}, flop_model_vector{}, flop_model_matrix{};
   const char* source = "";             ///< the .form file the kernels were generated from
   /// The matrix kernel adds nothing (a functional linear in its unknowns, e.g. a volume):
@@ -169,8 +190,13 @@ struct FormKernels {
   /// [n_constants]: the form's default of each constant, NaN where it declares none (the runtime
   /// must then be given a value).
   const double* constant_defaults = nullptr;
+
   IntegralDomain domain = IntegralDomain::Cells;
-  const char* boundary_part = "";      ///< Boundary: the part of ds(part), "" for the whole boundary
+  const char* boundary_part = "";      ///< Boundary: the part's name, "" for the whole boundary (`ds`)
+  PointKernel point = nullptr;         ///< Point: values at the quadrature points (see above)
+  int n_values = 0;                    ///< Point: values per quadrature point
+  int point_rank = 0;                  ///< Point: 0 scalar, 1 vector, 2 matrix, 3 tensor3
+  int point_extents[3] = {0, 0, 0};    ///< Point: extent of each of the point_rank indices
 };
 
 /// A compiled form module: every functional it defines (each output in each declared dimension).

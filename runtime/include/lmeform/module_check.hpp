@@ -1,6 +1,7 @@
 // The derivative check of a whole form module (`lmeform check`): every output in every declared
 // dimension, on the graded LME cells of form_check_setup.hpp with generic random states, one record
-// per output and dimension; the table printed by the command and the JSON records of --json.
+// per kernel (an output has one per integration domain) and dimension; the table printed by the
+// command and the JSON records of --json.
 #pragma once
 
 #include <cstdint>
@@ -13,6 +14,7 @@
 
 #include "lmeform/form_check.hpp"
 #include "lmeform/form_check_setup.hpp"
+#include "lmeform/form_registry.hpp"
 #include "lmeform/kernel.hpp"
 
 namespace lmeform::formcheck {
@@ -46,11 +48,15 @@ struct SlopeResult {
   [[nodiscard]] std::string text() const;  ///< "2.00", "exact", "kink", "n/a"
 };
 
-/// One row of the table: an output in one dimension, worst case over the check cells.
+/// One row of the table: one kernel of an output (an output has one per integration domain) in
+/// one dimension, worst case over the check cells.
 struct CheckRecord {
   std::string form;
   std::string output;
-  std::string kind;                      ///< energy, constraint, residual, bilinear, linear
+  std::string kind;                      ///< energy, constraint, residual, bilinear, linear, point
+  std::string domain = "cells";          ///< cells or boundary
+  std::string boundary_part;             ///< the boundary part ("" for the whole boundary, ds)
+  std::string measure;                   ///< dx, ds, ds(top); empty for a point output
   int dim = 0;
   std::string coordinates;
   int cells = 0;
@@ -94,6 +100,9 @@ struct ModuleCheck {
   [[nodiscard]] bool passed() const;
 };
 
+/// "E" for a kernel over the cells (or a point output), "E [ds(top)]" for one over the boundary.
+[[nodiscard]] std::string kernel_label(const CheckRecord& record);
+
 /// Axisymmetric when the module's name ends in `_axisymmetric` or its source (or a file it
 /// includes, searched next to the including file and in include_dirs) includes `axisymmetric.inc`;
 /// Cartesian otherwise. `reason` receives the rule that decided.
@@ -125,6 +134,6 @@ struct ModuleCheck {
 /// The records of the checks as a JSON list (one object per output and dimension).
 [[nodiscard]] std::string records_json(const std::vector<ModuleCheck>& checks);
 
-[[nodiscard]] const char* to_string(kernel::FunctionalKind kind) noexcept;
+using lmeform::to_string;  // the output kind's keyword (form_registry.hpp)
 
 }  // namespace lmeform::formcheck

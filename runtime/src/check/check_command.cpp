@@ -154,7 +154,7 @@ int run_check_command(const CheckCommandOptions& options) {
   if (!check.passed()) {
     std::string failed;
     for (const auto& r : check.records)
-      if (!r.passed) failed += fmt::format("{}{} ({}d)", failed.empty() ? "" : ", ", r.output, r.dim);
+      if (!r.passed) failed += fmt::format("{}{} ({}d)", failed.empty() ? "" : ", ", formcheck::kernel_label(r), r.dim);
     err << fmt::format("lmeform check: {} failed: {}\n", check.module, failed);
     return 1;
   }

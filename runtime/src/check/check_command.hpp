@@ -1,11 +1,12 @@
 // `lmeform check FORM.form`: the derivative check of a form module as a user command.
 //
-// For every output (energy, constraint, residual, bilinear, linear) in every declared dimension,
+// For every output (energy, constraint, residual, bilinear, linear; each of its kernels, one per
+// integration domain; point outputs are evaluated) in every declared dimension,
 // on a few cells of a small graded LME node set (Cartesian, or axisymmetric with the basis mirrored
 // across the axis) with smooth random states, coefficients, quadrature data and constants: the
 // derivatives against finite differences, Hessian symmetry, Taylor remainder slopes, linearity in
 // the test functions; kinks of non-smooth integrands are reported, not failed. Prints a table (one
-// row per output and dimension, then flops and compile time per kernel) and optionally writes the
+// row per kernel and dimension, then flops and compile time per kernel) and optionally writes the
 // records as JSON. Exit code 0 when every check passes, 1 on any failure, 2 when the form cannot be
 // loaded or an option is wrong.
 #pragma once

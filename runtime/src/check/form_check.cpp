@@ -77,6 +77,7 @@ kernel::CellInputs Evaluator::inputs(const std::vector<double>& u) {
   in.qdata = state_.qdata.empty() ? nullptr : state_.qdata.data();
   in.constants = state_.constants.empty() ? nullptr : state_.constants.data();
   in.workspace = workspace_.empty() ? nullptr : workspace_.data();
+  in.normals = cell_.normals.empty() ? nullptr : cell_.normals.data();
   return in;
 }
 
@@ -97,6 +98,24 @@ std::vector<double> Evaluator::matrix(const std::vector<double>& u) {
   std::vector<double> H(static_cast<std::size_t>(ndofs_) * ndofs_, 0.0);
   form_.matrix(inputs(u), H.data());
   return H;
+}
+
+std::vector<double> Evaluator::point(const std::vector<double>& u) {
+  const std::string label = std::string(form_.module) + "::" + form_.name;
+  if (!form_.point) throw std::invalid_argument(label + ": no point kernel");
+  // Unwritten values stay NaN (and fail the finiteness check); a guard after them catches a kernel
+  // that writes more than n_values per point.
+  constexpr std::size_t kGuard = 16;
+  constexpr double kSentinel = -1.2345e300;
+  const std::size_t size = static_cast<std::size_t>(cell_.nq) * static_cast<std::size_t>(std::max(form_.n_values, 0));
+  std::vector<double> values(size, std::numeric_limits<double>::quiet_NaN());
+  values.resize(size + kGuard, kSentinel);
+  form_.point(inputs(u), values.data());
+  for (std::size_t i = size; i < values.size(); ++i)
+    if (values[i] != kSentinel)
+      throw std::runtime_error(fmt::format("{}: the point kernel writes beyond n_values = {} per point", label, form_.n_values));
+  values.resize(size);
+  return values;
 }
 
 double fitted_slope(const std::vector<double>& h, const std::vector<double>& r) {
@@ -333,6 +352,8 @@ class Checker {
     const FunctionalKind kind = form_.kind;
     if (is_scalar_functional(kind)) {
       check_scalar_functional(direction);
+    } else if (kind == FunctionalKind::Point) {
+      check_point_values();
     } else if (kind == FunctionalKind::Residual) {
       check_residual(direction);
     } else {
@@ -782,6 +803,21 @@ class Checker {
       rep_.failures.push_back(fmt::format("not linear in the test{} function: scaling one test function changes the "
                                           "output by rel. {} beyond the scaling",
                                           form_.kind == FunctionalKind::Bilinear ? " and trial" : "", sci(err)));
+  }
+
+  /// A point output has no derivatives: its kernel must write n_values finite values per point.
+  void check_point_values() {
+    if (form_.n_values <= 0) {
+      rep_.failures.push_back(fmt::format("point output with n_values = {}", form_.n_values));
+      return;
+    }
+    const std::vector<double> values = ev_.point(u_);
+    const auto bad = std::find_if(values.begin(), values.end(), [](double x) { return !std::isfinite(x); });
+    if (bad != values.end()) {
+      const auto at = static_cast<int>(bad - values.begin());
+      rep_.failures.push_back(fmt::format("point value {} of point {} is {} (not written, or not finite)", at % form_.n_values,
+                                          at / form_.n_values, *bad));
+    }
   }
 
   /// Bilinear and linear forms read no unknowns: other nodal values must give the same output.

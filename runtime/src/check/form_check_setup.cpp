@@ -369,6 +369,22 @@ double fill_fields(const kernel::FieldInfo* fields, int n_fields, int stride, co
 
 }  // namespace
 
+std::vector<double> radial_normals(const Cell& cell, const Feature& feature) {
+  const std::size_t d = static_cast<std::size_t>(cell.dim);
+  std::vector<double> normals(static_cast<std::size_t>(cell.nq) * d, 0.0);
+  for (std::size_t q = 0; q < static_cast<std::size_t>(cell.nq); ++q) {
+    const double* x = cell.points.data() + q * d;
+    double* nq = normals.data() + q * d;
+    const double r = distance_to_center(x, feature);
+    if (!(r > 0.0)) {
+      nq[0] = 1.0;
+      continue;
+    }
+    for (std::size_t i = 0; i < d; ++i) nq[i] = (x[i] - feature.center[i]) / r;
+  }
+  return normals;
+}
+
 CheckCase generic_case(const kernel::FormKernels& form, const Cell& cell, const CheckGeometry& geometry,
                        const std::vector<double>& constants, const StateOptions& options, std::mt19937_64& rng) {
   CheckCase cc;

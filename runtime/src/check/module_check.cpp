@@ -22,15 +22,8 @@ namespace fs = std::filesystem;
 using kernel::FormKernels;
 using kernel::FunctionalKind;
 
-const char* to_string(FunctionalKind kind) noexcept {
-  switch (kind) {
-    case FunctionalKind::Energy: return "energy";
-    case FunctionalKind::Constraint: return "constraint";
-    case FunctionalKind::Residual: return "residual";
-    case FunctionalKind::Bilinear: return "bilinear";
-    case FunctionalKind::Linear: return "linear";
-  }
-  return "?";
+std::string kernel_label(const CheckRecord& record) {
+  return record.domain == "boundary" ? record.output + " [" + record.measure + "]" : record.output;
 }
 
 std::string SlopeResult::text() const {
@@ -216,6 +209,10 @@ CheckRecord check_kernels(const FormKernels& form, const std::vector<ConstantCho
   rec.form = form.module;
   rec.output = form.name;
   rec.kind = to_string(form.kind);
+  const bool boundary = form.domain == kernel::IntegralDomain::Boundary;
+  rec.domain = boundary ? "boundary" : "cells";
+  rec.boundary_part = boundary && form.boundary_part != nullptr ? form.boundary_part : "";
+  rec.measure = form.kind == FunctionalKind::Point ? "" : !boundary ? "dx" : rec.boundary_part.empty() ? "ds" : "ds(" + rec.boundary_part + ")";
   rec.dim = form.dim;
   rec.coordinates = to_string(coordinates);
   std::vector<double> values;
@@ -237,7 +234,8 @@ CheckRecord check_kernels(const FormKernels& form, const std::vector<ConstantCho
                           "so det grad y -> 0 on the axis for any nodal values)");
     const std::vector<Cell>& cells = vector_fields ? site.vector_field_cells : site.cells;
     for (std::size_t k = 0; k < cells.size(); ++k) {
-      const Cell& cell = cells[k];
+      Cell cell = cells[k];
+      if (boundary) cell.normals = radial_normals(cell, site.geometry->feature());
       rec.cells += 1;
       rec.max_nodes = std::max(rec.max_nodes, cell.n);
       rec.points = cell.nq;
@@ -262,10 +260,12 @@ CheckRecord check_kernels(const FormKernels& form, const std::vector<ConstantCho
   } catch (const std::exception& e) {
     rec.failures.push_back(std::string("could not be checked: ") + e.what());
   }
-  if (form.value) rec.flops_value = flops(form.flop_model_value, form.flops_value, rec.max_nodes, rec.points);
+  // A point output's kernel cost is given as the value's (kernel.hpp).
+  if (form.value || form.point) rec.flops_value = flops(form.flop_model_value, form.flops_value, rec.max_nodes, rec.points);
   if (form.vector) rec.flops_vector = flops(form.flop_model_vector, form.flops_vector, rec.max_nodes, rec.points);
   if (form.matrix) rec.flops_matrix = flops(form.flop_model_matrix, form.flops_matrix, rec.max_nodes, rec.points);
   rec.passed = rec.failures.empty();
+  if (form.kind == FunctionalKind::Point && rec.passed) rec.notes.push_back("point output, evaluated (finite)");
   rec.status = !rec.passed ? "fail" : rec.kinks.empty() ? "pass" : "kink";
   rec.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return rec;
@@ -345,7 +345,7 @@ std::string format_table(const ModuleCheck& mc) {
     const double lin = std::isnan(r.linearity_error) ? r.state_dependence_error
                        : std::isnan(r.state_dependence_error) ? r.linearity_error
                                                               : std::max(r.linearity_error, r.state_dependence_error);
-    os << fmt::format("{:<16} {:<10} {:>3} {:>5} {:>5} {:>9} {:>9} {:>9} {:>9} {:>6} {:>6} {:>6}  {}\n", r.output, r.kind,
+    os << fmt::format("{:<16} {:<10} {:>3} {:>5} {:>5} {:>9} {:>9} {:>9} {:>9} {:>6} {:>6} {:>6}  {}\n", kernel_label(r), r.kind,
                       r.dim, r.cells, r.max_nodes, error_text(r.gradient_rel_error), error_text(r.hessian_rel_error),
                       error_text(r.symmetry_error), error_text(lin), r.taylor_slope_gradient.text(),
                       r.taylor_slope_second_order.text(), r.taylor_slope_hessian.text(),
@@ -353,10 +353,13 @@ std::string format_table(const ModuleCheck& mc) {
   }
   os << "  r1 = |E(u+hv)-E-h g.v| (slope 2), r2 = |r1 - h^2/2 vHv| (slope 3), r3 = |g(u+hv)-g-h Hv| "
         "(residual: R, J; slope 2)\n";
+  if (std::any_of(mc.records.begin(), mc.records.end(), [](const CheckRecord& r) { return r.domain == "boundary"; }))
+    os << "  [ds...]: a boundary kernel, checked at the cells' quadrature points with the outward normals of spheres "
+          "about the feature's centre\n";
   for (const CheckRecord& r : mc.records) {
-    for (const auto& n : r.notes) os << fmt::format("  note {} {}d: {}\n", r.output, r.dim, n);
-    for (const auto& k : r.kinks) os << fmt::format("  kink {} {}d: {}\n", r.output, r.dim, k);
-    for (const auto& f : r.failures) os << fmt::format("  FAIL {} {}d: {}\n", r.output, r.dim, f);
+    for (const auto& n : r.notes) os << fmt::format("  note {} {}d: {}\n", kernel_label(r), r.dim, n);
+    for (const auto& k : r.kinks) os << fmt::format("  kink {} {}d: {}\n", kernel_label(r), r.dim, k);
+    for (const auto& f : r.failures) os << fmt::format("  FAIL {} {}d: {}\n", kernel_label(r), r.dim, f);
   }
   const std::string compile = mc.builtin         ? "built-in"
                               : mc.cache_hit     ? "cache hit"
@@ -365,7 +368,7 @@ std::string format_table(const ModuleCheck& mc) {
   os << fmt::format("\n{:<16} {:>3} {:>5} {:>4} {:>10} {:>10} {:>10} {:>11} {:>9}\n", "kernel", "dim", "n", "nq",
                     "value", "vector", "matrix", "JIT compile", "check");
   for (const CheckRecord& r : mc.records)
-    os << fmt::format("{:<16} {:>3} {:>5} {:>4} {:>10} {:>10} {:>10} {:>11} {:>8.2f}s\n", r.output, r.dim, r.max_nodes,
+    os << fmt::format("{:<16} {:>3} {:>5} {:>4} {:>10} {:>10} {:>10} {:>11} {:>8.2f}s\n", kernel_label(r), r.dim, r.max_nodes,
                       r.points, flop_text(r.flops_value), flop_text(r.flops_vector), flop_text(r.flops_matrix), compile,
                       r.seconds);
   os << "  flops per cell of the largest check cell (n nodes, nq points); JIT compile is per module\n";
@@ -398,6 +401,10 @@ std::string records_json(const std::vector<ModuleCheck>& checks) {
                       {"source", mc.source.string()},
                       {"output", r.output},
                       {"kind", r.kind},
+                      {"domain", r.domain},
+                      {"boundary_part", r.boundary_part},
+                      {"measure", r.measure},
+                      {"label", r.kind + " " + kernel_label(r)},
                       {"dim", r.dim},
                       {"coordinates", r.coordinates},
                       {"gradient_rel_error", number(r.gradient_rel_error)},

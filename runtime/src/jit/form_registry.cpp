@@ -16,6 +16,19 @@
 
 namespace lmeform {
 
+const char* to_string(kernel::FunctionalKind kind) noexcept {
+  using kernel::FunctionalKind;
+  switch (kind) {
+    case FunctionalKind::Energy: return "energy";
+    case FunctionalKind::Constraint: return "constraint";
+    case FunctionalKind::Residual: return "residual";
+    case FunctionalKind::Bilinear: return "bilinear";
+    case FunctionalKind::Linear: return "linear";
+    case FunctionalKind::Point: return "point";
+  }
+  return "?";
+}
+
 namespace fs = std::filesystem;
 
 std::vector<std::string> FormModule::outputs() const {

@@ -21,17 +21,6 @@ namespace {
 using kernel::FormKernels;
 using kernel::FunctionalKind;
 
-const char* kind_name(FunctionalKind k) {
-  switch (k) {
-    case FunctionalKind::Energy: return "energy";
-    case FunctionalKind::Constraint: return "constraint";
-    case FunctionalKind::Residual: return "residual";
-    case FunctionalKind::Bilinear: return "bilinear";
-    case FunctionalKind::Linear: return "linear";
-  }
-  return "?";
-}
-
 std::vector<std::string> unique_names(std::vector<std::string> names) {
   std::vector<std::string> out;
   for (auto& n : names)
@@ -56,14 +45,14 @@ bool contains(const std::vector<std::string>& names, std::string_view name) {
       if (k->name == output && (module_name.empty() || m->name == module_name)) {
         if (k->kind != kind)
           throw SceneError(fmt::format("{}: '{}' of form {} is a {} output, not a {} output", name.where, output, m->name,
-                                       kind_name(k->kind), kind_name(kind)));
+                                       to_string(k->kind), to_string(kind)));
         throw SceneError(fmt::format("{}: form {} declares '{}' in dimension {} only; this scene is {}D", name.where, m->name,
                                      output, fmt::join(m->dimensions(), ", "), b.dim));
       }
-  throw SceneError(fmt::format("{}: no {} output '{}' in the scene's forms{}{}", name.where, kind_name(kind), output,
+  throw SceneError(fmt::format("{}: no {} output '{}' in the scene's forms{}{}", name.where, to_string(kind), output,
                                did_you_mean(output, candidates),
-                               candidates.empty() ? fmt::format(" (they define no {} output)", kind_name(kind))
-                                                  : fmt::format(" ({} outputs: '{}')", kind_name(kind), fmt::join(candidates, "', '"))));
+                               candidates.empty() ? fmt::format(" (they define no {} output)", to_string(kind))
+                                                  : fmt::format(" ({} outputs: '{}')", to_string(kind), fmt::join(candidates, "', '"))));
 }
 
 /// "module.output" or "output" of `kind` among the modules, in the scene's dimension: every kernel
@@ -89,7 +78,7 @@ BoundOutput find_output(const BoundScene& b, const SceneName& name, FunctionalKi
   }
   if (defining.size() > 1)
     throw SceneError(fmt::format("{} = '{}' is ambiguous: several forms define a {} '{}'; write 'module.{}'", name.where, name.name,
-                                 kind_name(kind), output, output));
+                                 to_string(kind), output, output));
   if (defining.empty()) explain_missing_output(b, name, module_name, output, kind, unique_names(candidates));
   found.label = defining.front()->name + "." + output;
   return found;

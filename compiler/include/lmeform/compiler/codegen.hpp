@@ -8,11 +8,13 @@
 
 namespace lmeform::compiler {
 
-/// What one output needs at one dimension: derivatives of the integrand with respect to the jet
-/// slots of its row fields (unknowns or tests) and column fields (unknowns or trials).
+/// What one output needs at one dimension over one domain: derivatives of the integrand with respect
+/// to the jet slots of its row fields (unknowns or tests) and column fields (unknowns or trials);
+/// for a point output, its components.
 struct KernelPlan {
   const OutputDecl* output = nullptr;
   int dim = 0;
+  int domain = kCellDomain;         ///< index into CompiledForm::domains
   ir::Role row_role = ir::Role::Unknown;
   ir::Role col_role = ir::Role::Unknown;
   int row_dofs = 0;                 ///< dofs per node of the rows
@@ -27,13 +29,16 @@ struct KernelPlan {
   struct MatrixEntry { int row; int row_slot; int col; int col_slot; ir::NodeId node; };
   std::vector<VectorEntry> vector;  ///< non-zero ∂f/∂J_row
   std::vector<MatrixEntry> matrix;  ///< non-zero ∂²f/∂J_row∂J_col (both triangles when symmetric)
+  PointValue point;                 ///< point outputs: shape and components
+  bool is_point() const { return output->kind == OutputKind::Point; }
   bool has_value() const { return value >= 0; }
-  bool has_vector() const { return output->kind != OutputKind::Bilinear; }
+  bool has_vector() const { return output->kind != OutputKind::Bilinear && !is_point(); }
   bool has_matrix() const { return col_dofs > 0; }
 };
 
-/// Differentiates one output at one dimension. Throws CompileError (e.g. a residual not linear in v).
-KernelPlan plan_kernel(const CompiledForm& form, const OutputDecl& output, int dim);
+/// Differentiates one output at one dimension over one of its domains (a point output: collects
+/// its components). Throws CompileError (e.g. a residual not linear in v).
+KernelPlan plan_kernel(const CompiledForm& form, const OutputDecl& output, int dim, int domain = kCellDomain);
 
 struct GeneratedModule {
   std::string header;  ///< <module>_kernels.hpp

@@ -35,8 +35,26 @@ struct QdataDecl {
   int size(int dim) const { int s = 1; for (int i = 0; i < rank; ++i) s *= dim; return s; }
 };
 
-enum class OutputKind { Energy, Constraint, Residual, Bilinear, Linear };
+enum class OutputKind { Energy, Constraint, Residual, Bilinear, Linear, Point };
 const char* to_string(OutputKind k);
+
+/// Where an integral is taken: the cells (`dx`), the whole boundary (`ds`) or a named part of it
+/// (`ds(top)`; the runtime resolves the name).
+struct Domain {
+  bool boundary = false;
+  std::string part;  ///< boundary part; empty for the whole boundary (and for the cells)
+  /// "dx", "ds" or "ds(top)": the measure as the form writes it.
+  std::string measure() const { return !boundary ? "dx" : part.empty() ? "ds" : "ds(" + part + ")"; }
+  friend bool operator==(const Domain&, const Domain&) = default;
+};
+/// CompiledForm::domains[kCellDomain] is always the cells.
+inline constexpr int kCellDomain = 0;
+
+/// A point output's value at one dimension: its shape and components (row-major).
+struct PointValue {
+  std::vector<int> shape;
+  std::vector<ir::NodeId> components;
+};
 
 struct OutputDecl {
   OutputKind kind = OutputKind::Energy;
@@ -44,7 +62,14 @@ struct OutputDecl {
   Loc loc;
   int target_constant = -1;      ///< Constraint: index of the target constant, or -1
   double target_value = 0.0;     ///< Constraint: numeric target when target_constant < 0
-  std::map<int, ir::NodeId> integrand;  ///< per dimension: f such that the output is Σ_q w_q f
+  /// Integral outputs, per dimension and per domain (index into CompiledForm::domains): f such that
+  /// the output's part over that domain is Σ_q w_q f. A domain whose terms vanish in a dimension
+  /// (`if dim == 3 then ... else 0*ds`) is left out there.
+  std::map<int, std::map<int, ir::NodeId>> integrands;
+  /// Point outputs, per dimension.
+  std::map<int, PointValue> point;
+  /// The integrand over one domain (by default the cells) at dimension dim.
+  ir::NodeId integrand(int dim, int domain = kCellDomain) const { return integrands.at(dim).at(domain); }
 };
 
 struct CompileOptions {
@@ -58,6 +83,7 @@ struct CompiledForm {
   std::vector<ConstantDecl> constants;
   std::vector<QdataDecl> qdata;
   std::string coordinate;              ///< name of the coordinate, empty if none
+  std::vector<Domain> domains{Domain{}};  ///< the cells, then boundary measures in order of first use
   std::vector<OutputDecl> outputs;
   SourceSet sources;
   std::vector<std::filesystem::path> dependencies;  ///< the form and every included file

@@ -33,7 +33,7 @@ constexpr int hessian_slot(int i, int j, int dim) noexcept {
 constexpr int slot_order(int slot, int dim) noexcept { return slot == 0 ? 0 : slot <= dim ? 1 : 2; }
 
 enum class Op : std::uint8_t {
-  Const, Jet, Coord, Param, Qdata,                       // terminals
+  Const, Jet, Coord, Param, Qdata, Normal,               // terminals
   Add, Mul, Neg, Div, Pow,                               // arithmetic
   Sqrt, Exp, Log, Sin, Cos, Tanh, Abs, Sign,             // functions
   Select, Lt, Le, Gt, Ge, Eq, Ne, And, Or, Not,          // conditionals (true = 1.0)
@@ -45,7 +45,7 @@ enum class Role : std::uint8_t { Unknown = 0, Test = 1, Trial = 2, Coefficient =
 struct Node {
   Op op = Op::Const;
   double value = 0.0;             ///< Const
-  std::array<int, 4> arg{-1, -1, -1, -1};  ///< children; Jet: role, field, component, slot; Coord/Param/Qdata: index
+  std::array<int, 4> arg{-1, -1, -1, -1};  ///< children; Jet: role, field, component, slot; Coord/Param/Qdata/Normal: index
 };
 
 /// Identifies one jet entry of one component of a nodal field.
@@ -75,6 +75,8 @@ class Graph {
   NodeId coord(int i);
   NodeId param(int i);
   NodeId qdata(int offset);
+  /// Component i of the outward unit normal at a boundary quadrature point.
+  NodeId normal(int i);
 
   NodeId add(NodeId a, NodeId b);
   NodeId sub(NodeId a, NodeId b) { return add(a, neg(b)); }
@@ -90,6 +92,9 @@ class Graph {
   bool is_const(NodeId id, double v) const { return node(id).op == Op::Const && node(id).value == v; }
   bool is_const(NodeId id) const { return node(id).op == Op::Const; }
   JetVar jet_var(NodeId id) const;
+  /// Whether the node depends on the normal (kept per node as it is built: checking an integrand
+  /// over a cell measure must not walk the whole DAG once per term).
+  bool reads_normal(NodeId id) const { return reads_normal_[static_cast<std::size_t>(id)] != 0; }
 
   /// All nodes reachable from roots, in increasing id (= topological) order.
   std::vector<NodeId> reachable(std::span<const NodeId> roots) const;
@@ -104,6 +109,7 @@ class Graph {
   };
   std::vector<Node> nodes_;
   std::vector<Loc> origins_;
+  std::vector<unsigned char> reads_normal_;
   std::unordered_map<Node, NodeId, KeyHash, KeyEq> table_;
   Loc current_origin_;
   NodeId zero_ = -1, one_ = -1;
