@@ -32,6 +32,15 @@ Assembler::Assembler(const Discretization& discretization, const kernel::FormKer
                                 std::to_string(form.contract_version) + ", this runtime speaks version " +
                                 std::to_string(kernel::kContractVersion) + "; regenerate it with this lmeformc");
   }
+  // The discretization's quadrature is the cells': a boundary kernel needs boundary points and
+  // their normals, and a point output is not an integral.
+  if (form.kind == kernel::FunctionalKind::Point)
+    throw std::invalid_argument(describe() + ": a point output (values at the quadrature points) is not assembled");
+  if (form.domain != kernel::IntegralDomain::Cells) {
+    const std::string part = form.boundary_part != nullptr && *form.boundary_part != '\0' ? std::string(form.boundary_part) : "";
+    throw std::invalid_argument(describe() + ": integrates over the boundary (" + (part.empty() ? "ds" : "ds(" + part + ")") +
+                                "); the assembler integrates over the cells only");
+  }
   if (form.dim != disc_->dim()) {
     throw std::invalid_argument(describe() + ": generated for dimension " + std::to_string(form.dim) +
                                 " but the discretization is " + std::to_string(disc_->dim()) + "-dimensional");
