@@ -386,6 +386,23 @@ TEST(Assembly, FormNeedingHessiansRejectsATabulationWithout) {
   }
 }
 
+TEST(Assembly, BoundaryAndPointKernelsAreRefused) {
+  const NodeSet nodes = uniform_grid(Box::unit(2), {6, 6, 1});
+  const Discretization disc(PETSC_COMM_SELF, nodes, options(1.6, 3, NeighbourhoodStrategy::CellBased));
+  auto boundary = JetKernel<Poisson<false>>::descriptor("poisson", kSourceConstant, 1);
+  boundary.domain = lmeform::kernel::IntegralDomain::Boundary;
+  boundary.boundary_part = "top";
+  try {
+    Assembler assembler(disc, boundary);
+    FAIL() << "expected an error";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("integrates over the boundary part 'top', which the discretization has no quadrature for"), std::string::npos) << e.what();
+  }
+  auto point = JetKernel<Poisson<false>>::descriptor("poisson", kSourceConstant, 1);
+  point.kind = lmeform::kernel::FunctionalKind::Point;
+  EXPECT_THROW({ Assembler assembler(disc, point); }, std::invalid_argument);
+}
+
 TEST(Assembly, UnsetConstantIsAnError) {
   const NodeSet nodes = uniform_grid(Box::unit(2), {6, 6, 1});
   const Discretization disc(PETSC_COMM_SELF, nodes, options(1.6, 3, NeighbourhoodStrategy::CellBased));

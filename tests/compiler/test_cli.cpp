@@ -129,6 +129,26 @@ TEST_P(Lmeformc, ReportExplainsEachKernel) {
   EXPECT_NE(w.out.find("cost report of form cost"), std::string::npos);
 }
 
+TEST_P(Lmeformc, ReportAndJsonNameBoundaryAndPointKernels) {
+  write(work_ / "cwd" / "walls.form",
+        "dimension 2, 3\nunknown y : vector\ncoordinate x\n"
+        "energy E = inner(grad(y), grad(y))*dx - dot(y, n)*x[0]*ds(top)\npoint F = grad(y)\n");
+  const Outcome r = run("walls.form --report -o out");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  for (const std::string& expected :
+       {std::string("energy E [dx], dimension 2 (walls.form:4:1)"), std::string("energy E [ds(top)], dimension 3 (walls.form:4:1)"),
+        std::string("point F, dimension 3 (walls.form:5:1)"), std::string("point values: 9 per point (matrix[3x3]); flops/point")})
+    EXPECT_NE(r.out.find(expected), std::string::npos) << "missing: " << expected << "\n" << r.out;
+  const std::string json = slurp(work_ / "cwd" / "out" / "walls.json");
+  for (const std::string& expected :
+       {std::string("\"boundary_parts\": [\"top\"]"),
+        std::string("\"symbol\": \"walls_E_ds_top_2d\", \"output\": \"E\", \"kind\": \"energy\", \"dim\": 2, \"domain\": \"boundary\", "
+                    "\"boundary_part\": \"top\", \"measure\": \"ds(top)\""),
+        std::string("\"symbol\": \"walls_E_3d\", \"output\": \"E\", \"kind\": \"energy\", \"dim\": 3, \"domain\": \"cells\""),
+        std::string("\"point\": {\"shape\": \"matrix[2x2]\", \"rank\": 2, \"extents\": [2, 2], \"n_values\": 4}")})
+    EXPECT_NE(json.find(expected), std::string::npos) << "missing: " << expected << "\n" << json;
+}
+
 TEST_P(Lmeformc, ADirectoryIsNotAForm) {
   fs::create_directories(work_ / "cwd" / "forms");
   const Outcome r = run("forms -o out");

@@ -63,6 +63,9 @@ Assembler::Assembler(const Discretization& discretization, std::span<const kerne
         k->coefficient_components_per_node != form.coefficient_components_per_node || k->qdata_per_point != form.qdata_per_point)
       throw std::invalid_argument(describe() + ": its integrals over several domains do not share one layout of unknowns, "
                                   "coefficients, constants and data");
+    if (k->kind == kernel::FunctionalKind::Point)
+      throw std::invalid_argument(describe() + ": a point output (values at the quadrature points) is not an integral; evaluate it "
+                                  "with a PointEvaluator");
     if (k->workspace_doubles == nullptr) throw std::invalid_argument(describe() + ": has no workspace_doubles function");
     needed = std::max({needed, k->basis_order, k->coefficient_basis_order});
     integrals_.push_back({k, &domain_of(discretization, *k), {}});
