@@ -336,7 +336,9 @@ class Lowering {
     switch (out.kind) {
       case OutputKind::Energy: case OutputKind::Constraint:
         if (has_v || has_w) fail(s.body->loc, what + " must not use test or trial functions (use residual/bilinear)");
-        if (!has_u) fail(s.body->loc, what + " does not depend on any unknown");
+        // An energy of the coordinates and constants alone is a measured quantity (a length, an
+        // area: zero gradient); a constraint must move with the unknowns to constrain them.
+        if (!has_u && out.kind == OutputKind::Constraint) fail(s.body->loc, what + " does not depend on any unknown");
         break;
       case OutputKind::Residual:
         if (!has_v) fail(s.body->loc, what + " must be linear in a test function; none is used");

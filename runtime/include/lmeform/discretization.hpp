@@ -20,6 +20,7 @@
 
 #include <mpi.h>
 
+#include <memory>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -38,6 +39,10 @@
 #include "lmeform/sparsity_pattern.hpp"
 
 namespace lmeform {
+
+namespace detail {
+struct CellFacets;
+}
 
 enum class NeighbourhoodStrategy {
   CellBased,  ///< one element per background cell (seed Algorithm 2)
@@ -79,6 +84,13 @@ struct DiscretizationOptions {
   /// Boundary parts that forms integrate over (ds(part)): their quadrature, facet vertices in the
   /// original node numbering. Each becomes an integration domain of its own.
   std::vector<BoundaryQuadrature> boundary;
+  /// 0: the basis gradients as evaluated. n > 0: corrected cell by cell so that the rule satisfies
+  /// the divergence theorem on every cell against a facet rule of n points (Gauss–Legendre points
+  /// per edge in 2D, a triangle rule in 3D: give the boundary quadrature's rule, so that hull facets
+  /// carry the points of `ds`). Linear fields are then reproduced exactly (the patch test) with any
+  /// interior rule. Cell-based neighbourhoods, 2D and 3D, triangulated cells only
+  /// (src/assembly/cell_facets.hpp).
+  int consistent_integration = 0;
 };
 
 /// Wall-clock seconds of each stage (this rank).
@@ -156,6 +168,9 @@ class ElementSet {
   int max_element_points_ = 0;
   std::vector<int> storage_point_ids_;  // 0, 1, 2, ...: element e's storage points are a slice
   std::variant<std::monostate, LmeFullStorage, LmeCompressedStorage> storage_;
+  /// Consistent integration: per element node (element_nodes_ order) dim values added to the
+  /// gradient at every point of the element; empty otherwise.
+  std::vector<double> gradient_correction_;
 };
 
 class Discretization {
@@ -235,6 +250,7 @@ class Discretization {
  private:
   void build_cell_domain();
   void build_boundary_domain(const BoundaryQuadrature& q);
+  void build_gradient_correction();
   void build_ghosts_and_pattern();
 
   MPI_Comm comm_;
@@ -250,6 +266,8 @@ class Discretization {
   CsrLists point_lists_;
   std::size_t points_outside_carried_cells_ = 0;
   std::vector<CsrLists> boundary_point_lists_;  // per options_.boundary entry
+  std::shared_ptr<const detail::CellFacets> facets_;  // consistent integration only
+  CsrLists facet_point_lists_;
 
   std::vector<ElementSet> domains_;  // the cells, then the boundary parts
   int max_element_nodes_ = 0;

@@ -67,6 +67,9 @@ struct SceneNodes {
   std::vector<SceneRefinement> refine;
   /// Points of the rule per boundary segment (2D: Gauss–Legendre) or triangle (3D) of ds integrals.
   int boundary_points = 3;
+  /// integration = "consistent": basis gradients corrected cell by cell so that the quadrature
+  /// satisfies the divergence theorem (linear fields reproduced exactly, the patch test).
+  bool consistent_integration = false;
 };
 
 /// A name as written in the scene, with where it was written (for messages about it).

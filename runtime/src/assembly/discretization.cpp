@@ -1,4 +1,6 @@
 #include "lmeform/discretization.hpp"
+
+#include "cell_facets.hpp"
 #include "lmeform/stopwatch.hpp"
 
 #include <algorithm>
@@ -89,6 +91,23 @@ CsrLists with_cell_vertices(const CsrLists& lists, const BackgroundCells& cells,
   return with_vertices(lists, [&](std::size_t q) { return cells.cell(q / static_cast<std::size_t>(points_per_cell)); });
 }
 
+// Each cell's list with the lists of its facets' points merged in: a node whose support reaches a
+// facet of the cell but none of its interior points still gets the cell's gradient correction.
+CsrLists with_facet_lists(const CsrLists& cell_lists, const detail::CellFacets& facets, const CsrLists& facet_point_lists) {
+  const auto per_cell = static_cast<std::size_t>(facets.dim + 1), per_facet = static_cast<std::size_t>(facets.points_per_facet);
+  return with_vertices(cell_lists, [&, row = std::vector<int>()](std::size_t c) mutable {
+    row.clear();
+    for (std::size_t k = 0; k < per_cell; ++k) {
+      const auto f = static_cast<std::size_t>(facets.cell_facets[c * per_cell + k]);
+      for (std::size_t g = 0; g < per_facet; ++g) {
+        const auto list = facet_point_lists[f * per_facet + g];
+        row.insert(row.end(), list.begin(), list.end());
+      }
+    }
+    return std::span<const int>(row);
+  });
+}
+
 // Carried quadrature points move with the map and their cells with its nodal values, but the map
 // is not affine on a cell: where it compresses strongly, a point leaves its cell and can lie
 // outside the hull of its list (measured: beside the axis, where the neck of the eps = 0.01
@@ -134,6 +153,14 @@ Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, Discretizati
   }
   const int n = static_cast<int>(nodes.size());
   const std::vector<double> gamma = expand_gamma(options_.gamma, nodes.size());
+  if (options_.consistent_integration != 0) {
+    if (options_.consistent_integration < 0) throw std::invalid_argument("Discretization: consistent_integration must be >= 0");
+    if (nodes.dim < 2) throw std::invalid_argument("Discretization: consistent integration needs 2D or 3D cells");
+    if (options_.strategy != NeighbourhoodStrategy::CellBased)
+      throw std::invalid_argument("Discretization: consistent integration corrects gradients cell by cell: it needs cell-based neighbourhoods");
+    if (options_.carried)
+      throw std::invalid_argument("Discretization: consistent integration needs the cells' own simplex rule, not carried quadrature points");
+  }
 
   // Stage: neighbours in the original numbering (spacing, β, supports) and the partition.
   std::vector<double> spacing;
@@ -196,6 +223,14 @@ Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, Discretizati
     if (options_.carried)
       points_outside_carried_cells_ =
           add_enclosing_cells(point_lists_, quadrature_, cells_, nodes_, nodes, partition_.new_index);
+    if (options_.consistent_integration > 0) {
+      const int m = options_.consistent_integration;
+      facets_ = std::make_shared<const detail::CellFacets>(
+          detail::cell_facets(cells_, nodes_, nodes.dim == 2 ? gauss_legendre(m) : triangle_rule(m)));
+      const auto per_facet = static_cast<std::size_t>(facets_->points_per_facet);
+      facet_point_lists_ = with_vertices(basis_->neighbour_lists(facets_->points),
+                                         [&](std::size_t p) { return facets_->facet_vertices(p / per_facet); });
+    }
   }
 
   // Elements of every integration domain; ghosts and the pattern of their union; basis storage.
@@ -212,6 +247,7 @@ Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, Discretizati
   {
     StageClock clock(times_.basis);
     for (ElementSet& d : domains_) d.build_storage(*basis_, options_.storage, options_.basis_order, options_.strategy);
+    if (facets_ && options_.basis_order >= 1) build_gradient_correction();
   }
 }
 
@@ -225,9 +261,54 @@ void Discretization::build_cell_domain() {
   // Elements: cells (union of their points' lists) or single points.
   const bool cell_based = options_.strategy == NeighbourhoodStrategy::CellBased;
   const int points_per_element = cell_based ? quadrature_.points_per_cell : 1;
-  const CsrLists all_elements = cell_based ? union_of_groups(point_lists_, points_per_element, n_nodes()) : point_lists_;
+  CsrLists all_elements = cell_based ? union_of_groups(point_lists_, points_per_element, n_nodes()) : point_lists_;
+  if (facets_) all_elements = with_facet_lists(all_elements, *facets_, facet_point_lists_);
   cells.select_local_elements(all_elements, points_per_element, owned_begin(), owned_end());
   domains_.push_back(std::move(cells));
+}
+
+void Discretization::build_gradient_correction() {
+  ElementSet& cells = domains_.front();
+  const detail::CellFacets& facets = *facets_;
+  const auto d = static_cast<std::size_t>(dim());
+  const auto per_cell = d + 1, per_facet = static_cast<std::size_t>(facets.points_per_facet);
+  const auto points_per_cell = static_cast<std::size_t>(quadrature_.points_per_cell);
+  const auto jet = static_cast<std::size_t>(kernel::jet_size(dim(), 1));
+  std::vector<double> correction(cells.element_nodes_.indices.size() * d, 0.0);
+  std::vector<double> tabulation;
+  LmeWorkspace ws;
+  for (int e = 0; e < cells.n_elements(); ++e) {
+    const auto element = cells.element_nodes(e);
+    const std::size_t n = element.size();
+    const std::span<double> c(correction.data() + static_cast<std::size_t>(cells.element_nodes_.offsets[std::size_t(e)]) * d, n * d);
+    tabulation.assign(points_per_cell * jet * n, 0.0);
+    cells.tabulate(e, 1, tabulation, ws);
+    const auto first = static_cast<std::size_t>(cells.element_first_point(e));
+    double measure = 0;
+    for (std::size_t k = 0; k < points_per_cell; ++k) {
+      const double w = quadrature_.weights[first + k];
+      measure += w;
+      for (std::size_t i = 0; i < d; ++i)
+        for (std::size_t a = 0; a < n; ++a) c[a * d + i] -= w * tabulation[(k * jet + 1 + i) * n + a];
+    }
+    const std::size_t cell = first / points_per_cell;
+    for (std::size_t k = 0; k < per_cell; ++k) {
+      const auto f = static_cast<std::size_t>(facets.cell_facets[cell * per_cell + k]);
+      const double sign = facets.cell_signs[cell * per_cell + k];
+      const double* normal = facets.normals.data() + f * d;
+      for (std::size_t g = 0; g < per_facet; ++g) {
+        const std::size_t p = f * per_facet + g;
+        const auto list = facet_point_lists_[p];
+        const std::vector<double> values = basis_->evaluate(std::span<const double>(facets.points.data() + p * d, d), list, 0);
+        for (std::size_t m = 0; m < list.size(); ++m) {
+          const auto a = static_cast<std::size_t>(std::lower_bound(element.begin(), element.end(), list[m]) - element.begin());
+          for (std::size_t i = 0; i < d; ++i) c[a * d + i] += sign * facets.weights[p] * values[m] * normal[i];
+        }
+      }
+    }
+    for (double& v : c) v /= measure;
+  }
+  cells.gradient_correction_ = std::move(correction);
 }
 
 void Discretization::build_boundary_domain(const BoundaryQuadrature& q) {
@@ -383,6 +464,13 @@ void ElementSet::tabulate(int e, int order, std::span<double> out, LmeWorkspace&
   } else {
     std::get<LmeCompressedStorage>(storage_).tabulate_cell(*basis_, point_ids, element_nodes(e), order, out, ws);
   }
+  if (gradient_correction_.empty() || order < 1) return;
+  const auto d = static_cast<std::size_t>(dim_), n = element_nodes(e).size();
+  const auto jet = static_cast<std::size_t>(kernel::jet_size(dim_, order));
+  const double* c = gradient_correction_.data() + static_cast<std::size_t>(element_nodes_.offsets[static_cast<std::size_t>(e)]) * d;
+  for (std::size_t k = 0; k < count; ++k)
+    for (std::size_t i = 0; i < d; ++i)
+      for (std::size_t a = 0; a < n; ++a) out[(k * jet + 1 + i) * n + a] += c[a * d + i];
 }
 
 std::size_t ElementSet::storage_doubles() const noexcept {

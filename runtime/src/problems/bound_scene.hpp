@@ -128,6 +128,7 @@ struct DiscretizationSettings {
   double gamma = 0.8;
   int quadrature_points = 6;
   int spacing_smoothing = 5;
+  bool consistent_integration = false;  ///< gradients corrected cell by cell (DiscretizationOptions)
 };
 
 /// A scene with its forms loaded and every name checked against them.

@@ -103,44 +103,20 @@ void DynamicsIntegrator::reset_reference() {
 
 namespace {
 
-/// |∇φ| at the nodes of a scalar field (0 on the box's walls, where the field is at its far value
-/// and derivatives at hull vertices are undefined). The motion can leave a node at a vertex of its
-/// neighbours' hull (measured: beside the waist of the eps = 0.01 prolate at step 150), where
-/// derivatives are undefined: the density there takes the largest of its neighbours' values.
+/// |∇φ| at the nodes of a scalar field, 0 on the box's walls, where the field is at its far value
+/// (a motion can leave a node at a vertex of its neighbours' hull: measured beside the waist of the
+/// eps = 0.01 prolate at step 150).
 std::vector<double> field_gradient_norm(const NodeSet& nodes, std::span<const double> field, const Box& box, const LmeBasis& basis,
                                         std::size_t& undefined) {
-  const int dim = nodes.dim;
-  std::vector<double> grad_norm(nodes.size(), 0.0);
-  std::vector<std::size_t> undefined_gradient;
+  std::vector<char> on_wall(nodes.size(), 0);
   for (std::size_t a = 0; a < nodes.size(); ++a) {
     const auto x = nodes.point(a);
-    bool on_wall = false;
-    for (std::size_t i = 0; i < std::size_t(dim); ++i) {
+    for (std::size_t i = 0; i < std::size_t(nodes.dim); ++i) {
       const double tol = 1e-9 * (box.hi[i] - box.lo[i]);
-      on_wall = on_wall || x[i] <= box.lo[i] + tol || x[i] >= box.hi[i] - tol;
+      if (x[i] <= box.lo[i] + tol || x[i] >= box.hi[i] - tol) on_wall[a] = 1;
     }
-    if (on_wall) continue;
-    const auto list = basis.neighbours(x);
-    std::vector<double> jet;
-    try {
-      jet = basis.evaluate(x, list, 1);
-    } catch (const LmeEvaluationError&) {
-      undefined_gradient.push_back(a);
-      continue;
-    }
-    double g2 = 0;
-    for (int i = 0; i < dim; ++i) {
-      double g = 0;
-      for (std::size_t m = 0; m < list.size(); ++m) g += jet[std::size_t(1 + i) * list.size() + m] * field[std::size_t(list[m])];
-      g2 += g * g;
-    }
-    grad_norm[a] = std::sqrt(g2);
   }
-  std::vector<double> filled = grad_norm;
-  for (const std::size_t a : undefined_gradient)
-    for (const int neighbour : basis.neighbours(nodes.point(a))) filled[a] = std::max(filled[a], grad_norm[std::size_t(neighbour)]);
-  undefined = undefined_gradient.size();
-  return filled;
+  return nodal_gradient_norm(basis, field, on_wall, &undefined);
 }
 
 /// More nodes than `current`: the current ones keep their places (a good start for Lloyd), and one

@@ -63,37 +63,40 @@ int PointExpressions::add(const std::string& expression, int components, std::st
   return static_cast<int>(items_.size()) - 1;
 }
 
+namespace {
+
+std::string expression_header(int dim, const std::map<std::string, double, std::less<>>& constants) {
+  return "dimension " + std::to_string(dim) + "\ncoordinate x\n" + constant_declarations(constants);
+}
+
+}  // namespace
+
 void PointExpressions::compile(MPI_Comm comm, std::ostream* log) {
   if (items_.empty()) return;
-  std::ostringstream body;
-  body << "dimension " << dim_ << "\ncoordinate x\n" << constant_declarations(constants_)
-       << "test point_value_scalar, point_value_vector : vector\n";
-  for (std::size_t i = 0; i < items_.size(); ++i) {
-    const Item& it = items_[i];
-    if (it.components == 1)
-      body << "linear value" << i << " = (" << it.expression << ") * point_value_scalar * dx\n";
-    else
-      body << "linear value" << i << " = dot(" << it.expression << ", point_value_vector) * dx\n";
-  }
+  std::string body = expression_header(dim_, constants_);
+  for (std::size_t i = 0; i < items_.size(); ++i) body += "point value" + std::to_string(i) + " = " + items_[i].expression + "\n";
   try {
-    module_ = &load_generated("scene_expressions", body.str(), comm, log);
+    module_ = &load_generated("scene_expressions", body, comm, log);
   } catch (const FormLoadError& e) {
     // Compile the expressions one by one to name the one at fault.
     for (const Item& it : items_) {
-      std::ostringstream one;
-      one << "dimension " << dim_ << "\ncoordinate x\n" << constant_declarations(constants_)
-          << "test point_value_scalar, point_value_vector : vector\n";
-      if (it.components == 1) one << "linear value = (" << it.expression << ") * point_value_scalar * dx\n";
-      else one << "linear value = dot(" << it.expression << ", point_value_vector) * dx\n";
       try {
-        (void)load_generated("scene_expression", one.str(), comm, nullptr);
+        (void)load_generated("scene_expression", expression_header(dim_, constants_) + "point value = " + it.expression + "\n", comm,
+                             nullptr);
       } catch (const FormLoadError& single) {
-        throw SceneError(fmt::format("{}: the expression \"{}\" ({}) does not compile:\n{}", it.where, it.expression,
-                                     it.components == 1 ? "a scalar" : fmt::format("a vector of {} components", it.components),
-                                     single.what()));
+        throw SceneError(fmt::format("{}: the expression \"{}\" does not compile:\n{}", it.where, it.expression, single.what()));
       }
     }
     throw;
+  }
+  for (std::size_t i = 0; i < items_.size(); ++i) {
+    const Item& it = items_[i];
+    const auto& k = module_->at("value" + std::to_string(i), dim_);
+    if (k.n_values != it.components)
+      throw SceneError(fmt::format("{}: the expression \"{}\" is {}; {} expected{}", it.where, it.expression,
+                                   k.n_values == 1 ? std::string("a scalar") : fmt::format("{} values", k.n_values),
+                                   it.components == 1 ? std::string("a scalar") : fmt::format("a vector of {} components", it.components),
+                                   it.components == 1 ? std::string() : std::string(" (write vectors with e(i): \"x[1]*e(0) - x[0]*e(1)\")")));
   }
   const auto& k0 = module_->at("value0", dim_);
   constant_values_.clear();
@@ -110,26 +113,21 @@ void PointExpressions::set_constant(const std::string& name, double value) {
 }
 
 void PointExpressions::evaluate(int handle, std::span<const double> x, std::span<double> out) const {
-  const Item& it = items_.at(static_cast<std::size_t>(handle));
+  if (out.size() < static_cast<std::size_t>(items_.at(static_cast<std::size_t>(handle)).components))
+    throw std::invalid_argument("PointExpressions::evaluate: the output holds fewer values than the expression has");
   const auto& k = module_->at("value" + std::to_string(handle), dim_);
-  const int dofs = k.dofs_per_node;  // 1 + dim: the scalar and the vector test function
-  std::vector<double> workspace(k.workspace_doubles != nullptr ? k.workspace_doubles(1, 1) + 1 : 1);
-  std::vector<double> local(static_cast<std::size_t>(dofs), 0.0);
-  const double weight = 1.0, basis = 1.0;
+  std::vector<double> workspace(k.workspace_doubles != nullptr ? k.workspace_doubles(0, 1) + 1 : 1);
+  const double weight = 1.0;
   kernel::CellInputs in;
   in.contractions = &dense_contractions();
-  in.n_nodes = 1;
+  in.n_nodes = 0;
   in.n_points = 1;
   in.basis_order = 0;
   in.weights = &weight;
   in.points = x.data();
-  in.basis = &basis;
   in.constants = constant_values_.empty() ? nullptr : constant_values_.data();
   in.workspace = workspace.data();
-  k.vector(in, local.data());
-  if (it.components == 1) out[0] = local[0];
-  else
-    for (int c = 0; c < it.components; ++c) out[static_cast<std::size_t>(c)] = local[static_cast<std::size_t>(1 + c)];
+  k.point(in, out.data());
 }
 
 const FormModule& compile_error_form(int dim, const std::string& unknown, int components, const std::string& exact,

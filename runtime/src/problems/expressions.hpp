@@ -1,7 +1,7 @@
 // Expressions of the coordinates in scenes ("sin(pi*x[0])", "tanh((0.3 - norm(x))/eps)"), compiled
 // by lmeformc like any form: the runtime never includes the parser. A scene's point expressions
-// become the `linear` outputs of one generated module, evaluated on a one-node "cell" whose single
-// quadrature point is the point of interest (weight 1, basis value 1), so l(v) = expr(x).
+// become the `point` outputs of one generated module, evaluated at a one-point "cell" without
+// nodes: the point of interest.
 // Errors against an exact solution are the `energy` outputs of a second generated module,
 // (u − u_exact)² and |∇u − ∇u_exact|² integrated with the run's quadrature.
 #pragma once

@@ -13,6 +13,38 @@
 
 namespace lmeform::problems {
 
+std::vector<double> nodal_gradient_norm(const LmeBasis& basis, std::span<const double> field, std::span<const char> skip,
+                                        std::size_t* undefined) {
+  const NodeSet& nodes = basis.nodes();
+  const int dim = nodes.dim;
+  std::vector<double> norm(nodes.size(), 0.0);
+  std::vector<std::size_t> undefined_at;
+  for (std::size_t a = 0; a < nodes.size(); ++a) {
+    if (!skip.empty() && skip[a] != 0) continue;
+    const auto x = nodes.point(a);
+    const auto list = basis.neighbours(x);
+    std::vector<double> jet;
+    try {
+      jet = basis.evaluate(x, list, 1);
+    } catch (const LmeEvaluationError&) {
+      undefined_at.push_back(a);
+      continue;
+    }
+    double g2 = 0;
+    for (int i = 0; i < dim; ++i) {
+      double g = 0;
+      for (std::size_t m = 0; m < list.size(); ++m) g += jet[std::size_t(1 + i) * list.size() + m] * field[std::size_t(list[m])];
+      g2 += g * g;
+    }
+    norm[a] = std::sqrt(g2);
+  }
+  std::vector<double> filled = norm;
+  for (const std::size_t a : undefined_at)
+    for (const int neighbour : basis.neighbours(nodes.point(a))) filled[a] = std::max(filled[a], norm[std::size_t(neighbour)]);
+  if (undefined != nullptr) *undefined = undefined_at.size();
+  return filled;
+}
+
 std::vector<double> interpolate_nodal_field(const NodeSet& old_nodes, std::span<const double> phi, double gamma, const LmeOptions& lme,
                                             const NodeSet& new_nodes, std::size_t* nearest_fallbacks) {
   const std::vector<double> gammas(old_nodes.size(), gamma);

@@ -37,6 +37,12 @@ std::vector<double> evaluate_with_cell_fallback(const LmeBasis& basis, std::span
   }
 }
 
+/// |∇f| of a scalar nodal field at the basis's nodes (field in the basis's node order; 0 where
+/// skip[a] != 0, when skip is given). Derivatives are undefined at a vertex of the node's
+/// neighbours' convex hull (a corner of the domain, or a node a motion left there): such a node takes
+/// the largest value among its neighbours, counted in `undefined`.
+[[nodiscard]] std::vector<double> nodal_gradient_norm(const LmeBasis& basis, std::span<const double> field, std::span<const char> skip,
+                                                      std::size_t* undefined = nullptr);
 
 /// A scalar nodal field (values at old_nodes) evaluated at new points with the LME basis of the old
 /// nodes (values only): a field carried to another node set (an adapted grid, a re-mesh).

@@ -27,6 +27,9 @@ std::shared_ptr<Discretization> discretization_of(MPI_Comm comm, const BoundScen
   options.quadrature_points = b.discretization.quadrature_points;
   options.basis_order = std::max(b.basis_order, 1);  // |∇u| at the nodes and H1 errors need gradients
   options.carried = input.carried;
+  // The facet rule is the boundary rule: hull facets then carry the points of ds, and a traction
+  // balances the corrected gradients exactly.
+  if (b.discretization.consistent_integration) options.consistent_integration = b.boundary_points;
   // The boundary parts the forms integrate over: a rule per segment between boundary nodes.
   for (const std::string& part : b.boundary_parts) {
     if (input.carried)

@@ -1,5 +1,7 @@
 #include "stationary.hpp"
 
+#include "field_transfer.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -49,25 +51,20 @@ std::vector<double> gradient_norm_at_nodes(const BoundScene& b, const ProblemSpa
   const Discretization& disc = *space.disc;
   const std::size_t n = disc.nodes().size();
   const auto bs = std::size_t(b.layout.dofs_per_node);
+  const auto original = disc.original_index();
   std::vector<char> prescribed(n, 0);
   for (const auto& [node, dof] : space.fixed_pairs)
     if (dof == 0) prescribed[std::size_t(node)] = 1;
-  std::vector<double> out(n, 0.0);
+  std::vector<double> field(n);  // the discretization's order
+  std::vector<char> skip(n);
   for (std::size_t r = 0; r < n; ++r) {
-    const auto o = static_cast<std::size_t>(disc.original_index()[r]);
-    if (prescribed[o] != 0) continue;
-    const auto x = disc.nodes().point(r);
-    const auto list = disc.basis().neighbours(x);
-    const auto jet = disc.basis().evaluate(x, list, 1);
-    double g2 = 0;
-    for (int i = 0; i < disc.dim(); ++i) {
-      double g = 0;
-      for (std::size_t m = 0; m < list.size(); ++m)
-        g += jet[std::size_t(1 + i) * list.size() + m] * state[std::size_t(disc.original_index()[std::size_t(list[m])]) * bs];
-      g2 += g * g;
-    }
-    out[o] = std::sqrt(g2);
+    const auto o = static_cast<std::size_t>(original[r]);
+    field[r] = state[o * bs];
+    skip[r] = prescribed[o];
   }
+  const std::vector<double> norm = nodal_gradient_norm(disc.basis(), field, skip);
+  std::vector<double> out(n, 0.0);
+  for (std::size_t r = 0; r < n; ++r) out[static_cast<std::size_t>(original[r])] = norm[r];
   return out;
 }
 

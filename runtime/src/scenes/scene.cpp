@@ -44,7 +44,7 @@ void read_scene_section(const Section& root, Scene& s) {
 
 void read_nodes(const Section& root, const std::filesystem::path& folder, Scene& s) {
   const Section t = root.table("nodes", {"spacing", "counts", "count", "lloyd_iterations", "file", "gamma", "spacing_smoothing",
-                                         "quadrature_points", "refine", "boundary_points"});
+                                         "quadrature_points", "refine", "boundary_points", "integration"});
   SceneNodes& n = s.nodes;
   const char* const kinds[] = {"spacing", "counts", "count", "file"};
   std::vector<std::string> present;
@@ -138,6 +138,8 @@ void read_nodes(const Section& root, const std::filesystem::path& folder, Scene&
                    : std::find(triangle_rule_sizes().begin(), triangle_rule_sizes().end(), n.boundary_points) == triangle_rule_sizes().end())
     t.fail_key("boundary_points", "= " + std::to_string(n.boundary_points) + (s.dim() == 2 ? " must lie in 1..10 (Gauss-Legendre points per boundary segment)"
                                                                                     : " is not a triangle rule (per boundary triangle)"));
+  const std::string integration = t.choice_of("integration", t.optional_string("integration").value_or("gauss"), {"gauss", "consistent"});
+  n.consistent_integration = integration == "consistent";
   const std::vector<int> sizes = s.dim() == 2 ? triangle_rule_sizes() : tetrahedron_rule_sizes();
   if (std::find(sizes.begin(), sizes.end(), n.quadrature_points) == sizes.end()) {
     std::string list;
