@@ -12,6 +12,7 @@
 #include "lmeform/node_sets.hpp"
 #include "lmeform/scene_table.hpp"
 #include "problem_registry.hpp"
+#include "point_values.hpp"
 #include "problem_space.hpp"
 
 namespace lmeform::problems {
@@ -396,9 +397,21 @@ void bind_quantities(const Scene& scene, MPI_Comm comm, std::ostream* log, const
   std::vector<QuantityIntegral> integrals;
   std::vector<std::string> where;
   for (const SceneQuantity& q : scene.quantities) {
-    BoundQuantity bq{q, {}, std::nullopt};
+    BoundQuantity bq{q, {}, nullptr, std::nullopt};
     using Kind = SceneQuantity::Kind;
-    if (q.kind == Kind::reaction || q.kind == Kind::probe) {
+    if (q.kind == Kind::probe && !b.layout.has(q.field)) {
+      const auto point = std::find_if(b.point_outputs.begin(), b.point_outputs.end(), [&](const auto& p) { return p.first == q.field; });
+      if (point == b.point_outputs.end()) {
+        std::vector<std::string> names;
+        for (const auto& u : b.layout.fields) names.push_back(u.name);
+        for (const auto& p : b.point_outputs) names.push_back(p.first);
+        throw SceneError(fmt::format("{}: '{}' is no unknown or point output of the problem{} (fields: {})", q.where, q.field,
+                                     did_you_mean(q.field, names), fmt::join(names, ", ")));
+      }
+      bq.point = point->second;
+      if (q.component >= bq.point->n_values)
+        throw SceneError(fmt::format("{}: key 'component' = {}: '{}' has {} value(s)", q.where, q.component, q.field, bq.point->n_values));
+    } else if (q.kind == Kind::reaction || q.kind == Kind::probe) {
       bq.field = check_unknown(b, q.field, q.where);
       if (q.component >= bq.field.components)
         throw SceneError(fmt::format("{}: key 'component' = {}: '{}' has {} component(s)", q.where, q.component, q.field, bq.field.components));
@@ -429,6 +442,21 @@ void bind_quantities(const Scene& scene, MPI_Comm comm, std::ostream* log, const
       if (k->dim == b.dim && out.label == module.name + "." + k->name) out.kernels.push_back(k);
     q.integral = std::move(out);
   }
+}
+
+/// The point outputs the unknowns and the bound constants determine, by field name.
+void bind_point_outputs(const Scene& scene, BoundScene& b) {
+  b.write_point_fields = scene.output && scene.output->hdf5;
+  for (const FormModule* m : b.modules)
+    for (const auto* k : m->kernels) {
+      if (k->kind != FunctionalKind::Point || k->dim != b.dim || !PointEvaluator::can_evaluate(*k, b.layout)) continue;
+      bool known = true;
+      for (int i = 0; i < k->n_constants; ++i) known = known && b.constants.contains(k->constants[i]);
+      if (!known) continue;
+      const bool taken = std::any_of(b.point_outputs.begin(), b.point_outputs.end(), [&](const auto& p) { return p.first == k->name; }) ||
+                         b.layout.has(k->name);
+      b.point_outputs.emplace_back(taken ? m->name + "." + k->name : std::string(k->name), k);
+    }
 }
 
 /// [bounds]: the unknowns checked, the expressions registered; bounds constrain a minimization
@@ -596,6 +624,7 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
   bind_qdata(scene, b);
   bind_nodal_data(scene, b);
   bind_bounds(scene, b);
+  bind_point_outputs(scene, b);
   bind_reference(scene, comm, log, expression_constants, b);
   bind_quantities(scene, comm, log, expression_constants, b);
   b.expressions->compile(comm, log);

@@ -119,7 +119,8 @@ struct BoundBound {
 /// A quantity of interest ([quantities]), with what it reads bound.
 struct BoundQuantity {
   SceneQuantity scene;
-  UnknownField field;                 ///< reaction, probe
+  UnknownField field;                 ///< reaction, probe of an unknown
+  const kernel::FormKernels* point = nullptr;  ///< probe of a point output
   std::optional<BoundOutput> integral;  ///< integral: its generated kernels
 };
 
@@ -170,6 +171,11 @@ struct BoundScene {
   std::vector<std::string> zero_mean;    ///< scalar unknowns fixed by ∫ u dx = 0
   std::vector<BoundExactSolution> exact;
   std::vector<BoundQuantity> quantities;
+  /// The point outputs of the forms (`point NAME = ...`) that the unknowns and constants alone
+  /// determine, with their field names ("stress", or "module.stress" when two forms define it):
+  /// written at the nodes with a solution when the scene writes fields, and probed.
+  std::vector<std::pair<std::string, const kernel::FormKernels*>> point_outputs;
+  bool write_point_fields = false;
   std::vector<BoundBound> bounds;
 
   [[nodiscard]] const UnknownField& unknown(std::string_view name) const { return layout.field(name); }

@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include "point_values.hpp"
 #include "problem_registry.hpp"
 #include "stationary.hpp"
 
@@ -31,6 +32,22 @@ void add_reaction(const BoundQuantity& q, const BoundScene& b, ProblemSpace& spa
   MPI_Allreduce(MPI_IN_PLACE, sums.data(), static_cast<int>(sums.size()), MPI_DOUBLE, MPI_SUM, disc.comm());
   for (int c = 0; c < q.field.components; ++c)
     if (q.scene.component < 0 || q.scene.component == c) out.emplace_back(column(q, c, q.scene.component < 0 ? q.field.components : 1), sums[std::size_t(c)]);
+}
+
+/// A point output at the probe, evaluated with the basis of the solve.
+void add_point_probe(const BoundQuantity& q, const BoundScene& b, ProblemSpace& space, const std::vector<double>& state, QuantityValues& out) {
+  const Discretization& disc = *space.disc;
+  const std::span<const double> x(q.scene.point.data(), std::size_t(b.dim));
+  const PointEvaluator evaluator(*q.point, b.layout, space.constants);
+  std::vector<double> values(static_cast<std::size_t>(evaluator.n_values()));
+  try {
+    evaluator.evaluate(disc.basis(), x, renumbered_state(disc, state, b.layout.dofs_per_node), values);
+  } catch (const LmeEvaluationError& e) {
+    throw SceneError(fmt::format("{}: the probe cannot be evaluated: {}", q.scene.where, e.what()));
+  }
+  for (int c = 0; c < evaluator.n_values(); ++c)
+    if (q.scene.component < 0 || q.scene.component == c)
+      out.emplace_back(column(q, c, q.scene.component < 0 ? evaluator.n_values() : 1), values[std::size_t(c)]);
 }
 
 /// The field's value at the probe: Σ_a p_a(x) u_a over the point's LME neighbours.
@@ -70,7 +87,10 @@ QuantityValues evaluate_quantities(const BoundScene& b, ProblemSpace& space, Vec
   for (const BoundQuantity& q : b.quantities) {
     switch (q.scene.kind) {
       case SceneQuantity::Kind::reaction: add_reaction(q, b, space, residual, out); break;
-      case SceneQuantity::Kind::probe: add_probe(q, b, space, state, out); break;
+      case SceneQuantity::Kind::probe:
+        if (q.point != nullptr) add_point_probe(q, b, space, state, out);
+        else add_probe(q, b, space, state, out);
+        break;
       case SceneQuantity::Kind::integral: out.emplace_back(q.scene.name, space.assemblers.at(q.integral->label)->value(u)); break;
       case SceneQuantity::Kind::constant: out.emplace_back(q.scene.name, space.constants.at(q.scene.constant)); break;
     }

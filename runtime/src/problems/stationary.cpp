@@ -1,6 +1,7 @@
 #include "stationary.hpp"
 
 #include "field_transfer.hpp"
+#include "point_values.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -68,6 +69,26 @@ std::vector<double> gradient_norm_at_nodes(const BoundScene& b, const ProblemSpa
   return out;
 }
 
+/// The point outputs at the nodes, in the nodes' original order.
+std::vector<ReportField> point_output_fields(const BoundScene& b, const ProblemSpace& space, const std::vector<double>& state) {
+  std::vector<ReportField> out;
+  if (!b.write_point_fields || b.point_outputs.empty()) return out;
+  const Discretization& disc = *space.disc;
+  const std::size_t n = disc.nodes().size();
+  const auto original = disc.original_index();
+  const std::vector<double> renumbered = renumbered_state(disc, state, b.layout.dofs_per_node);
+  for (const auto& [name, kernel] : b.point_outputs) {
+    const PointEvaluator evaluator(*kernel, b.layout, space.constants);
+    const auto m = static_cast<std::size_t>(evaluator.n_values());
+    ReportField field{name, evaluator.n_values(), std::vector<double>(n * m)};
+    for (std::size_t r = 0; r < n; ++r)
+      evaluator.evaluate(disc.basis(), disc.nodes().point(r), renumbered,
+                         std::span<double>(field.values.data() + std::size_t(original[r]) * m, m));
+    out.push_back(std::move(field));
+  }
+  return out;
+}
+
 /// The value of every energy term and constraint at u.
 void record_values(const BoundScene& b, const ProblemSpace& space, Vec u, ProblemResult& result) {
   for (std::size_t i = 0; i < space.energy_terms.size(); ++i) result.values[b.energy[i].label] = space.energy_terms[i]->value(u);
@@ -107,6 +128,7 @@ ProblemResult solve_problem(MPI_Comm comm, const BoundScene& b, const ProblemInp
   result.errors = field_errors(comm, b, space, result.state, input.log);
   result.quantities = evaluate_quantities(b, space, u, result);
   result.gradient_norm = gradient_norm_at_nodes(b, space, result.state);
+  result.point_fields = point_output_fields(b, space, result.state);
   result.cells = delaunay(result.nodes);
   return result;
 }
@@ -117,6 +139,7 @@ ReportFields state_fields(const StateLayout& layout, bool axisymmetric, const Pr
   out.cells = r.cells;
   for (const auto& u : layout.fields) out.fields.push_back({u.name, u.components, layout.values(r.state, u)});
   if (!r.gradient_norm.empty()) out.fields.push_back({"grad_" + layout.fields.front().name + "_norm", 1, r.gradient_norm});
+  out.fields.insert(out.fields.end(), r.point_fields.begin(), r.point_fields.end());
   if (!layout.fields.empty() && layout.fields.front().components == 1) out.figure_field = layout.fields.front().name;
   out.mirror = axisymmetric;
   return out;

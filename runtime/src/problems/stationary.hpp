@@ -36,6 +36,7 @@ struct ProblemResult {
   BackgroundCells cells;                     ///< original numbering
   std::vector<double> state;                 ///< original order, dofs interleaved
   std::vector<double> gradient_norm;         ///< |∇u| of the first scalar unknown at the nodes (0 where fixed)
+  std::vector<ReportField> point_fields;     ///< the point outputs at the nodes (when the scene writes fields)
   std::vector<std::string> constraint_names;
   std::vector<FieldError> errors;
   /// Bounded problems: the free dofs at their lower and upper bounds at the end (-1: no bounds).

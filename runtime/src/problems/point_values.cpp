@@ -1,0 +1,107 @@
+#include "point_values.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "lmeform/contractions.hpp"
+
+namespace lmeform::problems {
+
+namespace {
+
+const UnknownField* field_of(const StateLayout& layout, const kernel::FieldInfo& u) {
+  for (const UnknownField& f : layout.fields)
+    if (f.name == u.name && f.components == u.components) return &f;
+  return nullptr;
+}
+
+}  // namespace
+
+bool PointEvaluator::can_evaluate(const kernel::FormKernels& output, const StateLayout& layout) {
+  if (output.kind != kernel::FunctionalKind::Point || output.point == nullptr) return false;
+  if (output.n_coefficients > 0 || output.qdata_per_point > 0) return false;
+  for (int i = 0; i < output.n_unknowns; ++i)
+    if (field_of(layout, output.unknowns[i]) == nullptr) return false;
+  return true;
+}
+
+PointEvaluator::PointEvaluator(const kernel::FormKernels& output, const StateLayout& layout,
+                               const std::map<std::string, double, std::less<>>& constants)
+    : kernel_(&output), dofs_per_node_(layout.dofs_per_node) {
+  if (!can_evaluate(output, layout))
+    throw std::invalid_argument(std::string("PointEvaluator: ") + output.module + "." + output.name +
+                                " is not a point output of the problem's unknowns alone");
+  for (int i = 0; i < output.n_unknowns; ++i) {
+    const UnknownField* f = field_of(layout, output.unknowns[i]);
+    offsets_.push_back(f->offset);
+    components_.push_back(f->components);
+  }
+  for (int i = 0; i < output.n_constants; ++i) {
+    const auto it = constants.find(output.constants[i]);
+    if (it == constants.end())
+      throw std::invalid_argument(std::string("PointEvaluator: no value for the constant '") + output.constants[i] + "' of " + output.module +
+                                  "." + output.name);
+    constants_.push_back(it->second);
+  }
+}
+
+void PointEvaluator::evaluate(const LmeBasis& basis, std::span<const double> x, std::span<const double> state, std::span<double> values) const {
+  const kernel::FormKernels& k = *kernel_;
+  const int order = k.basis_order;
+  std::vector<double> at(x.begin(), x.end());
+  std::vector<int> list = basis.neighbours(at);
+  std::vector<double> jet;
+  try {
+    jet = basis.evaluate(at, list, order);
+  } catch (const LmeEvaluationError& e) {
+    if (order == 0 || e.reason() != LmeFailure::singular_jacobian) throw;
+    double h = 0;
+    std::vector<double> centre(at.size(), 0.0);
+    for (const int a : list) {
+      const auto xa = basis.nodes().point(static_cast<std::size_t>(a));
+      for (std::size_t i = 0; i < at.size(); ++i) centre[i] += xa[i] / double(list.size());
+      h += basis.spacing()[static_cast<std::size_t>(a)] / double(list.size());
+    }
+    double distance = 0;
+    for (std::size_t i = 0; i < at.size(); ++i) distance += (centre[i] - at[i]) * (centre[i] - at[i]);
+    distance = std::sqrt(distance);
+    for (std::size_t i = 0; i < at.size(); ++i) at[i] += 0.01 * h * (centre[i] - at[i]) / distance;
+    list = basis.neighbours(at);
+    jet = basis.evaluate(at, list, order);
+  }
+  const std::size_t n = list.size();
+  std::vector<double> local(n * static_cast<std::size_t>(k.dofs_per_node));
+  for (std::size_t m = 0; m < n; ++m) {
+    std::size_t slot = m * static_cast<std::size_t>(k.dofs_per_node);
+    for (std::size_t u = 0; u < offsets_.size(); ++u)
+      for (int c = 0; c < components_[u]; ++c)
+        local[slot++] = state[static_cast<std::size_t>(list[m]) * static_cast<std::size_t>(dofs_per_node_) +
+                              static_cast<std::size_t>(offsets_[u] + c)];
+  }
+  std::vector<double> workspace(k.workspace_doubles != nullptr ? k.workspace_doubles(static_cast<int>(n), 1) + 1 : 1);
+  const double weight = 1.0;
+  kernel::CellInputs in;
+  in.n_nodes = static_cast<int>(n);
+  in.n_points = 1;
+  in.basis_order = order;
+  in.weights = &weight;
+  in.points = at.data();
+  in.basis = jet.data();
+  in.unknowns = local.data();
+  in.constants = constants_.empty() ? nullptr : constants_.data();
+  in.workspace = workspace.data();
+  in.contractions = &dense_contractions();
+  k.point(in, values.data());
+}
+
+std::vector<double> renumbered_state(const Discretization& disc, std::span<const double> original, int dofs_per_node) {
+  const auto bs = static_cast<std::size_t>(dofs_per_node);
+  const auto index = disc.original_index();
+  std::vector<double> out(original.size());
+  for (std::size_t r = 0; r < index.size(); ++r)
+    std::copy_n(original.begin() + std::ptrdiff_t(std::size_t(index[r]) * bs), bs, out.begin() + std::ptrdiff_t(r * bs));
+  return out;
+}
+
+}  // namespace lmeform::problems

@@ -1,0 +1,49 @@
+// Point outputs of the forms (`point NAME = EXPR`) evaluated at any point with the LME basis of a
+// node set: the values a form computes at a quadrature point (a stress, F, det F), written at the
+// nodes with a solution and read by probes. The generated point kernel does the arithmetic; this
+// file supplies the basis jet, the nodal values in the form's order and the constants.
+#pragma once
+
+#include <map>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "lmeform/discretization.hpp"
+#include "lmeform/kernel.hpp"
+#include "lmeform/lme_basis.hpp"
+#include "toolkit.hpp"
+
+namespace lmeform::problems {
+
+class PointEvaluator {
+ public:
+  /// `output`: a Point kernel whose unknowns are fields of `layout` (by name and shape) and which
+  /// reads no coefficients or quadrature data (can_evaluate says); `constants`: every constant
+  /// by name, resolved.
+  PointEvaluator(const kernel::FormKernels& output, const StateLayout& layout, const std::map<std::string, double, std::less<>>& constants);
+
+  /// Whether a point output can be evaluated from the unknowns of `layout` alone.
+  [[nodiscard]] static bool can_evaluate(const kernel::FormKernels& output, const StateLayout& layout);
+
+  [[nodiscard]] int n_values() const noexcept { return kernel_->n_values; }
+  [[nodiscard]] const kernel::FormKernels& output() const noexcept { return *kernel_; }
+
+  /// The values at x (n_values()); `state`: the problem's unknowns at the basis' nodes
+  /// (layout.dofs_per_node per node, in the basis' node order). Where derivatives are undefined
+  /// (a vertex of the convex hull of x's neighbours: a corner of the domain) the point is moved
+  /// a hundredth of the local spacing towards its neighbours.
+  void evaluate(const LmeBasis& basis, std::span<const double> x, std::span<const double> state, std::span<double> values) const;
+
+ private:
+  const kernel::FormKernels* kernel_;
+  int dofs_per_node_;
+  std::vector<int> offsets_;     ///< per form unknown: its offset in the problem's dofs of a node
+  std::vector<int> components_;  ///< per form unknown
+  std::vector<double> constants_;
+};
+
+/// A state in the nodes' original order renumbered to the discretization's (its basis' order).
+[[nodiscard]] std::vector<double> renumbered_state(const Discretization& disc, std::span<const double> original, int dofs_per_node);
+
+}  // namespace lmeform::problems
