@@ -416,56 +416,58 @@ TEST(HessianStrategies, EdgePushingAgreesWithRowSweepsOnEveryForm) {
     const CompiledForm form = compile_file(entry.path(), options);
     for (const auto& out : form.outputs) {
       if (out.kind != OutputKind::Energy && out.kind != OutputKind::Constraint) continue;
-      for (const int dim : form.dims) {
-        SCOPED_TRACE(out.name + " " + std::to_string(dim) + "D");
-        ir::Graph& g = *form.graphs.at(dim);
-        const NodeId f = out.integrand(dim);
-        const NodeId root[] = {f};
-        std::vector<NodeId> vars;
-        for (const NodeId id : g.reachable(root))
-          if (g.node(id).op == ir::Op::Jet && g.jet_var(id).role == ir::Role::Unknown) vars.push_back(id);
-        std::map<std::pair<std::size_t, std::size_t>, NodeId> pushed, rows;
-        for (const auto& e : ir::hessian(g, f, vars)) pushed[{e.row, e.col}] = e.node;
-        std::vector<NodeId> first(vars.size(), g.zero());
-        for (const auto& [k, d] : ir::gradient(g, f, vars)) first[k] = d;
-        for (std::size_t k = 0; k < vars.size(); ++k)
-          for (const auto& [l, h] : ir::gradient(g, first[k], vars))
-            if (l >= k) rows[{k, l}] = h;
-        std::mt19937 rng(11);
-        std::uniform_real_distribution<double> U(-0.2, 0.2);
-        std::map<std::vector<int>, double> jets;
-        const ir::Interpreter interp(g);
-        auto value = [&](NodeId id) {
-          const NodeId r[] = {id};
-          return interp.evaluate(r, [&](const ir::Node& n) -> double {
-            switch (n.op) {
-              case ir::Op::Jet: {
-                const std::vector<int> key{n.arg[0], n.arg[1], n.arg[2], n.arg[3]};
-                if (const auto it = jets.find(key); it != jets.end()) return it->second;
-                return jets[key] = U(rng) + (n.arg[3] == 1 + n.arg[2] ? 1.0 : 0.3);
+      for (const auto& [dim, by_domain] : out.integrands) {
+        for (const auto& [domain, f] : by_domain) {
+          SCOPED_TRACE(out.name + " " + std::to_string(dim) + "D, domain " + std::to_string(domain));
+          ir::Graph& g = *form.graphs.at(dim);
+          const NodeId root[] = {f};
+          std::vector<NodeId> vars;
+          for (const NodeId id : g.reachable(root))
+            if (g.node(id).op == ir::Op::Jet && g.jet_var(id).role == ir::Role::Unknown) vars.push_back(id);
+          std::map<std::pair<std::size_t, std::size_t>, NodeId> pushed, rows;
+          for (const auto& e : ir::hessian(g, f, vars)) pushed[{e.row, e.col}] = e.node;
+          std::vector<NodeId> first(vars.size(), g.zero());
+          for (const auto& [k, d] : ir::gradient(g, f, vars)) first[k] = d;
+          for (std::size_t k = 0; k < vars.size(); ++k)
+            for (const auto& [l, h] : ir::gradient(g, first[k], vars))
+              if (l >= k) rows[{k, l}] = h;
+          std::mt19937 rng(11);
+          std::uniform_real_distribution<double> U(-0.2, 0.2);
+          std::map<std::vector<int>, double> jets;
+          const ir::Interpreter interp(g);
+          auto value = [&](NodeId id) {
+            const NodeId r[] = {id};
+            return interp.evaluate(r, [&](const ir::Node& n) -> double {
+              switch (n.op) {
+                case ir::Op::Jet: {
+                  const std::vector<int> key{n.arg[0], n.arg[1], n.arg[2], n.arg[3]};
+                  if (const auto it = jets.find(key); it != jets.end()) return it->second;
+                  return jets[key] = U(rng) + (n.arg[3] == 1 + n.arg[2] ? 1.0 : 0.3);
+                }
+                case ir::Op::Coord: return 0.6 + 0.1 * n.arg[0];
+                case ir::Op::Param: return 0.7 + 0.05 * n.arg[0];
+                case ir::Op::Qdata: return 0.3 + 0.07 * n.arg[0];
+                case ir::Op::Normal: return n.arg[0] == 0 ? 0.6 : 0.8;
+                default: return NAN;
               }
-              case ir::Op::Coord: return 0.6 + 0.1 * n.arg[0];
-              case ir::Op::Param: return 0.7 + 0.05 * n.arg[0];
-              case ir::Op::Qdata: return 0.3 + 0.07 * n.arg[0];
-              default: return NAN;
-            }
-          })[0];
-        };
-        std::set<std::pair<std::size_t, std::size_t>> keys;
-        for (const auto& [k, v] : pushed) keys.insert(k);
-        for (const auto& [k, v] : rows) keys.insert(k);
-        std::map<std::pair<std::size_t, std::size_t>, std::pair<double, double>> values;
-        double scale = 0;
-        for (const auto& key : keys) {
-          const double a = pushed.contains(key) ? value(pushed[key]) : 0.0;
-          const double b = rows.contains(key) ? value(rows[key]) : 0.0;
-          values[key] = {a, b};
-          scale = std::max({scale, std::abs(a), std::abs(b)});
+            })[0];
+          };
+          std::set<std::pair<std::size_t, std::size_t>> keys;
+          for (const auto& [k, v] : pushed) keys.insert(k);
+          for (const auto& [k, v] : rows) keys.insert(k);
+          std::map<std::pair<std::size_t, std::size_t>, std::pair<double, double>> values;
+          double scale = 0;
+          for (const auto& key : keys) {
+            const double a = pushed.contains(key) ? value(pushed[key]) : 0.0;
+            const double b = rows.contains(key) ? value(rows[key]) : 0.0;
+            values[key] = {a, b};
+            scale = std::max({scale, std::abs(a), std::abs(b)});
+          }
+          for (const auto& [key, ab] : values)
+            EXPECT_LE(std::abs(ab.first - ab.second), 1e-12 * std::max(1.0, scale))
+                << "entry (" << key.first << ", " << key.second << "): edge pushing " << ab.first << ", rows " << ab.second;
+          ++checked;
         }
-        for (const auto& [key, ab] : values)
-          EXPECT_LE(std::abs(ab.first - ab.second), 1e-12 * std::max(1.0, scale))
-              << "entry (" << key.first << ", " << key.second << "): edge pushing " << ab.first << ", rows " << ab.second;
-        ++checked;
       }
     }
   }

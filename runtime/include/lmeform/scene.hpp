@@ -229,6 +229,10 @@ struct Scene {
   SceneModel model;
   std::map<std::string, double, std::less<>> constants;  ///< [constants], by name
   std::map<std::string, std::string, std::less<>> constant_where;
+  /// [parameters]: named numbers of the scene's own (not of the forms), for its expressions: an
+  /// imposed displacement that [steps] ramps, a plate's position. "FILE:LINE: key ..." by name.
+  std::map<std::string, double, std::less<>> parameters;
+  std::map<std::string, std::string, std::less<>> parameter_where;
   std::vector<SceneConstraint> constraints;
   std::vector<SceneDirichlet> dirichlet;
   std::vector<SceneInitialField> initial;

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <stdexcept>
 #include <string>
 
@@ -334,6 +335,15 @@ void Discretization::build_boundary_domain(const BoundaryQuadrature& q) {
   d.weights_ = q.weights;
   d.normals_ = q.normals;
   d.point_lists_ = &boundary_point_lists_.back();
+  d.inner_points_.resize(q.points.size());
+  for (std::size_t p = 0; p < q.weights.size(); ++p) {
+    // The facet's size: its length (2D) or the square root of its area (3D), from the rule's weights.
+    double measure = 0;
+    for (std::size_t g = (p / per_facet) * per_facet; g < (p / per_facet + 1) * per_facet; ++g) measure += q.weights[g];
+    const double size = dim() == 2 ? measure : std::sqrt(measure);
+    for (std::size_t i = 0; i < std::size_t(dim()); ++i)
+      d.inner_points_[p * std::size_t(dim()) + i] = q.points[p * std::size_t(dim()) + i] - 1e-3 * size * q.normals[p * std::size_t(dim()) + i];
+  }
   const bool cell_based = options_.strategy == NeighbourhoodStrategy::CellBased;
   const int points_per_element = cell_based ? q.points_per_facet : 1;
   const CsrLists all_elements = cell_based ? union_of_groups(*d.point_lists_, points_per_element, n_nodes()) : *d.point_lists_;
@@ -411,6 +421,29 @@ void Discretization::build_ghosts_and_pattern() {
   pattern_ = build_sparsity_pattern(elements.offsets, elements.indices, dual.offsets, dual.indices, n_nodes(), begin, end);
 }
 
+namespace {
+
+using BasisStorageVariant = std::variant<std::monostate, LmeFullStorage, LmeCompressedStorage>;
+
+void emplace_storage(BasisStorageVariant& storage, const LmeBasis& basis, std::span<const double> coords, CsrLists lists, int order,
+                     BasisStorage kind) {
+  if (kind == BasisStorage::Full) storage.emplace<LmeFullStorage>(basis, coords, std::move(lists), order);
+  else storage.emplace<LmeCompressedStorage>(basis, coords, std::move(lists), order);
+}
+
+void tabulate_from(const BasisStorageVariant& storage, const LmeBasis& basis, bool per_point, std::size_t first,
+                   std::span<const int> point_ids, std::span<const int> nodes, int order, std::span<double> out, LmeWorkspace& ws) {
+  if (per_point) {
+    if (const auto* full = std::get_if<LmeFullStorage>(&storage)) full->point_jet(first, order, out);
+    else std::get<LmeCompressedStorage>(storage).point_jet(basis, first, order, out, ws);
+    return;
+  }
+  if (const auto* full = std::get_if<LmeFullStorage>(&storage)) full->tabulate_cell(point_ids, nodes, order, out, ws);
+  else std::get<LmeCompressedStorage>(storage).tabulate_cell(basis, point_ids, nodes, order, out, ws);
+}
+
+}  // namespace
+
 void ElementSet::build_storage(const LmeBasis& basis, BasisStorage storage, int order, NeighbourhoodStrategy strategy) {
   basis_ = &basis;
   basis_order_ = order;
@@ -435,11 +468,17 @@ void ElementSet::build_storage(const LmeBasis& basis, BasisStorage storage, int 
     std::copy_n(points_.begin() + static_cast<std::ptrdiff_t>(q * d), d, coords.begin() + static_cast<std::ptrdiff_t>(k * d));
     lists.push_back((*point_lists_)[q]);
   }
-  if (storage == BasisStorage::Full) {
-    storage_.emplace<LmeFullStorage>(basis, coords, std::move(lists), order);
-  } else {
-    storage_.emplace<LmeCompressedStorage>(basis, coords, std::move(lists), order);
+  if (!boundary_ || order == 0) {
+    emplace_storage(storage_, basis, coords, std::move(lists), order, storage);
+    return;
   }
+  std::vector<double> inner(coords.size());
+  for (std::size_t k = 0; k < local_points.size(); ++k) {
+    const auto q = static_cast<std::size_t>(local_points[k]);
+    for (std::size_t i = 0; i < d; ++i) inner[k * d + i] = inner_points_[q * d + i];
+  }
+  emplace_storage(inner_storage_, basis, inner, lists, order, storage);
+  emplace_storage(storage_, basis, coords, std::move(lists), 0, storage);
 }
 
 void ElementSet::tabulate(int e, int order, std::span<double> out, LmeWorkspace& ws) const {
@@ -450,19 +489,19 @@ void ElementSet::tabulate(int e, int order, std::span<double> out, LmeWorkspace&
   }
   const auto first = static_cast<std::size_t>(element_first_local_point_[static_cast<std::size_t>(e)]);
   const auto count = static_cast<std::size_t>(element_point_count_[static_cast<std::size_t>(e)]);
-  if (strategy_ == NeighbourhoodStrategy::PerPoint) {
-    if (const auto* full = std::get_if<LmeFullStorage>(&storage_)) {
-      full->point_jet(first, order, out);
-    } else {
-      std::get<LmeCompressedStorage>(storage_).point_jet(*basis_, first, order, out, ws);
-    }
-    return;
-  }
+  const bool per_point = strategy_ == NeighbourhoodStrategy::PerPoint;
   const std::span<const int> point_ids(storage_point_ids_.data() + first, count);
-  if (const auto* full = std::get_if<LmeFullStorage>(&storage_)) {
-    full->tabulate_cell(point_ids, element_nodes(e), order, out, ws);
+  const std::span<const int> nodes = per_point ? std::span<const int>() : element_nodes(e);
+  if (order == 0 || std::holds_alternative<std::monostate>(inner_storage_)) {
+    tabulate_from(storage_, *basis_, per_point, first, point_ids, nodes, order, out, ws);
   } else {
-    std::get<LmeCompressedStorage>(storage_).tabulate_cell(*basis_, point_ids, element_nodes(e), order, out, ws);
+    // Derivatives at the inner points, values at the points themselves.
+    tabulate_from(inner_storage_, *basis_, per_point, first, point_ids, nodes, order, out, ws);
+    const std::size_t n = per_point ? (*point_lists_)[static_cast<std::size_t>(element_first_point(e))].size() : nodes.size();
+    const auto jet = static_cast<std::size_t>(kernel::jet_size(dim_, order));
+    std::vector<double> values(count * n);
+    tabulate_from(storage_, *basis_, per_point, first, point_ids, nodes, 0, values, ws);
+    for (std::size_t k = 0; k < count; ++k) std::copy_n(values.begin() + std::ptrdiff_t(k * n), n, out.begin() + std::ptrdiff_t(k * jet * n));
   }
   if (gradient_correction_.empty() || order < 1) return;
   const auto d = static_cast<std::size_t>(dim_), n = element_nodes(e).size();

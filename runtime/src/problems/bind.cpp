@@ -228,6 +228,15 @@ void bind_constants(const Scene& scene, const OutputRoles& roles, BoundScene& b)
       }
 }
 
+/// [parameters]: the scene's own named numbers, constants of its expressions (not of the forms).
+void bind_parameters(const Scene& scene, BoundScene& b) {
+  for (const auto& [name, value] : scene.parameters) {
+    if (b.constants.contains(name))
+      throw SceneError(fmt::format("{} is a constant of the forms: give its value in [constants]", scene.parameter_where.at(name)));
+    b.constants[name] = value;
+  }
+}
+
 /// Targets: [constraints] NAME = target, else the form's target constant or number.
 void bind_constraint_targets(const Scene& scene, const OutputRoles& roles, BoundScene& b) {
   for (std::size_t i = 0; i < b.constraints.size(); ++i) {
@@ -269,9 +278,9 @@ int qdata_size(const BoundScene& b, std::string_view name) {
 }
 
 /// A value of the scene as a number or a registered expression.
-BoundValue bind_value(BoundScene& b, const SceneValue& v, int components, const std::string& where) {
+BoundValue bind_value(BoundScene& b, const SceneValue& v, int components, const std::string& where, bool scalar_allowed = false) {
   if (v.is_number()) return {v.number(), -1};
-  return {0.0, b.expressions->add(v.expression(), components, where)};
+  return {0.0, b.expressions->add(v.expression(), components, where, scalar_allowed)};
 }
 
 /// Every datum the kernels read is supplied by the scene; sources that need a field register it.
@@ -366,7 +375,8 @@ void bind_nodal_data(const Scene& scene, BoundScene& b) {
         throw SceneError(fmt::format("{}: key 'components' lists component {} of '{}', which has {}", d.where, c, u.name, u.components));
     if (bd.components.empty())
       for (int c = 0; c < u.components; ++c) bd.components.push_back(c);
-    bd.value = bind_value(b, d.value, u.components, d.value.where);
+    // One listed component of a vector: a scalar expression is its value ("-delta").
+    bd.value = bind_value(b, d.value, u.components, d.value.where, bd.components.size() == 1);
     b.dirichlet.push_back(std::move(bd));
   }
 }
@@ -616,6 +626,7 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
   bind_boundary_parts(scene, b);
   bind_constants(scene, roles, b);
   bind_constraint_targets(scene, roles, b);
+  bind_parameters(scene, b);
   // A driver's constants are set at solve time: expressions see them as 0.
   std::map<std::string, double, std::less<>> expression_constants = b.constants;
   for (auto& [name, value] : expression_constants)

@@ -58,8 +58,8 @@ std::string constant_declarations(const std::map<std::string, double, std::less<
 PointExpressions::PointExpressions(int dim, std::map<std::string, double, std::less<>> constants)
     : dim_(dim), constants_(std::move(constants)) {}
 
-int PointExpressions::add(const std::string& expression, int components, std::string where) {
-  items_.push_back({expression, components, std::move(where)});
+int PointExpressions::add(const std::string& expression, int components, std::string where, bool scalar_allowed) {
+  items_.push_back({expression, components, std::move(where), scalar_allowed});
   return static_cast<int>(items_.size()) - 1;
 }
 
@@ -92,7 +92,7 @@ void PointExpressions::compile(MPI_Comm comm, std::ostream* log) {
   for (std::size_t i = 0; i < items_.size(); ++i) {
     const Item& it = items_[i];
     const auto& k = module_->at("value" + std::to_string(i), dim_);
-    if (k.n_values != it.components)
+    if (k.n_values != it.components && !(k.n_values == 1 && it.scalar_allowed))
       throw SceneError(fmt::format("{}: the expression \"{}\" is {}; {} expected{}", it.where, it.expression,
                                    k.n_values == 1 ? std::string("a scalar") : fmt::format("{} values", k.n_values),
                                    it.components == 1 ? std::string("a scalar") : fmt::format("a vector of {} components", it.components),
@@ -128,6 +128,9 @@ void PointExpressions::evaluate(int handle, std::span<const double> x, std::span
   in.constants = constant_values_.empty() ? nullptr : constant_values_.data();
   in.workspace = workspace.data();
   k.point(in, out.data());
+  // A scalar where allowed for several components: the same value for each, as a number.
+  if (k.n_values == 1)
+    for (int c = 1; c < items_[static_cast<std::size_t>(handle)].components; ++c) out[static_cast<std::size_t>(c)] = out[0];
 }
 
 const FormModule& compile_error_form(int dim, const std::string& unknown, int components, const std::string& exact,

@@ -25,7 +25,10 @@ class PointExpressions {
   PointExpressions(int dim, std::map<std::string, double, std::less<>> constants);
   /// Registers an expression with `components` values (1: scalar, dim: vector); `where` prefixes
   /// errors ("scene.toml:12: key 'initial.phi'"). Returns its handle.
-  int add(const std::string& expression, int components, std::string where);
+  /// `scalar_allowed`: a scalar expression is accepted for several components and gives each the
+  /// same value (a Dirichlet entry of one listed component); otherwise a scalar for a vector is
+  /// refused, never spread over components the user meant differently.
+  int add(const std::string& expression, int components, std::string where, bool scalar_allowed = false);
   /// Compiles every registered expression (collective over comm). A compile error names the
   /// expression's key and carries lmeformc's message.
   void compile(MPI_Comm comm, std::ostream* log);
@@ -41,6 +44,7 @@ class PointExpressions {
     std::string expression;
     int components;
     std::string where;
+    bool scalar_allowed = false;
   };
   int dim_;
   std::map<std::string, double, std::less<>> constants_;

@@ -27,8 +27,8 @@ bool PointEvaluator::can_evaluate(const kernel::FormKernels& output, const State
 }
 
 PointEvaluator::PointEvaluator(const kernel::FormKernels& output, const StateLayout& layout,
-                               const std::map<std::string, double, std::less<>>& constants)
-    : kernel_(&output), dofs_per_node_(layout.dofs_per_node) {
+                               const std::map<std::string, double, std::less<>>& constants, const Domain* domain)
+    : kernel_(&output), domain_(domain), dofs_per_node_(layout.dofs_per_node) {
   if (!can_evaluate(output, layout))
     throw std::invalid_argument(std::string("PointEvaluator: ") + output.module + "." + output.name +
                                 " is not a point output of the problem's unknowns alone");
@@ -51,11 +51,8 @@ void PointEvaluator::evaluate(const LmeBasis& basis, std::span<const double> x, 
   const int order = k.basis_order;
   std::vector<double> at(x.begin(), x.end());
   std::vector<int> list = basis.neighbours(at);
-  std::vector<double> jet;
-  try {
-    jet = basis.evaluate(at, list, order);
-  } catch (const LmeEvaluationError& e) {
-    if (order == 0 || e.reason() != LmeFailure::singular_jacobian) throw;
+  // Moves `at` the fraction `f` of its neighbours' mean spacing towards their centre.
+  auto move_inward = [&](double f) {
     double h = 0;
     std::vector<double> centre(at.size(), 0.0);
     for (const int a : list) {
@@ -66,8 +63,17 @@ void PointEvaluator::evaluate(const LmeBasis& basis, std::span<const double> x, 
     double distance = 0;
     for (std::size_t i = 0; i < at.size(); ++i) distance += (centre[i] - at[i]) * (centre[i] - at[i]);
     distance = std::sqrt(distance);
-    for (std::size_t i = 0; i < at.size(); ++i) at[i] += 0.01 * h * (centre[i] - at[i]) / distance;
+    if (distance == 0) return;
+    for (std::size_t i = 0; i < at.size(); ++i) at[i] += f * h * (centre[i] - at[i]) / distance;
     list = basis.neighbours(at);
+  };
+  if (order > 0 && domain_ != nullptr && domain_->depth(at) <= 1e-9 * domain_->diameter()) move_inward(1e-3);
+  std::vector<double> jet;
+  try {
+    jet = basis.evaluate(at, list, order);
+  } catch (const LmeEvaluationError& e) {
+    if (order == 0 || e.reason() != LmeFailure::singular_jacobian) throw;
+    move_inward(1e-2);
     jet = basis.evaluate(at, list, order);
   }
   const std::size_t n = list.size();

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "lmeform/discretization.hpp"
+#include "lmeform/domain.hpp"
 #include "lmeform/kernel.hpp"
 #include "lmeform/lme_basis.hpp"
 #include "toolkit.hpp"
@@ -21,7 +22,9 @@ class PointEvaluator {
   /// `output`: a Point kernel whose unknowns are fields of `layout` (by name and shape) and which
   /// reads no coefficients or quadrature data (can_evaluate says); `constants`: every constant
   /// by name, resolved.
-  PointEvaluator(const kernel::FormKernels& output, const StateLayout& layout, const std::map<std::string, double, std::less<>>& constants);
+  /// `domain`: where points on its boundary are moved inward for derivatives (null: none are).
+  PointEvaluator(const kernel::FormKernels& output, const StateLayout& layout, const std::map<std::string, double, std::less<>>& constants,
+                 const Domain* domain = nullptr);
 
   /// Whether a point output can be evaluated from the unknowns of `layout` alone.
   [[nodiscard]] static bool can_evaluate(const kernel::FormKernels& output, const StateLayout& layout);
@@ -30,13 +33,16 @@ class PointEvaluator {
   [[nodiscard]] const kernel::FormKernels& output() const noexcept { return *kernel_; }
 
   /// The values at x (n_values()); `state`: the problem's unknowns at the basis' nodes
-  /// (layout.dofs_per_node per node, in the basis' node order). Where derivatives are undefined
-  /// (a vertex of the convex hull of x's neighbours: a corner of the domain) the point is moved
-  /// a hundredth of the local spacing towards its neighbours.
+  /// (layout.dofs_per_node per node, in the basis' node order). On the hull of the nodes the LME
+  /// derivatives are the limit of an ill-conditioned solve (J is singular across the boundary;
+  /// at a vertex in every direction): a point of the domain's boundary is moved a thousandth of
+  /// the local spacing towards its neighbours when the output reads derivatives, a hundredth
+  /// where derivatives are still undefined.
   void evaluate(const LmeBasis& basis, std::span<const double> x, std::span<const double> state, std::span<double> values) const;
 
  private:
   const kernel::FormKernels* kernel_;
+  const Domain* domain_;
   int dofs_per_node_;
   std::vector<int> offsets_;     ///< per form unknown: its offset in the problem's dofs of a node
   std::vector<int> components_;  ///< per form unknown

@@ -38,7 +38,7 @@ void add_reaction(const BoundQuantity& q, const BoundScene& b, ProblemSpace& spa
 void add_point_probe(const BoundQuantity& q, const BoundScene& b, ProblemSpace& space, const std::vector<double>& state, QuantityValues& out) {
   const Discretization& disc = *space.disc;
   const std::span<const double> x(q.scene.point.data(), std::size_t(b.dim));
-  const PointEvaluator evaluator(*q.point, b.layout, space.constants);
+  const PointEvaluator evaluator(*q.point, b.layout, space.constants, &b.geometry);
   std::vector<double> values(static_cast<std::size_t>(evaluator.n_values()));
   try {
     evaluator.evaluate(disc.basis(), x, renumbered_state(disc, state, b.layout.dofs_per_node), values);

@@ -78,7 +78,7 @@ std::vector<ReportField> point_output_fields(const BoundScene& b, const ProblemS
   const auto original = disc.original_index();
   const std::vector<double> renumbered = renumbered_state(disc, state, b.layout.dofs_per_node);
   for (const auto& [name, kernel] : b.point_outputs) {
-    const PointEvaluator evaluator(*kernel, b.layout, space.constants);
+    const PointEvaluator evaluator(*kernel, b.layout, space.constants, &b.geometry);
     const auto m = static_cast<std::size_t>(evaluator.n_values());
     ReportField field{name, evaluator.n_values(), std::vector<double>(n * m)};
     for (std::size_t r = 0; r < n; ++r)

@@ -214,6 +214,18 @@ void read_constants(const Section& root, Scene& s) {
   }
 }
 
+void read_parameters(const Section& root, Scene& s) {
+  const auto t = root.optional_any_table("parameters");
+  if (!t) return;
+  for (const auto& [key, node] : t->entries()) {
+    const std::string name(key.str());
+    const bool identifier = !name.empty() && (std::isalpha(static_cast<unsigned char>(name[0])) != 0 || name[0] == '_') &&
+                            std::all_of(name.begin(), name.end(), [](char c) { return std::isalnum(static_cast<unsigned char>(c)) != 0 || c == '_'; });
+    if (!identifier) t->fail_key(name, "is not a name an expression can use (letters, digits and _, not starting with a digit)");
+    s.parameters[name] = t->number_of(name, node);
+    s.parameter_where[name] = t->where(name);
+  }
+}
 
 void read_constraints(const Section& root, Scene& s) {
   const auto t = root.optional_any_table("constraints");
@@ -465,7 +477,7 @@ Scene parse_scene(std::string_view text, std::string source_name, std::span<cons
     throw SceneError(source_name + ":" + std::to_string(b.line) + ":" + std::to_string(b.column) +
                      ": TOML syntax error: " + std::string(e.description()));
   }
-  std::vector<std::string_view> tables{"scene", "domain", "nodes", "model", "constants", "constraints", "dirichlet",
+  std::vector<std::string_view> tables{"scene", "domain", "nodes", "model", "constants", "parameters", "constraints", "dirichlet",
                                        "initial", "coefficients", "qdata", "solver", "reference", "quantities", "bounds", "output"};
   tables.insert(tables.end(), extensions.begin(), extensions.end());
   // The initializer_list interface of SceneTable wants a list: check the top-level keys here.
@@ -489,6 +501,7 @@ Scene parse_scene(std::string_view text, std::string source_name, std::span<cons
   read_nodes(root, s.folder, s);
   read_model(root, s);
   read_constants(root, s);
+  read_parameters(root, s);
   read_constraints(root, s);
   read_dirichlet(root, s);
   read_initial(root, s);
