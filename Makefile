@@ -3,7 +3,7 @@
 #   make demo   - the main demo
 #   make test   - the whole test suite (unit, form FD checks, 2-rank MPI tests)
 #   make bench  - the benchmarks in quick mode; JSON lands in build/bench/
-#   make compare - Stokes: lmeform (bench_stokes) against FEniCSx; results in build/compare/
+#   make compare - Stokes and the cantilever: lmeform against FEniCSx; results in build/compare/
 
 BUILD_DIR ?= build
 BUILD_TYPE ?= Release
@@ -34,6 +34,7 @@ bench: build
 
 compare: build
 	bash demos/stokes/compare.sh $(BUILD_DIR)
+	bash demos/solids/compare.sh $(BUILD_DIR)
 
 clean:
 	rm -rf $(BUILD_DIR)
