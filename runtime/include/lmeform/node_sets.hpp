@@ -33,6 +33,10 @@ struct Box {
 /// With `domain`, a point outside it (beyond 1e-9 of its extent) is an error naming its line.
 [[nodiscard]] NodeSet read_points(const std::filesystem::path& path, int dim = 0, const Box* domain = nullptr);
 
+class Domain;
+/// The same, every point checked against a polygon or polyhedron (beyond 1e-9 of its diameter).
+[[nodiscard]] NodeSet read_points(const std::filesystem::path& path, int dim, const Domain& domain);
+
 /// Writes one point per line, comma separated, with round-trip precision (17 significant digits).
 void write_points(const std::filesystem::path& path, const NodeSet& nodes);
 

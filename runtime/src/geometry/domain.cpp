@@ -88,8 +88,15 @@ Domain Domain::box(const Box& box, bool axisymmetric) {
       f.part = names[i][side];
       f.normal[std::size_t(i)] = side == 0 ? -1.0 : 1.0;
       f.offset = side == 0 ? -box.lo[std::size_t(i)] : box.hi[std::size_t(i)];
-      for (int c = 0; c < corners; ++c)
-        if (((c >> i) & 1) == side) f.vertices.push_back(c);
+      // The corners of the face as a loop: along the first free axis, then back along the second
+      // (bit order would cross the square into a bow tie of zero area).
+      const int a = (i + 1) % box.dim, b = (i + 2) % box.dim;
+      const int fixed = side << i;
+      if (box.dim == 2) {
+        f.vertices = {fixed, fixed | (1 << a)};
+      } else {
+        f.vertices = {fixed, fixed | (1 << a), fixed | (1 << a) | (1 << b), fixed | (1 << b)};
+      }
       d.faces_.push_back(std::move(f));
     }
   return d;

@@ -1,10 +1,13 @@
 #include "lmeform/node_sets.hpp"
 
+#include "lmeform/domain.hpp"
+
 #include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <fstream>
 #include <iomanip>
+#include <span>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -92,7 +95,11 @@ NodeSet uniform_grid(const Box& box, double spacing) {
   return uniform_grid(box, counts);
 }
 
-NodeSet read_points(const std::filesystem::path& path, int dim, const Box* domain) {
+namespace {
+
+/// `outside(p)`: why p lies outside the domain, or "" when it does not.
+template <class Outside>
+NodeSet read_points_checked(const std::filesystem::path& path, int dim, Outside&& outside) {
   if (dim != 0) check_dim(dim, "read_points");
   std::ifstream in(path);
   if (!in) throw std::runtime_error("read_points: cannot open " + path.string());
@@ -139,26 +146,49 @@ NodeSet read_points(const std::filesystem::path& path, int dim, const Box* domai
     if (p.size() != static_cast<std::size_t>(dim)) {
       fail("expected " + std::to_string(dim) + " coordinates, found " + std::to_string(p.size()));
     }
-    if (domain != nullptr) {
-      // A node outside the domain lies outside every boundary condition and every picture.
-      double extent = 0;
-      for (int i = 0; i < domain->dim; ++i) extent = std::max(extent, domain->hi[std::size_t(i)] - domain->lo[std::size_t(i)]);
-      const double tol = 1e-9 * extent;
-      for (std::size_t i = 0; i < p.size(); ++i) {
-        if (p[i] < domain->lo[i] - tol || p[i] > domain->hi[i] + tol) {
-          std::ostringstream what;
-          what << "the point (";
-          for (std::size_t k = 0; k < p.size(); ++k) what << (k ? ", " : "") << p[k];
-          what << ") lies outside the domain: coordinate " << i << " is outside [" << domain->lo[i] << ", " << domain->hi[i] << "]";
-          fail(what.str());
-        }
-      }
-    }
+    // A node outside the domain lies outside every boundary condition and every picture.
+    if (const std::string why = outside(std::span<const double>(p)); !why.empty()) fail(why);
     coords.insert(coords.end(), p.begin(), p.end());
   }
   if (in.bad()) throw std::runtime_error("read_points: error reading " + path.string());
   if (coords.empty()) throw std::runtime_error("read_points: " + path.string() + " holds no points");
   return NodeSet(dim, std::move(coords));
+}
+
+std::string point_text(std::span<const double> p) {
+  std::ostringstream what;
+  what << "the point (";
+  for (std::size_t k = 0; k < p.size(); ++k) what << (k ? ", " : "") << p[k];
+  what << ")";
+  return what.str();
+}
+
+}  // namespace
+
+NodeSet read_points(const std::filesystem::path& path, int dim, const Box* domain) {
+  return read_points_checked(path, dim, [&](std::span<const double> p) -> std::string {
+    if (domain == nullptr) return {};
+    double extent = 0;
+    for (int i = 0; i < domain->dim; ++i) extent = std::max(extent, domain->hi[std::size_t(i)] - domain->lo[std::size_t(i)]);
+    const double tol = 1e-9 * extent;
+    for (std::size_t i = 0; i < p.size(); ++i)
+      if (p[i] < domain->lo[i] - tol || p[i] > domain->hi[i] + tol) {
+        std::ostringstream what;
+        what << point_text(p) << " lies outside the domain: coordinate " << i << " is outside [" << domain->lo[i] << ", " << domain->hi[i] << "]";
+        return what.str();
+      }
+    return {};
+  });
+}
+
+NodeSet read_points(const std::filesystem::path& path, int dim, const Domain& domain) {
+  const double tol = 1e-9 * domain.diameter();
+  return read_points_checked(path, dim, [&](std::span<const double> p) -> std::string {
+    if (static_cast<int>(p.size()) != domain.dim() || domain.contains(p, tol)) return {};
+    std::ostringstream what;
+    what << point_text(p) << " lies outside the domain (by " << -domain.depth(p) << ")";
+    return what.str();
+  });
 }
 
 void write_points(const std::filesystem::path& path, const NodeSet& nodes) {

@@ -1,5 +1,7 @@
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <limits>
 #include <optional>
 #include <span>
@@ -177,6 +179,19 @@ void bind_layout(const Scene& scene, BoundScene& b) {
 }
 
 /// Every ds(part) of the outputs must name a part of the scene's domain.
+/// "FILE:LINE:COL" and the line with a caret under the first `ds(part)` of a form's file, or "".
+std::string locate_measure(const std::filesystem::path& source, const std::string& part) {
+  std::ifstream in(source);
+  std::string line;
+  for (int number = 1; std::getline(in, line); ++number) {
+    const std::size_t column = line.find("ds(" + part + ")");
+    if (column == std::string::npos) continue;
+    return fmt::format("{}:{}:{}:\n{}\n{}^", source.string(), number, column + 1, line, std::string(column, ' '));
+  }
+  return {};
+}
+
+/// Every ds(part) of the outputs names a part of the scene's domain.
 void bind_boundary_parts(const Scene& scene, BoundScene& b) {
   for (const BoundOutput* o : b.outputs())
     for (const FormKernels* k : o->kernels) {
@@ -184,9 +199,18 @@ void bind_boundary_parts(const Scene& scene, BoundScene& b) {
       const std::string part = k->boundary_part;
       if (!b.geometry.has_part(part)) {
         std::vector<std::string> parts = b.geometry.part_names();
-        throw SceneError(fmt::format("{}: {} integrates over ds({}), but the scene's [domain] has no part '{}'{} (its parts: {})", scene.source,
+        std::string where = scene.source;
+        std::filesystem::path form = k->source;
+        for (std::size_t i = 0; i < b.modules.size() && i < scene.model.forms.size(); ++i)
+          if (b.modules[i]->name == k->module) {
+            where = scene.model.forms[i].where + " = '" + scene.model.forms[i].name + "'";
+            form = b.modules[i]->source;
+          }
+        const std::string location = locate_measure(form, part);
+        throw SceneError(fmt::format("{}: {} integrates over ds({}), but the scene's [domain] has no part '{}'{} (its parts: {}){}", where,
                                      o->label, part, part, did_you_mean(part, parts),
-                                     parts.empty() ? std::string("none named") : fmt::format("{}", fmt::join(parts, ", "))));
+                                     parts.empty() ? std::string("none named") : fmt::format("{}", fmt::join(parts, ", ")),
+                                     location.empty() ? std::string() : "\n" + location));
       }
       if (std::find(b.boundary_parts.begin(), b.boundary_parts.end(), part) == b.boundary_parts.end()) b.boundary_parts.push_back(part);
     }

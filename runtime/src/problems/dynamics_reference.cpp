@@ -6,13 +6,18 @@
 
 #include <fmt/format.h>
 
+#include "expressions.hpp"
 #include "lmeform/kernel.hpp"
+#include "point_values.hpp"
 
 namespace lmeform::problems {
 
 ReferenceConfiguration::ReferenceConfiguration(MPI_Comm comm, const BoundScene& b, const ProblemInput& input,
                                                const ConstrainedMinimizerOptions& options, bool forward_euler, const std::string& deformation)
-    : space(build_problem_space(comm, b, input)), nodes(input.nodes), deformation_offset(b.unknown(deformation).offset) {
+    : space(build_problem_space(comm, b, input)),
+      nodes(input.nodes),
+      deformation_offset(b.unknown(deformation).offset),
+      kinematics(&compile_kinematics_form(b.dim, deformation, comm, nullptr)) {
   minimizer = std::make_unique<ConstrainedMinimizer>(space.energy_terms, space.constraints, options);
   minimizer->set_fixed_dofs(space.fixed);
   Assembler& primary = *space.primary;
@@ -43,39 +48,20 @@ ReferenceConfiguration::ReferenceConfiguration(MPI_Comm comm, const BoundScene& 
 std::vector<PointKinematics> point_kinematics(const ReferenceConfiguration& ref, const std::vector<double>& y_original, int order) {
   const Discretization& disc = *ref.space.disc;
   const int dim = disc.dim();
-  const int J = kernel::jet_size(dim, order);
-  const auto bs = std::size_t(ref.space.primary->block_size());
-  const auto offset = std::size_t(ref.deformation_offset);
-  std::vector<double> tab(static_cast<std::size_t>(disc.max_element_points() * J * disc.max_element_nodes()));
-  LmeWorkspace ws;
-  const auto original = disc.original_index();
-  std::vector<PointKinematics> out;
-  for (int e = 0; e < disc.n_elements(); ++e) {
-    if (!disc.element_owned(e)) continue;
-    const auto nodes = disc.element_nodes(e);
-    const auto n = nodes.size();
-    disc.tabulate(e, order, tab, ws);
-    auto y = [&](std::size_t a, int k) { return y_original[std::size_t(original[std::size_t(nodes[a])]) * bs + offset + std::size_t(k)]; };
-    for (int q = 0; q < disc.element_point_count(e); ++q) {
-      PointKinematics p;
-      p.point = disc.element_first_point(e) + q;
-      for (int k = 0; k < dim; ++k) {
-        for (std::size_t a = 0; a < n; ++a) p.position[std::size_t(k)] += tab[std::size_t(q * J) * n + a] * y(a, k);
-        for (int I = 0; I < dim; ++I) {
-          double f = 0;
-          for (std::size_t a = 0; a < n; ++a) f += tab[std::size_t(q * J + 1 + I) * n + a] * y(a, k);
-          p.F[std::size_t(k * dim + I)] = f;
-          if (order < 2) continue;
-          for (int K = I; K < dim; ++K) {
-            const auto slot = std::size_t(kernel::hessian_slot(I, K, dim));
-            double h = 0;
-            for (std::size_t a = 0; a < n; ++a) h += tab[(std::size_t(q * J) + slot) * n + a] * y(a, k);
-            p.H[std::size_t((k * dim + I) * dim + K)] = p.H[std::size_t((k * dim + K) * dim + I)] = h;
-          }
-        }
-      }
-      out.push_back(p);
-    }
+  const int bs = ref.space.primary->block_size();
+  auto values_of = [&](const char* output) {
+    return point_values_on_cells(disc, ref.kinematics->at(output, dim), y_original, bs, ref.deformation_offset);
+  };
+  const CellPointValues position = values_of("position"), F = values_of("F");
+  const CellPointValues H = order >= 2 ? values_of("H") : CellPointValues{};
+  const auto d = std::size_t(dim);
+  std::vector<PointKinematics> out(position.points.size());
+  for (std::size_t r = 0; r < out.size(); ++r) {
+    PointKinematics& p = out[r];
+    p.point = position.points[r];
+    std::copy_n(position.values.begin() + std::ptrdiff_t(r * d), d, p.position.begin());
+    std::copy_n(F.values.begin() + std::ptrdiff_t(r * d * d), d * d, p.F.begin());
+    if (order >= 2) std::copy_n(H.values.begin() + std::ptrdiff_t(r * d * d * d), d * d * d, p.H.begin());
   }
   return out;
 }

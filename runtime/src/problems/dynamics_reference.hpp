@@ -31,6 +31,7 @@ struct ReferenceConfiguration {
   int coefficients_per_node = 0;
   NodeSet nodes;                       ///< the reference nodes (original order)
   int deformation_offset = 0;          ///< of the deformation within a node's dofs
+  const FormModule* kinematics = nullptr;  ///< generated: position, F, H of the deformation
 };
 
 /// The position y(X), F and ∂²y/∂X∂X at one quadrature point.

@@ -180,6 +180,13 @@ const FormModule& compile_quantity_form(int dim, const std::vector<std::pair<std
   }
 }
 
+const FormModule& compile_kinematics_form(int dim, const std::string& deformation, MPI_Comm comm, std::ostream* log) {
+  std::ostringstream body;
+  body << "dimension " << dim << "\nunknown " << deformation << " : vector\n"
+       << "point position = " << deformation << "\npoint F = grad(" << deformation << ")\npoint H = hess(" << deformation << ")\n";
+  return load_generated("scene_kinematics", body.str(), comm, log);
+}
+
 const FormModule& compile_integral_form(int dim, MPI_Comm comm, std::ostream* log) {
   std::ostringstream body;
   body << "dimension " << dim << "\nunknown u\nenergy integral = u * dx\n";

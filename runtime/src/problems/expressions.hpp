@@ -75,6 +75,10 @@ struct QuantityIntegral {
                                                       const std::vector<QuantityIntegral>& integrals, const std::vector<std::string>& where,
                                                       MPI_Comm comm, std::ostream* log);
 
+/// The generated form of a motion's kinematics at a point: point outputs "position" (y), "F"
+/// (grad y) and "H" (hess y) of the vector unknown `deformation`.
+[[nodiscard]] const FormModule& compile_kinematics_form(int dim, const std::string& deformation, MPI_Comm comm, std::ostream* log);
+
 /// The generated form of the mean of a scalar field: output "integral" = ∫ u dx (dx, no
 /// axisymmetric weight); its gradient is ∫ N_a dx.
 [[nodiscard]] const FormModule& compile_integral_form(int dim, MPI_Comm comm, std::ostream* log);

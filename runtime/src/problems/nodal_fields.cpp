@@ -94,7 +94,7 @@ SpacingFunction scene_spacing(const Scene& scene) {
           h_min};
 }
 
-/// Every point of a node file inside the domain (boxes are checked by read_points).
+/// Every node of a previous run inside the domain (a point file is checked line by line).
 void check_inside(const Scene& scene, const NodeSet& nodes) {
   if (scene.geometry.is_box()) return;
   const double tol = 1e-9 * scene.geometry.diameter();
@@ -111,9 +111,11 @@ NodeSet file_nodes(const Scene& scene) {
       NodeSet nodes = read_field_hdf5(scene.nodes.file).nodes;
       if (nodes.dim != scene.dim())
         throw std::runtime_error(fmt::format("{} holds {}D nodes, the scene is {}D", scene.nodes.file.string(), nodes.dim, scene.dim()));
+      check_inside(scene, nodes);
       return nodes;
     }
-    return read_points(scene.nodes.file, scene.dim(), &scene.domain);
+    if (scene.geometry.is_box()) return read_points(scene.nodes.file, scene.dim(), &scene.domain);
+    return read_points(scene.nodes.file, scene.dim(), scene.geometry);
   } catch (const std::runtime_error& e) {
     throw SceneError(fmt::format("{}: key 'nodes.file': {}", scene.source, e.what()));
   }

@@ -2,6 +2,8 @@
 
 #include <petscsnes.h>
 
+#include <limits>
+
 #include <fmt/format.h>
 
 #include "toolkit.hpp"
@@ -89,6 +91,8 @@ NonlinearSolve solve_nonlinear(MPI_Comm comm, ProblemSpace& space, Vec u, const 
   NonlinearSolve out;
   out.converged = reason > 0;
   out.iterations = static_cast<int>(its);
+  // SNES leaves the norm unset (0) when the residual is not finite: say so rather than print 0.
+  if (reason == SNES_DIVERGED_FNORM_NAN) norm = std::numeric_limits<double>::quiet_NaN();
   out.residual_norm = norm;
   out.message = fmt::format("SNES {}{} after {} Newton steps, |R| = {:.3e}", space.bounded() ? "VI " : "", SNESConvergedReasons[reason], its, norm);
   if (space.bounded()) {

@@ -101,6 +101,51 @@ void PointEvaluator::evaluate(const LmeBasis& basis, std::span<const double> x, 
   k.point(in, values.data());
 }
 
+CellPointValues point_values_on_cells(const Discretization& disc, const kernel::FormKernels& output, std::span<const double> state,
+                                     int dofs_per_node, int offset, std::span<const double> constants) {
+  if (output.kind != kernel::FunctionalKind::Point || output.point == nullptr || output.n_coefficients > 0 || output.qdata_per_point > 0 ||
+      static_cast<std::size_t>(output.n_constants) != constants.size())
+    throw std::invalid_argument(std::string("point_values_on_cells: ") + output.module + "." + output.name +
+                                " is not a point output of the unknowns and the given constants");
+  const int order = output.basis_order;
+  const auto dofs = static_cast<std::size_t>(output.dofs_per_node), nv = static_cast<std::size_t>(output.n_values);
+  const auto jet = static_cast<std::size_t>(kernel::jet_size(disc.dim(), order));
+  const ElementSet& cells = disc.cells_domain();
+  const auto original = disc.original_index();
+  std::vector<double> tabulation(static_cast<std::size_t>(cells.max_element_points()) * jet * static_cast<std::size_t>(cells.max_element_nodes()));
+  std::vector<double> local, values, workspace;
+  LmeWorkspace ws;
+  CellPointValues out;
+  for (int e = 0; e < cells.n_elements(); ++e) {
+    if (!cells.element_owned(e)) continue;
+    const auto nodes = cells.element_nodes(e);
+    const std::size_t n = nodes.size(), nq = static_cast<std::size_t>(cells.element_point_count(e));
+    const auto first = static_cast<std::size_t>(cells.element_first_point(e));
+    cells.tabulate(e, order, tabulation, ws);
+    local.resize(n * dofs);
+    for (std::size_t a = 0; a < n; ++a)
+      for (std::size_t c = 0; c < dofs; ++c)
+        local[a * dofs + c] = state[std::size_t(original[std::size_t(nodes[a])]) * std::size_t(dofs_per_node) + std::size_t(offset) + c];
+    values.resize(nq * nv);
+    workspace.resize(output.workspace_doubles != nullptr ? output.workspace_doubles(static_cast<int>(n), static_cast<int>(nq)) + 1 : 1);
+    kernel::CellInputs in;
+    in.n_nodes = static_cast<int>(n);
+    in.n_points = static_cast<int>(nq);
+    in.basis_order = order;
+    in.weights = cells.weights().data() + first;
+    in.points = cells.points().data() + first * static_cast<std::size_t>(disc.dim());
+    in.basis = tabulation.data();
+    in.unknowns = local.data();
+    in.constants = constants.empty() ? nullptr : constants.data();
+    in.workspace = workspace.data();
+    in.contractions = &dense_contractions();
+    output.point(in, values.data());
+    for (std::size_t q = 0; q < nq; ++q) out.points.push_back(static_cast<int>(first + q));
+    out.values.insert(out.values.end(), values.begin(), values.end());
+  }
+  return out;
+}
+
 std::vector<double> renumbered_state(const Discretization& disc, std::span<const double> original, int dofs_per_node) {
   const auto bs = static_cast<std::size_t>(dofs_per_node);
   const auto index = disc.original_index();

@@ -49,6 +49,19 @@ class PointEvaluator {
   std::vector<double> constants_;
 };
 
+/// A point output at the quadrature points of this rank's owned cells (each point on one rank).
+struct CellPointValues {
+  std::vector<int> points;     ///< global quadrature point of each row
+  std::vector<double> values;  ///< [row * n_values + i]
+};
+
+/// `output` (a Point kernel of one vector or scalar unknown and constants) evaluated at the points
+/// of the cells with the discretization's tabulation: the unknown's values are state[node *
+/// dofs_per_node + offset + c] (nodes in original order).
+[[nodiscard]] CellPointValues point_values_on_cells(const Discretization& disc, const kernel::FormKernels& output,
+                                                    std::span<const double> state, int dofs_per_node, int offset,
+                                                    std::span<const double> constants = {});
+
 /// A state in the nodes' original order renumbered to the discretization's (its basis' order).
 [[nodiscard]] std::vector<double> renumbered_state(const Discretization& disc, std::span<const double> original, int dofs_per_node);
 
