@@ -197,6 +197,11 @@ void LoadStepper::record(int step, double lambda, const ProblemResult& result, i
   s.lambda = lambda;
   for (const SteppedConstant& c : settings_.constants) s.constants.emplace_back(c.name, c.at(lambda));
   s.quantities = evaluate_quantities(bound_, space_, u_, result);
+  // A bounded problem's active set per step (a contact that closes, damage that saturates).
+  if (result.active_lower >= 0) {
+    s.quantities.emplace_back("active_lower", double(result.active_lower));
+    s.quantities.emplace_back("active_upper", double(result.active_upper));
+  }
   s.iterations = result.iterations;
   s.cuts = cuts;
   s.wall_s = clock_.seconds();
