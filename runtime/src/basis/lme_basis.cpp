@@ -11,6 +11,8 @@
 
 #include <Eigen/Dense>
 
+#include "maxent_dual.hpp"
+
 namespace lmeform {
 
 const char* to_string(LmeFailure reason) noexcept {
@@ -53,7 +55,7 @@ LmeEvaluationError::LmeEvaluationError(LmeFailure reason, std::span<const double
 
 namespace {
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+using detail::kNaN;
 
 constexpr int sym_index(int i, int j, int d) noexcept { return kernel::hessian_slot(i, j, d) - 1 - d; }
 
@@ -90,53 +92,7 @@ template <int D>
 struct Lme {
   using V = Vec<D>;
   using M = Mat<D>;
-
-  // ln Z at lambda with a log-sum-exp shift; p and r = grad_lambda ln Z = sum p_a y_a as by-products.
-  static double eval(int n, const double* y, const double* c, const V& lam, double* p, V& r) {
-    double fmax = -std::numeric_limits<double>::infinity();
-    for (int a = 0; a < n; ++a) {
-      const double f = c[a] + lam.dot(Eigen::Map<const V>(y + a * D));
-      p[a] = f;
-      fmax = std::max(fmax, f);
-    }
-    double sum = 0.0;
-    for (int a = 0; a < n; ++a) {
-      p[a] = std::exp(p[a] - fmax);
-      sum += p[a];
-    }
-    const double inv = 1.0 / sum;
-    r.setZero();
-    for (int a = 0; a < n; ++a) {
-      p[a] *= inv;
-      r += p[a] * Eigen::Map<const V>(y + a * D);
-    }
-    return fmax + std::log(sum);
-  }
-
-  // Inverse of a symmetric matrix through LDLT with its reciprocal condition number; false when it
-  // is not positive definite in floating point. (1x1 by hand: Eigen's LDLT trips gcc's -Warray-bounds.)
-  static bool spd_inverse(const M& a, M& inv, double& rcond) {
-    if constexpr (D == 1) {
-      if (!(a(0, 0) > 0.0) || !std::isfinite(a(0, 0))) return false;
-      inv(0, 0) = 1.0 / a(0, 0);
-      rcond = 1.0;
-      return true;
-    } else {
-      const Eigen::LDLT<M> ldlt(a);
-      if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) return false;
-      inv = ldlt.solve(M::Identity());
-      rcond = ldlt.rcond();
-      return inv.allFinite() && rcond > 0.0;
-    }
-  }
-
-  // Largest u . y_a over the neighbours for a unit direction u. If it is < -margin, every neighbour
-  // lies strictly on one side of a plane through x, so x is outside their hull by more than margin.
-  static double max_projection(int n, const double* y, const V& u) {
-    double best = -std::numeric_limits<double>::infinity();
-    for (int a = 0; a < n; ++a) best = std::max(best, u.dot(Eigen::Map<const V>(y + a * D)));
-    return best;
-  }
+  using Dual = detail::MaxEntDual<D>;
 
   // Scaled relative coordinates y^_a = (x - x_a)/l, beta^_a = beta_a l^2; returns l.
   // coords / beta: of every node index the list may hold (nodes, then mirror images).
@@ -208,7 +164,6 @@ struct Lme {
     }
   }
 
-  // Safeguarded Newton on lambda^ minimising ln Z; leaves p at the solution in ws.p.
   /// The multipliers λ at x for the neighbours `list`: the point scaled by the local length (len),
   /// its geometry checked, the Newton iteration on ln Z (ln Z at the solution in lnz).
   static V solve(const double* coords, const double* beta, std::span<const double> x, std::span<const int> list, LmeWorkspace& ws,
@@ -217,98 +172,10 @@ struct Lme {
     len = prepare(coords, beta, x, list, ws);
     check_geometry(x, n, len, ws, opt);
     lnz = 0.0;
-    return newton(x, n, ws, opt, lnz);
-  }
-
-  static V newton(std::span<const double> x, int n, LmeWorkspace& ws, const LmeOptions& opt, double& lnz) {
-    const double* y = ws.y.data();
-    const double* c = ws.c.data();
-    double* p = ws.p.data();
-    const double tol = opt.newton_tolerance;
-    V lam = V::Zero();
-    V r;
-    lnz = eval(n, y, c, lam, p, r);
-    double gnorm = r.norm();
-    // Once ||r^|| <= tol, up to kPolish further Newton steps drive the error in lambda itself to
-    // rounding: near the hull boundary J is nearly singular, and the derivative formulas (which
-    // assume r = 0) amplify a residual r by J^-1, so a small gradient alone is not enough.
-    constexpr int kPolish = 2;
-    int polish = 0;
-    for (int it = 0;; ++it) {
-      const bool converged = gnorm <= tol;
-      if (converged && polish >= kPolish) return lam;
-      if (!converged && it >= opt.max_iterations) {
-        std::ostringstream os;
-        os << opt.max_iterations << " iterations, tolerance " << std::scientific << std::setprecision(1) << tol;
-        throw LmeEvaluationError(LmeFailure::not_converged, x, static_cast<std::size_t>(n), gnorm, os.str());
-      }
-      if (!converged && it >= 2) {
-        // A certificate, not a guess: all neighbours strictly behind a plane through x.
-        const double ln = lam.norm();
-        if ((ln > 0.0 && max_projection(n, y, lam / ln) < -tol) || max_projection(n, y, -r / gnorm) < -tol) {
-          throw LmeEvaluationError(LmeFailure::outside_hull, x, static_cast<std::size_t>(n), gnorm,
-                                   "a plane through x separates it from all neighbours");
-        }
-      }
-      M hess = -r * r.transpose();
-      for (int a = 0; a < n; ++a) {
-        const auto ya = Eigen::Map<const V>(y + a * D);
-        hess.noalias() += p[a] * ya * ya.transpose();
-      }
-      V dir;
-      bool ok = false;
-      {
-        M inv = M::Zero();
-        double rc = 0.0;
-        if (spd_inverse(hess, inv, rc)) {
-          dir = -(inv * r);
-          ok = dir.allFinite() && r.dot(dir) < 0.0;
-        }
-      }
-      if (converged) {
-        if (!ok || dir.norm() <= 4.0 * std::numeric_limits<double>::epsilon() * (1.0 + lam.norm())) return lam;
-        ++polish;
-      }
-      // J singular or indefinite in floating point (e.g. near a hull vertex): steepest descent,
-      // which the line search below still globalises.
-      if (!ok) dir = -r;
-      bool accepted = false;
-      V lam_t, r_t;
-      double lnz_t = lnz;
-      auto line_search = [&](const V& d) {
-        const double slope = r.dot(d);
-        double t = 1.0;
-        for (int ls = 0; ls < 60; ++ls, t *= 0.5) {
-          lam_t = lam + t * d;
-          lnz_t = eval(n, y, c, lam_t, p, r_t);
-          if (lnz_t <= lnz + 1e-4 * t * slope) return true;
-          // Near the minimum ln Z is flat to rounding: then the gradient norm decides.
-          if (std::abs(lnz_t - lnz) <= 8.0 * std::numeric_limits<double>::epsilon() * (1.0 + std::abs(lnz)) &&
-              r_t.norm() <= gnorm)
-            return true;
-          if (converged) return false;  // polishing is best effort: no backtracking
-        }
-        return false;
-      };
-      accepted = line_search(dir);
-      // With the weight on one or two neighbours J is nearly singular and the rounding in
-      // sum p_a y_a y_a^T - r r^T can spoil the Newton direction (measured: a point of a long cell
-      // between a fine and a coarse node set); steepest descent still decreases ln Z.
-      if (!accepted && ok && !converged) accepted = line_search(-r);
-      if (!accepted) {
-        if (converged) {
-          // p was overwritten by the rejected trial: restore the converged state.
-          lnz = eval(n, y, c, lam, p, r);
-          return lam;
-        }
-        throw LmeEvaluationError(LmeFailure::not_converged, x, static_cast<std::size_t>(n), gnorm,
-                                 "line search stalled after " + std::to_string(it) + " iterations");
-      }
-      lam = lam_t;
-      lnz = lnz_t;
-      r = r_t;
-      gnorm = r.norm();
-    }
+    return Dual::newton(x, n, ws.y.data(), ws.c.data(), ws.p.data(), opt, lnz, [&](const V&, double gnorm) {
+      throw LmeEvaluationError(LmeFailure::outside_hull, x, static_cast<std::size_t>(n), gnorm,
+                               "a plane through x separates it from all neighbours");
+    });
   }
 
   // Builds the record of `order` from p at the solution, in the units of y and beta.
@@ -345,7 +212,7 @@ struct Lme {
          << " (scaled by the local spacing): x is at a vertex of the convex hull, where derivatives are undefined";
       throw LmeEvaluationError(LmeFailure::singular_jacobian, x, static_cast<std::size_t>(n), kNaN, os.str());
     }
-    if (!spd_inverse(jac, jinv, rc)) rc = 0.0;
+    if (!Dual::spd_inverse(jac, jinv, rc)) rc = 0.0;
     if (!(rc >= min_rcond)) {
       std::ostringstream os;
       os.precision(3);
