@@ -15,6 +15,7 @@
 #include <span>
 #include <sstream>
 #include <string>
+#include <type_traits>
 
 #include <Eigen/Dense>
 
@@ -63,7 +64,13 @@ struct MaxEntDual {
       const Eigen::LDLT<M> ldlt(a);
       if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) return false;
       inv = ldlt.solve(M::Identity());
-      rcond = ldlt.rcond();
+      if constexpr (K <= 3) {
+        rcond = ldlt.rcond();
+      } else {
+        // With the inverse at hand the L1 condition number is exact and cheap (and Eigen's
+        // estimator trips gcc's -Wmaybe-uninitialized at these sizes).
+        rcond = 1.0 / (a.cwiseAbs().colwise().sum().maxCoeff() * inv.cwiseAbs().colwise().sum().maxCoeff());
+      }
       return inv.allFinite() && rcond > 0.0;
     }
   }
@@ -167,5 +174,90 @@ struct MaxEntDual {
     }
   }
 };
+
+// Scaled relative coordinates y^_a = (x - x_a)/l, beta^_a = beta_a l^2; returns l.
+// coords / beta: of every node index the list may hold (nodes, then mirror images).
+template <int D>
+double scaled_neighbourhood(const double* coords, const double* beta, std::span<const double> x,
+                            std::span<const int> nbrs, LmeWorkspace& ws) {
+  const auto n = nbrs.size();
+  ws.y.resize(n * D);
+  ws.beta.resize(n);
+  ws.c.resize(n);
+  ws.p.resize(n);
+  double sum2 = 0.0;
+  for (std::size_t a = 0; a < n; ++a) {
+    const auto b = static_cast<std::size_t>(nbrs[a]);
+    for (int i = 0; i < D; ++i) {
+      const double d = x[static_cast<std::size_t>(i)] - coords[b * D + static_cast<std::size_t>(i)];
+      ws.y[a * D + static_cast<std::size_t>(i)] = d;
+      sum2 += d * d;
+    }
+  }
+  const double len = std::sqrt(sum2 / static_cast<double>(n));
+  if (!(len > 0.0)) return 0.0;
+  const double inv = 1.0 / len;
+  for (std::size_t a = 0; a < n; ++a) {
+    double r2 = 0.0;
+    for (int i = 0; i < D; ++i) {
+      double& v = ws.y[a * D + static_cast<std::size_t>(i)];
+      v *= inv;
+      r2 += v * v;
+    }
+    ws.beta[a] = beta[static_cast<std::size_t>(nbrs[a])] * len * len;
+    ws.c[a] = -ws.beta[a] * r2;
+  }
+  return len;
+}
+
+// Refuses neighbourhoods with fewer than D + 1 nodes or affinely degenerate ones (collinear in 2D,
+// coplanar in 3D), where no basis exists.
+template <int D>
+void check_affine_geometry(std::span<const double> x, int n, double len, const LmeWorkspace& ws,
+                           const LmeOptions& opt) {
+  using V = Eigen::Matrix<double, D, 1>;
+  using M = Eigen::Matrix<double, D, D>;
+  if (n < D + 1) {
+    throw LmeEvaluationError(LmeFailure::too_few_neighbours, x, static_cast<std::size_t>(n), kNaN,
+                             "got " + std::to_string(n) + ", need " + std::to_string(D + 1));
+  }
+  if (!(len > 0.0)) {
+    throw LmeEvaluationError(LmeFailure::degenerate, x, static_cast<std::size_t>(n), kNaN,
+                             "all neighbours coincide with x");
+  }
+  V mean = V::Zero();
+  for (int a = 0; a < n; ++a) mean += Eigen::Map<const V>(ws.y.data() + a * D);
+  mean /= n;
+  M cov = M::Zero();
+  for (int a = 0; a < n; ++a) {
+    const V d = Eigen::Map<const V>(ws.y.data() + a * D) - mean;
+    cov += d * d.transpose();
+  }
+  double lo = 0.0, hi = 0.0;
+  if constexpr (D == 1) {
+    lo = hi = cov(0, 0);
+  } else {
+    const Eigen::SelfAdjointEigenSolver<M> es(cov, Eigen::EigenvaluesOnly);
+    lo = es.eigenvalues()(0);
+    hi = es.eigenvalues()(D - 1);
+  }
+  const double tol = opt.degeneracy_tolerance;
+  if (!(hi > 0.0) || !(lo > tol * tol * hi)) {
+    std::ostringstream os;
+    os.precision(3);
+    os << "thickness/extent = " << std::scientific << std::sqrt(std::max(lo, 0.0) / std::max(hi, 1e-300))
+       << " <= " << tol;
+    throw LmeEvaluationError(LmeFailure::degenerate, x, static_cast<std::size_t>(n), kNaN, os.str());
+  }
+}
+
+template <class F>
+decltype(auto) dispatch(int dim, F&& f) {
+  switch (dim) {
+    case 1: return f(std::integral_constant<int, 1>{});
+    case 2: return f(std::integral_constant<int, 2>{});
+    default: return f(std::integral_constant<int, 3>{});
+  }
+}
 
 }  // namespace lmeform::detail
