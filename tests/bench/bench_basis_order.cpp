@@ -252,7 +252,7 @@ void feasibility(bool quick, std::vector<JsonRecord>& records) {
   std::printf("%-8s", "gamma");
   for (const NodeKind kind : {NodeKind::uniform, NodeKind::jittered, NodeKind::graded}) std::printf(" %10s", name(kind));
   std::printf("\n");
-  for (const double gamma : {0.3, 0.5, 0.8, 1.0, 1.2, 1.4, 1.6, 1.8}) {
+  for (const double gamma : {0.3, 0.5, 0.8, 0.9, 1.0, 1.2}) {
     std::printf("%-8.1f", gamma);
     for (const NodeKind kind : {NodeKind::uniform, NodeKind::jittered, NodeKind::graded}) {
       std::string refusal;

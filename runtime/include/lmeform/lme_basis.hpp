@@ -188,8 +188,9 @@ class LmeBasis {
 
   /// Second-order basis: the nodal gaps G_a, d(d+1)/2 doubles per node (upper triangle in
   /// kernel::hessian_slot order). G_a = h_a^2 / (2 gamma_a) I, projected onto the tangent space of
-  /// the hull at hull nodes (a hull point sees only the nodes of its face) and widened across a
-  /// hull face for nodes within 1.5 h_a of it (docs/lme_basis.md). Empty for the first-order basis.
+  /// the hull at hull nodes (a hull point sees only the nodes of its face) and, for the first row of
+  /// nodes along a hull face, widened across it to 1.5 times the squared distance
+  /// (docs/lme_basis.md). Empty for the first-order basis.
   [[nodiscard]] std::span<const double> gaps() const noexcept { return gap_; }
   /// Nodal coefficients c_a = values_a - hessians_a : G_a / 2 from a field's nodal values and
   /// Hessians (d(d+1)/2 per node, kernel::hessian_slot order): with them the basis reproduces

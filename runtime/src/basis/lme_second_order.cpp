@@ -28,6 +28,7 @@
 
 #include "lmeform/convex_hull.hpp"
 #include "lmeform/kernel.hpp"
+#include "lmeform/neighbour_search.hpp"
 #include "maxent_dual.hpp"
 
 namespace lmeform::detail {
@@ -332,11 +333,13 @@ void second_order_reconstruct(int dim, const SecondOrderNodes& nodes, std::span<
 
 namespace {
 
-// Gap rule constants (docs/lme_basis.md): a hull face within kReach h_a of a node widens its gap
-// across that face to kWiden times the squared distance, so that points between the face and the
-// first nodes inside it still have nodes closer than the gap; faces count as one direction when
-// their normals are within kSameDirection (cos 25 degrees: curved hulls, not corners).
-constexpr double kReach = 1.5, kWiden = 1.5, kSameDirection = 0.906;
+// Gap rule constants (docs/lme_basis.md). Points between a hull face and the first nodes inside
+// it need a node whose gap across the face exceeds its squared distance from them, so the first
+// row of nodes along a face (within kReach h_a of it, and within kFirstRow of the least distance
+// to it among the nodes within kRowWindow h_a) gets a gap of kWiden times its squared distance
+// across the face. Faces count as one direction when their normals are within kSameDirection
+// (cos 25 degrees: the facets of a curved hull, not corners).
+constexpr double kReach = 3.0, kRowWindow = 2.0, kFirstRow = 1.5, kWiden = 1.5, kSameDirection = 0.906;
 
 struct Plane {
   std::array<double, 3> normal{};
@@ -372,24 +375,29 @@ std::vector<Plane> hull_planes(const NodeSet& hull_nodes, double& extent) {
 }
 
 template <int D>
-void node_gap(std::span<const double> x, double h, double gamma, const std::vector<Plane>& planes, double on_face,
-              double* out) {
+double plane_distance(const Plane& p, std::span<const double> x) {
+  double dist = -p.offset;
+  for (std::size_t i = 0; i < D; ++i) dist -= p.normal[i] * x[i];
+  return dist;
+}
+
+// Gap of node a; `row` holds the nodes within kRowWindow h_a of it.
+template <int D>
+void node_gap(const NodeSet& nodes, std::size_t a, std::span<const int> row, double h, double gamma,
+              const std::vector<Plane>& planes, double on_face, double* out) {
   using V = Eigen::Matrix<double, D, 1>;
   using M = Eigen::Matrix<double, D, D>;
   const double g0 = h * h / (2.0 * gamma);
+  const auto x = nodes.point(a);
   std::vector<V> across;                     // normals already accounted for (distinct directions)
-  std::vector<std::pair<double, V>> near;    // faces within reach, by distance
+  std::vector<std::pair<double, V>> near;    // faces the node is in the first row of, by distance
   M proj = M::Identity();
   auto distinct = [&](const V& n) {
     return std::all_of(across.begin(), across.end(), [&](const V& m) { return std::abs(n.dot(m)) < kSameDirection; });
   };
   for (const Plane& p : planes) {
-    V n;
-    double dist = -p.offset;
-    for (int i = 0; i < D; ++i) {
-      n(i) = p.normal[static_cast<std::size_t>(i)];
-      dist -= n(i) * x[static_cast<std::size_t>(i)];
-    }
+    const V n = Eigen::Map<const V>(p.normal.data());
+    const double dist = plane_distance<D>(p, x);
     if (dist <= on_face) {
       // On this face: a point of the face sees only the face's nodes, so no gap across it.
       if (!distinct(n)) continue;
@@ -400,7 +408,12 @@ void node_gap(std::span<const double> x, double h, double gamma, const std::vect
         proj -= e * e.transpose();
       }
     } else if (dist < kReach * h) {
-      near.emplace_back(dist, n);
+      double least = dist;
+      for (const int b : row) {
+        const double db = plane_distance<D>(p, nodes.point(static_cast<std::size_t>(b)));
+        if (db > on_face) least = std::min(least, db);
+      }
+      if (dist <= kFirstRow * least) near.emplace_back(dist, n);
     }
   }
   std::sort(near.begin(), near.end(), [](const auto& l, const auto& r) { return l.first < r.first; });
@@ -421,13 +434,16 @@ std::vector<double> second_order_gaps(const NodeSet& nodes, std::span<const doub
                                       std::span<const double> gamma, const NodeSet& hull_nodes) {
   double extent = 0.0;
   const std::vector<Plane> planes = hull_planes(hull_nodes, extent);
+  const KdTree tree(nodes);
   const int d = nodes.dim;
   const auto s = static_cast<std::size_t>(d * (d + 1) / 2);
   std::vector<double> gap(nodes.size() * s);
+  std::vector<int> row;
   const double on_face = 1e-9 * extent;
   for (std::size_t a = 0; a < nodes.size(); ++a) {
+    tree.radius_search(nodes.point(a), kRowWindow * spacing[a], row);
     dispatch(d, [&](auto dc) {
-      node_gap<decltype(dc)::value>(nodes.point(a), spacing[a], gamma[a], planes, on_face, gap.data() + a * s);
+      node_gap<decltype(dc)::value>(nodes, a, row, spacing[a], gamma[a], planes, on_face, gap.data() + a * s);
     });
   }
   return gap;
