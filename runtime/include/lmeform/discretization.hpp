@@ -73,7 +73,7 @@ struct CarriedQuadrature {
 
 struct DiscretizationOptions {
   std::vector<double> gamma{1.6};  ///< one γ for all nodes, or one per node (original numbering)
-  LmeOptions lme{};
+  LmeOptions lme{};                ///< passed to the basis unchanged (mirror, spacing smoothing, consistency)
   int quadrature_points = 6;       ///< Gauss points per background cell (a rule size of quadrature.hpp)
   int basis_order = 1;             ///< derivative order tabulated: the highest the forms need
   NeighbourhoodStrategy strategy = NeighbourhoodStrategy::CellBased;

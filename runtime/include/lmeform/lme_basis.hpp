@@ -25,6 +25,7 @@
 #include <span>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "lmeform/kernel.hpp"
@@ -32,6 +33,31 @@
 #include "lmeform/node_set.hpp"
 
 namespace lmeform {
+
+/// Which polynomials the span of the basis holds exactly.
+enum class LmeConsistency {
+  /// Local max-ent (seed 2.2): sum p_a = 1, sum p_a x_a = x. Affine functions only; at fixed gamma
+  /// the second moment J(x) = sum p_a (x_a - x)(x_a - x)^T is not in the span, and its Hessian,
+  /// an O(1) error of every approximated Hessian, does not fall with h (docs/lme_basis.md).
+  first,
+  /// Second-order max-ent: also sum p_a ((x_a - x)(x_a - x)^T - G_a) = 0 with a nodal gap G_a
+  /// (LmeBasis::gaps()). Non-negative, smooth, weak Kronecker on the hull; the coefficients
+  /// c_a = q(x_a) - A : G_a / 2 reproduce every quadratic q (Hessian A) with its gradient and
+  /// Hessian (LmeBasis::gap_corrected). Needs gamma_a <= lme_second_order_max_gamma.
+  second,
+};
+
+/// "first" / "second".
+[[nodiscard]] const char* to_string(LmeConsistency consistency) noexcept;
+/// Inverse of to_string; also accepts "1" / "2". Throws std::invalid_argument naming the valid values.
+[[nodiscard]] LmeConsistency parse_lme_consistency(std::string_view name);
+
+/// Largest gamma_a of the second-order basis. Its nodal gap h_a^2 / (2 gamma_a) is the second moment
+/// the weights must meet, so the nodes around every point must spread at least that wide in every
+/// direction; at larger gamma the gaps between irregular nodes are too wide for it (measured in
+/// docs/lme_basis.md, h = 0.025: a grid jittered by 0.3 h fails at 2 of 2000 points at gamma 1.0,
+/// 13 at 1.2, 123 at 1.6; none at 0.8 and below).
+inline constexpr double lme_second_order_max_gamma = 1.0;
 
 struct LmeOptions {
   /// Cutoff on the Gaussian factor of p_a: node a is a neighbour of x iff
@@ -61,6 +87,9 @@ struct LmeOptions {
   /// the plane is no longer a convex-hull boundary. Nodes must lie on one side of the plane (or on it).
   int mirror_axis = -1;
   double mirror_position = 0.0;
+  /// first (default): the LME basis. second: second-order max-ent, whose Hessians converge under
+  /// refinement at fixed gamma (see LmeConsistency).
+  LmeConsistency consistency = LmeConsistency::first;
 };
 
 enum class LmeFailure {
@@ -69,6 +98,9 @@ enum class LmeFailure {
   outside_hull,        ///< x lies outside the convex hull of its neighbours
   not_converged,       ///< Newton did not reach the tolerance within max_iterations
   singular_jacobian,   ///< derivatives requested where J is singular (x on the hull boundary)
+  /// Second-order basis: no non-negative weights on the neighbours meet the second-moment
+  /// constraints (x too close to the hull for the gaps of the nodes around it, or too few nodes).
+  infeasible_second_moment,
 };
 
 [[nodiscard]] const char* to_string(LmeFailure reason) noexcept;
@@ -106,6 +138,17 @@ class LmeEvaluationError : public std::runtime_error {
   return order <= 0 ? 1 + dim : order == 1 ? 1 + 2 * dim + dim * dim : 2 + 2 * dim + 3 * s + dim * s;
 }
 
+/// Record size of the second-order basis (LmeConsistency::second), K = d + d(d+1)/2 constraint
+/// features, s = d(d+1)/2, in units of the local length l (kept as the first entry):
+///   order 0: l, ln Z, mu[K]                                       2 + K
+///   order 1: ..., abar[d], dmu/dx[K*d]                            2 + K + d + K d
+///   order 2: ..., d2mu/dx2[K*s], Sbar[s]                          2 + K + d + K d + K s + s
+/// (1D: 4 / 7 / 10, 2D: 7 / 19 / 37, 3D: 11 / 41 / 101 doubles).
+[[nodiscard]] constexpr int lme_second_order_record_size(int dim, int order) noexcept {
+  const int s = dim * (dim + 1) / 2, k = dim + s;
+  return order <= 0 ? 2 + k : order == 1 ? 2 + k + dim + k * dim : 2 + k + dim + k * dim + k * s + s;
+}
+
 /// Scratch buffers reused across evaluations (grow only; no allocation once warm). One per thread.
 struct LmeWorkspace {
   std::vector<double> y;       ///< n * dim relative (scaled) coordinates
@@ -119,6 +162,7 @@ struct LmeWorkspace {
   std::vector<int> extended;   ///< mirror symmetry: the neighbours followed by their images
   std::vector<double> mirror_jet;  ///< mirror symmetry: the jet over `extended` before folding
   std::vector<int> mirror_fold;    ///< mirror symmetry: for each image in `extended`, its node's column
+  std::vector<double> phi;         ///< second-order basis: n * K constraint features
 };
 
 /// The LME basis of a node set: nodes, per-node gamma_a, spacing h_a, beta_a, support radius r_a
@@ -140,6 +184,21 @@ class LmeBasis {
   [[nodiscard]] std::span<const double> spacing() const noexcept { return spacing_; }
   [[nodiscard]] std::span<const double> beta() const noexcept { return beta_; }
   [[nodiscard]] std::span<const double> support_radii() const noexcept { return radius_; }
+  [[nodiscard]] LmeConsistency consistency() const noexcept { return options_.consistency; }
+
+  /// Second-order basis: the nodal gaps G_a, d(d+1)/2 doubles per node (upper triangle in
+  /// kernel::hessian_slot order). G_a = h_a^2 / (2 gamma_a) I, projected onto the tangent space of
+  /// the hull at hull nodes (a hull point sees only the nodes of its face) and, for the first row of
+  /// nodes along a hull face, widened across it to 1.5 times the squared distance
+  /// (docs/lme_basis.md). Empty for the first-order basis.
+  [[nodiscard]] std::span<const double> gaps() const noexcept { return gap_; }
+  /// Nodal coefficients c_a = values_a - hessians_a : G_a / 2 from a field's nodal values and
+  /// Hessians (d(d+1)/2 per node, kernel::hessian_slot order): with them the basis reproduces
+  /// quadratics exactly, and approximates smooth fields to third order. The first-order basis
+  /// returns the values.
+  [[nodiscard]] std::vector<double> gap_corrected(std::span<const double> values, std::span<const double> hessians) const;
+  /// Doubles of one compressed record of this basis (lme_record_size or lme_second_order_record_size).
+  [[nodiscard]] int record_size(int order) const noexcept;
 
   /// Images of nodes across the mirror plane (LmeOptions::mirror_axis): how many, and the node
   /// each image belongs to. Empty without mirror symmetry.
@@ -168,8 +227,8 @@ class LmeBasis {
   void tabulate_cell(std::span<const double> points, std::span<const int> cell_nodes, int order,
                      std::span<double> basis, LmeWorkspace& ws) const;
 
-  /// Solves for lambda at x and writes the compressed record of `order` (lme_record_size(dim, order)
-  /// doubles, physical units) to `record`.
+  /// Solves for lambda at x and writes the compressed record of `order` (record_size(order) doubles;
+  /// first order: physical units; second order: see lme_second_order_record_size) to `record`.
   void solve_record(std::span<const double> x, std::span<const int> neighbours, int order, std::span<double> record,
                     LmeWorkspace& ws) const;
 
@@ -183,7 +242,14 @@ class LmeBasis {
  private:
   void init(std::span<const double> gamma, std::vector<double> spacing);
   void init_mirror();
+  void init_gaps();
   void check_order(int order, const char* who) const;
+  // The first-order kernels over `list` (with mirror symmetry: nodes and images, unfolded).
+  void evaluate_first_order(std::span<const double> x, std::span<const int> list, int order, double* out,
+                            std::size_t stride, LmeWorkspace& ws) const;
+  void reconstruct_first_order(std::span<const double> x, std::span<const int> list, int record_order,
+                               std::span<const double> record, int order, std::span<double> jet, std::size_t stride,
+                               std::span<const int> columns, LmeWorkspace& ws) const;
   /// Mirror symmetry: fills ws.extended with `nbrs` followed by the images within reach of x;
   /// returns the extended size.
   std::size_t extend(std::span<const double> x, std::span<const int> nbrs, LmeWorkspace& ws) const;
@@ -191,15 +257,18 @@ class LmeBasis {
   // Coordinates and beta of every index a list may hold (with mirror symmetry: nodes then images).
   [[nodiscard]] const double* coords_data() const noexcept { return mirrored() ? all_coords_.data() : nodes_.coords.data(); }
   [[nodiscard]] const double* beta_data() const noexcept { return mirrored() ? all_beta_.data() : beta_.data(); }
+  [[nodiscard]] const double* gap_data() const noexcept { return mirrored() ? all_gap_.data() : gap_.data(); }
+  [[nodiscard]] bool second_order() const noexcept { return options_.consistency == LmeConsistency::second; }
 
   NodeSet nodes_;
   LmeOptions options_;
   KdTree tree_;
   std::vector<double> gamma_, spacing_, beta_, radius_;
+  std::vector<double> gap_;  // second order: packed G_a per node
   // Mirror symmetry: nodes then images (coordinates, beta, radius) and the image -> node map.
   std::vector<int> image_source_;
   std::vector<int> image_of_;  // node -> image index, -1 without one
-  std::vector<double> all_coords_, all_beta_, all_radius_;
+  std::vector<double> all_coords_, all_beta_, all_radius_, all_gap_;
   std::optional<KdTree> all_tree_;
 };
 

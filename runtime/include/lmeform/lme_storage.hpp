@@ -3,8 +3,9 @@
 //
 // * LmeFullStorage: the jet of every point (p, grad p, Hessian upper triangle for every neighbour,
 //   up to the order asked): L * nbar * jet_size(d, order) doubles.
-// * LmeCompressedStorage: one record per point (lme_record_size(d, order) doubles: ln Z, lambda,
-//   r_beta, ...; see lme_basis.hpp), from which the jet is rebuilt on demand without Newton.
+// * LmeCompressedStorage: one record per point (LmeBasis::record_size(order) doubles: for the
+//   first-order basis ln Z, lambda, r_beta, ...; for the second-order basis l, ln Z, mu, ...; see
+//   lme_basis.hpp), from which the jet is rebuilt on demand without Newton.
 //
 // Both give a point's jet (layout jet[s * n_q + a], columns in list order) and a cell tabulation for
 // the assembly in the kernel contract layout basis[(k * J + s) * n + c], where the k-th point of the
@@ -60,7 +61,7 @@ class LmeCompressedStorage {
   [[nodiscard]] int order() const noexcept { return order_; }
   [[nodiscard]] std::size_t size() const noexcept { return lists_.size(); }
   [[nodiscard]] const CsrLists& lists() const noexcept { return lists_; }
-  /// Stored record doubles (L * lme_record_size), as the seed counts M_OS; the copy of the points
+  /// Stored record doubles (L * record size), as the seed counts M_OS; the copy of the points
   /// (L * dim doubles, needed to rebuild x - x_a) and the lists are not counted.
   [[nodiscard]] std::size_t doubles() const noexcept { return records_.size(); }
   [[nodiscard]] std::span<const double> record(std::size_t q) const;
@@ -74,8 +75,12 @@ class LmeCompressedStorage {
                      int order, std::span<double> basis_out, LmeWorkspace& ws) const;
 
  private:
+  void check_same_basis(const LmeBasis& basis) const;
+
   int dim_ = 0;
   int order_ = 0;
+  int record_size_ = 0;
+  LmeConsistency consistency_ = LmeConsistency::first;
   std::size_t num_nodes_ = 0;
   CsrLists lists_;
   std::vector<double> points_;

@@ -11,6 +11,9 @@
 
 #include <Eigen/Dense>
 
+#include "lme_second_order.hpp"
+#include "maxent_dual.hpp"
+
 namespace lmeform {
 
 const char* to_string(LmeFailure reason) noexcept {
@@ -20,8 +23,20 @@ const char* to_string(LmeFailure reason) noexcept {
     case LmeFailure::outside_hull: return "point outside the convex hull of its neighbours";
     case LmeFailure::not_converged: return "Newton iteration on lambda did not converge";
     case LmeFailure::singular_jacobian: return "singular J = sum p_a (x - x_a)(x - x_a)^T: derivatives undefined";
+    case LmeFailure::infeasible_second_moment: return "second-order constraints infeasible";
   }
   return "unknown failure";
+}
+
+const char* to_string(LmeConsistency consistency) noexcept {
+  return consistency == LmeConsistency::second ? "second" : "first";
+}
+
+LmeConsistency parse_lme_consistency(std::string_view name) {
+  if (name == "first" || name == "1") return LmeConsistency::first;
+  if (name == "second" || name == "2") return LmeConsistency::second;
+  throw std::invalid_argument("LME consistency \"" + std::string(name) + "\": expected \"first\" (the LME basis) or "
+                              "\"second\" (second-order max-ent, converging Hessians)");
 }
 
 namespace {
@@ -53,7 +68,7 @@ LmeEvaluationError::LmeEvaluationError(LmeFailure reason, std::span<const double
 
 namespace {
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+using detail::kNaN;
 
 constexpr int sym_index(int i, int j, int d) noexcept { return kernel::hessian_slot(i, j, d) - 1 - d; }
 
@@ -90,225 +105,20 @@ template <int D>
 struct Lme {
   using V = Vec<D>;
   using M = Mat<D>;
+  using Dual = detail::MaxEntDual<D>;
 
-  // ln Z at lambda with a log-sum-exp shift; p and r = grad_lambda ln Z = sum p_a y_a as by-products.
-  static double eval(int n, const double* y, const double* c, const V& lam, double* p, V& r) {
-    double fmax = -std::numeric_limits<double>::infinity();
-    for (int a = 0; a < n; ++a) {
-      const double f = c[a] + lam.dot(Eigen::Map<const V>(y + a * D));
-      p[a] = f;
-      fmax = std::max(fmax, f);
-    }
-    double sum = 0.0;
-    for (int a = 0; a < n; ++a) {
-      p[a] = std::exp(p[a] - fmax);
-      sum += p[a];
-    }
-    const double inv = 1.0 / sum;
-    r.setZero();
-    for (int a = 0; a < n; ++a) {
-      p[a] *= inv;
-      r += p[a] * Eigen::Map<const V>(y + a * D);
-    }
-    return fmax + std::log(sum);
-  }
-
-  // Inverse of a symmetric matrix through LDLT with its reciprocal condition number; false when it
-  // is not positive definite in floating point. (1x1 by hand: Eigen's LDLT trips gcc's -Warray-bounds.)
-  static bool spd_inverse(const M& a, M& inv, double& rcond) {
-    if constexpr (D == 1) {
-      if (!(a(0, 0) > 0.0) || !std::isfinite(a(0, 0))) return false;
-      inv(0, 0) = 1.0 / a(0, 0);
-      rcond = 1.0;
-      return true;
-    } else {
-      const Eigen::LDLT<M> ldlt(a);
-      if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) return false;
-      inv = ldlt.solve(M::Identity());
-      rcond = ldlt.rcond();
-      return inv.allFinite() && rcond > 0.0;
-    }
-  }
-
-  // Largest u . y_a over the neighbours for a unit direction u. If it is < -margin, every neighbour
-  // lies strictly on one side of a plane through x, so x is outside their hull by more than margin.
-  static double max_projection(int n, const double* y, const V& u) {
-    double best = -std::numeric_limits<double>::infinity();
-    for (int a = 0; a < n; ++a) best = std::max(best, u.dot(Eigen::Map<const V>(y + a * D)));
-    return best;
-  }
-
-  // Scaled relative coordinates y^_a = (x - x_a)/l, beta^_a = beta_a l^2; returns l.
-  // coords / beta: of every node index the list may hold (nodes, then mirror images).
-  static double prepare(const double* coords, const double* beta, std::span<const double> x,
-                        std::span<const int> nbrs, LmeWorkspace& ws) {
-    const auto n = nbrs.size();
-    ws.y.resize(n * D);
-    ws.beta.resize(n);
-    ws.c.resize(n);
-    ws.p.resize(n);
-    double sum2 = 0.0;
-    for (std::size_t a = 0; a < n; ++a) {
-      const auto b = static_cast<std::size_t>(nbrs[a]);
-      for (int i = 0; i < D; ++i) {
-        const double d = x[static_cast<std::size_t>(i)] - coords[b * D + static_cast<std::size_t>(i)];
-        ws.y[a * D + static_cast<std::size_t>(i)] = d;
-        sum2 += d * d;
-      }
-    }
-    const double len = std::sqrt(sum2 / static_cast<double>(n));
-    if (!(len > 0.0)) return 0.0;
-    const double inv = 1.0 / len;
-    for (std::size_t a = 0; a < n; ++a) {
-      double r2 = 0.0;
-      for (int i = 0; i < D; ++i) {
-        double& v = ws.y[a * D + static_cast<std::size_t>(i)];
-        v *= inv;
-        r2 += v * v;
-      }
-      ws.beta[a] = beta[static_cast<std::size_t>(nbrs[a])] * len * len;
-      ws.c[a] = -ws.beta[a] * r2;
-    }
-    return len;
-  }
-
-  static void check_geometry(std::span<const double> x, int n, double len, const LmeWorkspace& ws,
-                             const LmeOptions& opt) {
-    if (n < D + 1) {
-      throw LmeEvaluationError(LmeFailure::too_few_neighbours, x, static_cast<std::size_t>(n), kNaN,
-                               "got " + std::to_string(n) + ", need " + std::to_string(D + 1));
-    }
-    if (!(len > 0.0)) {
-      throw LmeEvaluationError(LmeFailure::degenerate, x, static_cast<std::size_t>(n), kNaN,
-                               "all neighbours coincide with x");
-    }
-    V mean = V::Zero();
-    for (int a = 0; a < n; ++a) mean += Eigen::Map<const V>(ws.y.data() + a * D);
-    mean /= n;
-    M cov = M::Zero();
-    for (int a = 0; a < n; ++a) {
-      const V d = Eigen::Map<const V>(ws.y.data() + a * D) - mean;
-      cov += d * d.transpose();
-    }
-    double lo = 0.0, hi = 0.0;
-    if constexpr (D == 1) {
-      lo = hi = cov(0, 0);
-    } else {
-      const Eigen::SelfAdjointEigenSolver<M> es(cov, Eigen::EigenvaluesOnly);
-      lo = es.eigenvalues()(0);
-      hi = es.eigenvalues()(D - 1);
-    }
-    const double tol = opt.degeneracy_tolerance;
-    if (!(hi > 0.0) || !(lo > tol * tol * hi)) {
-      std::ostringstream os;
-      os.precision(3);
-      os << "thickness/extent = " << std::scientific << std::sqrt(std::max(lo, 0.0) / std::max(hi, 1e-300))
-         << " <= " << tol;
-      throw LmeEvaluationError(LmeFailure::degenerate, x, static_cast<std::size_t>(n), kNaN, os.str());
-    }
-  }
-
-  // Safeguarded Newton on lambda^ minimising ln Z; leaves p at the solution in ws.p.
   /// The multipliers λ at x for the neighbours `list`: the point scaled by the local length (len),
   /// its geometry checked, the Newton iteration on ln Z (ln Z at the solution in lnz).
   static V solve(const double* coords, const double* beta, std::span<const double> x, std::span<const int> list, LmeWorkspace& ws,
                  const LmeOptions& opt, double& len, double& lnz) {
     const int n = static_cast<int>(list.size());
-    len = prepare(coords, beta, x, list, ws);
-    check_geometry(x, n, len, ws, opt);
+    len = detail::scaled_neighbourhood<D>(coords, beta, x, list, ws);
+    detail::check_affine_geometry<D>(x, n, len, ws, opt);
     lnz = 0.0;
-    return newton(x, n, ws, opt, lnz);
-  }
-
-  static V newton(std::span<const double> x, int n, LmeWorkspace& ws, const LmeOptions& opt, double& lnz) {
-    const double* y = ws.y.data();
-    const double* c = ws.c.data();
-    double* p = ws.p.data();
-    const double tol = opt.newton_tolerance;
-    V lam = V::Zero();
-    V r;
-    lnz = eval(n, y, c, lam, p, r);
-    double gnorm = r.norm();
-    // Once ||r^|| <= tol, up to kPolish further Newton steps drive the error in lambda itself to
-    // rounding: near the hull boundary J is nearly singular, and the derivative formulas (which
-    // assume r = 0) amplify a residual r by J^-1, so a small gradient alone is not enough.
-    constexpr int kPolish = 2;
-    int polish = 0;
-    for (int it = 0;; ++it) {
-      const bool converged = gnorm <= tol;
-      if (converged && polish >= kPolish) return lam;
-      if (!converged && it >= opt.max_iterations) {
-        std::ostringstream os;
-        os << opt.max_iterations << " iterations, tolerance " << std::scientific << std::setprecision(1) << tol;
-        throw LmeEvaluationError(LmeFailure::not_converged, x, static_cast<std::size_t>(n), gnorm, os.str());
-      }
-      if (!converged && it >= 2) {
-        // A certificate, not a guess: all neighbours strictly behind a plane through x.
-        const double ln = lam.norm();
-        if ((ln > 0.0 && max_projection(n, y, lam / ln) < -tol) || max_projection(n, y, -r / gnorm) < -tol) {
-          throw LmeEvaluationError(LmeFailure::outside_hull, x, static_cast<std::size_t>(n), gnorm,
-                                   "a plane through x separates it from all neighbours");
-        }
-      }
-      M hess = -r * r.transpose();
-      for (int a = 0; a < n; ++a) {
-        const auto ya = Eigen::Map<const V>(y + a * D);
-        hess.noalias() += p[a] * ya * ya.transpose();
-      }
-      V dir;
-      bool ok = false;
-      {
-        M inv = M::Zero();
-        double rc = 0.0;
-        if (spd_inverse(hess, inv, rc)) {
-          dir = -(inv * r);
-          ok = dir.allFinite() && r.dot(dir) < 0.0;
-        }
-      }
-      if (converged) {
-        if (!ok || dir.norm() <= 4.0 * std::numeric_limits<double>::epsilon() * (1.0 + lam.norm())) return lam;
-        ++polish;
-      }
-      // J singular or indefinite in floating point (e.g. near a hull vertex): steepest descent,
-      // which the line search below still globalises.
-      if (!ok) dir = -r;
-      bool accepted = false;
-      V lam_t, r_t;
-      double lnz_t = lnz;
-      auto line_search = [&](const V& d) {
-        const double slope = r.dot(d);
-        double t = 1.0;
-        for (int ls = 0; ls < 60; ++ls, t *= 0.5) {
-          lam_t = lam + t * d;
-          lnz_t = eval(n, y, c, lam_t, p, r_t);
-          if (lnz_t <= lnz + 1e-4 * t * slope) return true;
-          // Near the minimum ln Z is flat to rounding: then the gradient norm decides.
-          if (std::abs(lnz_t - lnz) <= 8.0 * std::numeric_limits<double>::epsilon() * (1.0 + std::abs(lnz)) &&
-              r_t.norm() <= gnorm)
-            return true;
-          if (converged) return false;  // polishing is best effort: no backtracking
-        }
-        return false;
-      };
-      accepted = line_search(dir);
-      // With the weight on one or two neighbours J is nearly singular and the rounding in
-      // sum p_a y_a y_a^T - r r^T can spoil the Newton direction (measured: a point of a long cell
-      // between a fine and a coarse node set); steepest descent still decreases ln Z.
-      if (!accepted && ok && !converged) accepted = line_search(-r);
-      if (!accepted) {
-        if (converged) {
-          // p was overwritten by the rejected trial: restore the converged state.
-          lnz = eval(n, y, c, lam, p, r);
-          return lam;
-        }
-        throw LmeEvaluationError(LmeFailure::not_converged, x, static_cast<std::size_t>(n), gnorm,
-                                 "line search stalled after " + std::to_string(it) + " iterations");
-      }
-      lam = lam_t;
-      lnz = lnz_t;
-      r = r_t;
-      gnorm = r.norm();
-    }
+    return Dual::newton(x, n, ws.y.data(), ws.c.data(), ws.p.data(), opt, lnz, [&](const V&, double gnorm) {
+      throw LmeEvaluationError(LmeFailure::outside_hull, x, static_cast<std::size_t>(n), gnorm,
+                               "a plane through x separates it from all neighbours");
+    });
   }
 
   // Builds the record of `order` from p at the solution, in the units of y and beta.
@@ -345,7 +155,7 @@ struct Lme {
          << " (scaled by the local spacing): x is at a vertex of the convex hull, where derivatives are undefined";
       throw LmeEvaluationError(LmeFailure::singular_jacobian, x, static_cast<std::size_t>(n), kNaN, os.str());
     }
-    if (!spd_inverse(jac, jinv, rc)) rc = 0.0;
+    if (!Dual::spd_inverse(jac, jinv, rc)) rc = 0.0;
     if (!(rc >= min_rcond)) {
       std::ostringstream os;
       os.precision(3);
@@ -462,14 +272,6 @@ void fold_images(const double* ext, std::size_t n_ext, std::size_t n, int rows, 
   }
 }
 
-template <class F>
-decltype(auto) dispatch(int dim, F&& f) {
-  switch (dim) {
-    case 1: return f(std::integral_constant<int, 1>{});
-    case 2: return f(std::integral_constant<int, 2>{});
-    default: return f(std::integral_constant<int, 3>{});
-  }
-}
 
 }  // namespace
 
@@ -510,7 +312,35 @@ void LmeBasis::init(std::span<const double> gamma, std::vector<double> spacing) 
     beta_[a] = gamma_[a] / (spacing_[a] * spacing_[a]);
     radius_[a] = support_radius(beta_[a], options_.tol0);
   }
+  if (second_order()) init_gaps();
   if (mirrored()) init_mirror();
+}
+
+void LmeBasis::init_gaps() {
+  for (std::size_t a = 0; a < gamma_.size(); ++a) {
+    if (gamma_[a] > lme_second_order_max_gamma) {
+      std::ostringstream os;
+      os << "LmeBasis: the second-order basis needs gamma <= " << lme_second_order_max_gamma << ", node " << a
+         << " has gamma = " << gamma_[a]
+         << ": its second moment h^2/(2 gamma) must exceed the squared distance from a point to the nodes around it; "
+            "use a smaller gamma or the first-order basis (LmeConsistency::first)";
+      throw std::invalid_argument(os.str());
+    }
+  }
+  const std::size_t n = nodes_.size(), d = static_cast<std::size_t>(dim());
+  if (!mirrored() || options_.mirror_axis >= dim()) {
+    gap_ = detail::second_order_gaps(nodes_, spacing_, gamma_, nodes_);
+    return;
+  }
+  // With mirror symmetry the plane is no hull boundary: the hull is that of the nodes and their reflections.
+  std::vector<double> both = nodes_.coords;
+  const auto axis = static_cast<std::size_t>(options_.mirror_axis);
+  for (std::size_t a = 0; a < n; ++a)
+    for (std::size_t i = 0; i < d; ++i) {
+      const double c = nodes_.coords[a * d + i];
+      both.push_back(i == axis ? 2.0 * options_.mirror_position - c : c);
+    }
+  gap_ = detail::second_order_gaps(nodes_, spacing_, gamma_, NodeSet(dim(), std::move(both)));
 }
 
 void LmeBasis::init_mirror() {
@@ -539,6 +369,8 @@ void LmeBasis::init_mirror() {
   all_coords_ = nodes_.coords;
   all_beta_ = beta_;
   all_radius_ = radius_;
+  all_gap_ = gap_;
+  const std::size_t s = second_order() ? d * (d + 1) / 2 : 0;
   image_of_.assign(n, -1);
   for (std::size_t a = 0; a < n; ++a) {
     const double delta = nodes_.coords[a * d + std::size_t(axis)] - plane;
@@ -552,6 +384,12 @@ void LmeBasis::init_mirror() {
     }
     all_beta_.push_back(beta_[a]);
     all_radius_.push_back(radius_[a]);
+    // The reflected gap: entries coupling the axis with another direction change sign.
+    for (std::size_t i = 0; i < d && s > 0; ++i)
+      for (std::size_t j = i; j < d; ++j) {
+        const double g = gap_[a * s + static_cast<std::size_t>(kernel::hessian_slot(int(i), int(j), dim()) - 1 - dim())];
+        all_gap_.push_back((i == std::size_t(axis)) != (j == std::size_t(axis)) ? -g : g);
+      }
   }
   all_tree_.emplace(NodeSet(dim(), all_coords_));
 }
@@ -581,6 +419,28 @@ void LmeBasis::check_order(int order, const char* who) const {
     throw std::invalid_argument(std::string(who) + ": derivative order must be 0, 1 or 2, got " +
                                 std::to_string(order));
   }
+}
+
+int LmeBasis::record_size(int order) const noexcept {
+  return second_order() ? lme_second_order_record_size(dim(), order) : lme_record_size(dim(), order);
+}
+
+std::vector<double> LmeBasis::gap_corrected(std::span<const double> values, std::span<const double> hessians) const {
+  const std::size_t n = nodes_.size(), d = static_cast<std::size_t>(dim()), s = d * (d + 1) / 2;
+  if (values.size() != n || hessians.size() != n * s) {
+    throw std::invalid_argument("LmeBasis::gap_corrected: " + std::to_string(values.size()) + " values and " +
+                                std::to_string(hessians.size()) + " Hessian entries for " + std::to_string(n) +
+                                " nodes (need one value and " + std::to_string(s) + " entries per node)");
+  }
+  std::vector<double> out(values.begin(), values.end());
+  if (!second_order()) return out;
+  for (std::size_t a = 0; a < n; ++a)
+    for (std::size_t i = 0; i < d; ++i)
+      for (std::size_t j = i; j < d; ++j) {
+        const std::size_t k = a * s + static_cast<std::size_t>(kernel::hessian_slot(int(i), int(j), dim()) - 1 - dim());
+        out[a] -= (i == j ? 0.5 : 1.0) * hessians[k] * gap_[k];
+      }
+  return out;
 }
 
 std::vector<int> LmeBasis::neighbours(std::span<const double> x) const {
@@ -630,7 +490,18 @@ void LmeBasis::evaluate(std::span<const double> x, std::span<const int> nbrs, in
     out = ws.mirror_jet.data();
     stride = n_all;
   }
-  dispatch(dim(), [&](auto dc) {
+  if (second_order()) {
+    detail::second_order_evaluate(dim(), {coords_data(), beta_data(), gap_data()}, options_, x, list, order, out, stride, ws);
+  } else {
+    evaluate_first_order(x, list, order, out, stride, ws);
+  }
+  if (mirrored()) fold_images(out, n_all, n, rows, ws.mirror_fold.data(), jet.data(), n, nullptr);
+}
+
+void LmeBasis::evaluate_first_order(std::span<const double> x, std::span<const int> list, int order, double* out,
+                                    std::size_t stride, LmeWorkspace& ws) const {
+  const std::size_t n_all = list.size();
+  detail::dispatch(dim(), [&](auto dc) {
     constexpr int D = decltype(dc)::value;
     using K = Lme<D>;
     const int ni = static_cast<int>(n_all);
@@ -645,7 +516,6 @@ void LmeBasis::evaluate(std::span<const double> x, std::span<const int> nbrs, in
     K::jet(ni, ws.y.data(), ws.beta.data(), ws.record.data(), order, order, ws.p.data(), 1.0 / len, out, stride,
            nullptr);
   });
-  if (mirrored()) fold_images(out, n_all, n, rows, ws.mirror_fold.data(), jet.data(), n, nullptr);
 }
 
 std::vector<double> LmeBasis::evaluate(std::span<const double> x, std::span<const int> nbrs, int order) const {
@@ -675,12 +545,17 @@ void LmeBasis::solve_record(std::span<const double> x, std::span<const int> nbrs
                             LmeWorkspace& ws) const {
   check_order(order, "LmeBasis::solve_record");
   if (x.size() != static_cast<std::size_t>(dim()) ||
-      record.size() < static_cast<std::size_t>(lme_record_size(dim(), order))) {
+      record.size() < static_cast<std::size_t>(record_size(order))) {
     throw std::invalid_argument("LmeBasis::solve_record: bad point or record size");
   }
   const std::size_t n_all = mirrored() ? extend(x, nbrs, ws) : nbrs.size();
   const std::span<const int> list = mirrored() ? std::span<const int>(ws.extended) : nbrs;
-  dispatch(dim(), [&](auto dc) {
+  if (second_order()) {
+    detail::second_order_solve_record(dim(), {coords_data(), beta_data(), gap_data()}, options_, x, list, order,
+                                      record.data(), ws);
+    return;
+  }
+  detail::dispatch(dim(), [&](auto dc) {
     constexpr int D = decltype(dc)::value;
     using K = Lme<D>;
     const int ni = static_cast<int>(n_all);
@@ -706,7 +581,25 @@ void LmeBasis::reconstruct(std::span<const double> x, std::span<const int> nbrs,
   const std::span<const int> list = mirrored() ? std::span<const int>(ws.extended) : nbrs;
   const int rows = kernel::jet_size(dim(), order);
   if (mirrored()) ws.mirror_jet.resize(static_cast<std::size_t>(rows) * n_all);
-  dispatch(dim(), [&](auto dc) {
+  if (second_order()) {
+    double* out = mirrored() ? ws.mirror_jet.data() : jet.data();
+    detail::second_order_reconstruct(dim(), {coords_data(), beta_data(), gap_data()}, x, list, record_order,
+                                     record.data(), order, out, mirrored() ? n_all : stride,
+                                     mirrored() || columns.empty() ? nullptr : columns.data(), ws);
+  } else {
+    reconstruct_first_order(x, list, record_order, record, order, jet, stride, columns, ws);
+  }
+  if (mirrored()) {
+    fold_images(ws.mirror_jet.data(), n_all, nbrs.size(), rows, ws.mirror_fold.data(), jet.data(), stride,
+                columns.empty() ? nullptr : columns.data());
+  }
+}
+
+void LmeBasis::reconstruct_first_order(std::span<const double> x, std::span<const int> list, int record_order,
+                                       std::span<const double> record, int order, std::span<double> jet,
+                                       std::size_t stride, std::span<const int> columns, LmeWorkspace& ws) const {
+  const std::size_t n_all = list.size();
+  detail::dispatch(dim(), [&](auto dc) {
     constexpr int D = decltype(dc)::value;
     const double* coords = coords_data();
     const double* beta = beta_data();
@@ -725,10 +618,6 @@ void LmeBasis::reconstruct(std::span<const double> x, std::span<const int> nbrs,
                   1.0, jet.data(), stride, columns.empty() ? nullptr : columns.data());
     }
   });
-  if (mirrored()) {
-    fold_images(ws.mirror_jet.data(), n_all, nbrs.size(), rows, ws.mirror_fold.data(), jet.data(), stride,
-                columns.empty() ? nullptr : columns.data());
-  }
 }
 
 }  // namespace lmeform

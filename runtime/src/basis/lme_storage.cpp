@@ -132,7 +132,9 @@ LmeCompressedStorage::LmeCompressedStorage(const LmeBasis& basis, std::span<cons
     : dim_(basis.dim()), order_(order), num_nodes_(basis.size()), lists_(std::move(lists)),
       points_(points.begin(), points.end()) {
   check_points(basis, points, lists_, order, "LmeCompressedStorage");
-  const auto rs = static_cast<std::size_t>(lme_record_size(dim_, order_));
+  record_size_ = basis.record_size(order_);
+  consistency_ = basis.consistency();
+  const auto rs = static_cast<std::size_t>(record_size_);
   const auto d = static_cast<std::size_t>(dim_);
   records_.resize(lists_.size() * rs);
   LmeWorkspace ws;
@@ -141,8 +143,14 @@ LmeCompressedStorage::LmeCompressedStorage(const LmeBasis& basis, std::span<cons
   }
 }
 
+void LmeCompressedStorage::check_same_basis(const LmeBasis& basis) const {
+  if (basis.size() != num_nodes_ || basis.dim() != dim_ || basis.consistency() != consistency_) {
+    throw std::invalid_argument("LmeCompressedStorage: basis differs from the one the storage was built from");
+  }
+}
+
 std::span<const double> LmeCompressedStorage::record(std::size_t q) const {
-  const auto rs = static_cast<std::size_t>(lme_record_size(dim_, order_));
+  const auto rs = static_cast<std::size_t>(record_size_);
   return std::span<const double>(records_).subspan(q * rs, rs);
 }
 
@@ -153,9 +161,7 @@ std::span<const double> LmeCompressedStorage::point(std::size_t q) const {
 
 void LmeCompressedStorage::point_jet(const LmeBasis& basis, std::size_t q, int order, std::span<double> out,
                                      LmeWorkspace& ws) const {
-  if (basis.size() != num_nodes_ || basis.dim() != dim_) {
-    throw std::invalid_argument("LmeCompressedStorage: basis differs from the one the storage was built from");
-  }
+  check_same_basis(basis);
   const auto list = lists_[q];
   if (out.size() < static_cast<std::size_t>(kernel::jet_size(dim_, std::max(order, 0))) * list.size()) {
     throw std::invalid_argument("LmeCompressedStorage::point_jet: output too small");
@@ -166,9 +172,7 @@ void LmeCompressedStorage::point_jet(const LmeBasis& basis, std::size_t q, int o
 void LmeCompressedStorage::tabulate_cell(const LmeBasis& basis, std::span<const int> point_ids,
                                          std::span<const int> cell_nodes, int order, std::span<double> basis_out,
                                          LmeWorkspace& ws) const {
-  if (basis.size() != num_nodes_ || basis.dim() != dim_) {
-    throw std::invalid_argument("LmeCompressedStorage: basis differs from the one the storage was built from");
-  }
+  check_same_basis(basis);
   check_cell(point_ids.size(), cell_nodes, dim_, order, order_, basis_out.size(), num_nodes_);
   const auto jn = static_cast<std::size_t>(kernel::jet_size(dim_, order));
   const std::size_t n = cell_nodes.size();
