@@ -61,11 +61,6 @@ double error_l2(const nlohmann::json& report) {
   return NAN;
 }
 
-double error_h1(const nlohmann::json& report) {
-  for (const auto& e : report.at("errors"))
-    if (e.at("unknown") == "u") return e.at("h1").get<double>();
-  return NAN;
-}
 
 std::vector<Case> cases() {
   std::vector<Case> c;

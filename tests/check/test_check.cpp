@@ -122,6 +122,22 @@ TEST_P(BuiltinModule, PassesInEveryDeclaredDimension) {
   EXPECT_EQ(check.coordinates, axisymmetric ? fc::Coordinates::axisymmetric : fc::Coordinates::cartesian);
 }
 
+// Fourth-order scenes run on the second-order max-ent basis (nodes.basis = "second"): every form's
+// derivatives must hold on its check cells too (a gap-corrected span, other neighbour weights).
+TEST_P(BuiltinModule, PassesWithTheSecondOrderBasis) {
+  const lmeform::FormModule& module = lmeform::load_form(GetParam());
+  fc::ModuleCheckOptions options;
+  options.basis = lmeform::LmeConsistency::second;
+  const fc::ModuleCheck check = fc::check_module(module.name, module.source, module.kernels, options);
+  EXPECT_EQ(check.basis, lmeform::LmeConsistency::second);
+  EXPECT_NE(fc::format_table(check).find("basis: second order"), std::string::npos);
+  EXPECT_EQ(check.records.size(), module.kernels.size());
+  for (const fc::CheckRecord& r : check.records) {
+    EXPECT_TRUE(r.passed) << r.output << " " << r.dim << "d";
+    EXPECT_EQ(r.status, "pass") << r.output << " " << r.dim << "d";
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(All, BuiltinModule, ::testing::ValuesIn(lmeform::builtin_form_names()),
                          [](const ::testing::TestParamInfo<std::string>& p) { return p.param; });
 

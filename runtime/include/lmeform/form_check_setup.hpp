@@ -51,7 +51,8 @@ struct GeometryOptions {
   double transition = 0.15;  ///< distance from the feature over which the spacing grows
   std::optional<std::array<double, 3>> center;  ///< default: box centre, on the axis when axisymmetric
   double radius = 0.3;
-  double gamma = 0.0;        ///< LME locality; 0: 0.8 (1D, 2D), 1.8 (3D: keeps neighbourhoods small)
+  double gamma = 0.0;        ///< LME locality; 0: 0.8 (1D, 2D), 1.8 (3D: keeps neighbourhoods small; 0.8 for the second-order basis)
+  LmeConsistency basis = LmeConsistency::first;  ///< first- or second-order max-ent basis
   std::uint64_t seed = 11;
 };
 

@@ -33,6 +33,7 @@ struct ModuleCheckOptions {
   std::optional<Coordinates> coordinates;  ///< empty: default_coordinates()
   std::vector<std::pair<std::string, double>> constants;  ///< user values (--set NAME=VALUE)
   std::uint64_t seed = 1;
+  LmeConsistency basis = LmeConsistency::first;  ///< the basis of the check cells
   StateOptions states;
   /// Tolerances and steps; fd_step and the Taylor steps apply to directions scaled per dof
   /// (1 for scalar fields, h_min for vector fields).
@@ -90,6 +91,7 @@ struct ModuleCheck {
   std::filesystem::path source;
   Coordinates coordinates = Coordinates::cartesian;
   std::string coordinates_reason;        ///< why these coordinates ("--coordinates", "includes axisymmetric.inc", ...)
+  LmeConsistency basis = LmeConsistency::first;  ///< the basis of the check cells
   std::vector<ConstantChoice> constants;
   std::vector<CheckRecord> records;
   std::string provenance;                ///< "built-in", "JIT: compiled in 3.1 s", "JIT: cache hit"

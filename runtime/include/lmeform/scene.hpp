@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "lmeform/domain.hpp"
+#include "lmeform/lme_basis.hpp"
 #include "lmeform/node_sets.hpp"
 
 namespace lmeform {
@@ -70,6 +71,9 @@ struct SceneNodes {
   /// integration = "consistent": basis gradients corrected cell by cell so that the quadrature
   /// satisfies the divergence theorem (linear fields reproduced exactly, the patch test).
   bool consistent_integration = false;
+  /// basis = "first" (LME, affine reproduction) or "second" (second-order max-ent: quadratics are
+  /// in the span, Hessians converge; gamma <= lme_second_order_max_gamma).
+  LmeConsistency basis = LmeConsistency::first;
 };
 
 /// A name as written in the scene, with where it was written (for messages about it).

@@ -31,6 +31,9 @@ CLI::App* add_check_subcommand(CLI::App& app, CheckCommandOptions& options) {
                   "cartesian or axisymmetric (r = x[0] > 0, basis mirrored across the axis); default: axisymmetric "
                   "when the module name ends in _axisymmetric or its source includes axisymmetric.inc")
       ->check(CLI::IsMember({"auto", "cartesian", "axisymmetric"}));
+  cmd->add_option("--basis", options.basis,
+                  "basis of the check cells: first (LME) or second (second-order max-ent, as nodes.basis in a scene)")
+      ->check(CLI::IsMember({"first", "second"}));
   cmd->add_option("--set", options.sets, "constant value NAME=VALUE (repeatable); default: the form's default, else "
                                          "1 +- 20 % at random")
       ->allow_extra_args(false);
@@ -101,6 +104,7 @@ int run_check_command(const CheckCommandOptions& options) {
     mo.dims = options.dims;
     mo.outputs = options.outputs;
     mo.seed = options.seed;
+    mo.basis = parse_lme_consistency(options.basis);
     mo.states.perturbation = options.perturbation;
     mo.states.width = options.interface_width;
     if (options.coordinates == "cartesian") mo.coordinates = formcheck::Coordinates::cartesian;

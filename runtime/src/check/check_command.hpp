@@ -26,6 +26,7 @@ struct CheckCommandOptions {
   std::string form;                        ///< built-in module name or path of a .form file
   std::vector<int> dims;                   ///< --dim: only these dimensions
   std::string coordinates = "auto";        ///< --coordinates auto|cartesian|axisymmetric
+  std::string basis = "first";             ///< --basis first|second: the max-ent basis of the check cells
   std::vector<std::string> sets;           ///< --set NAME=VALUE: constant values
   std::uint64_t seed = 1;                  ///< --seed: random states and constants
   std::string json;                        ///< --json OUT: write the records

@@ -11,6 +11,7 @@
 #include <regex>
 #include <set>
 #include <sstream>
+#include <tuple>
 #include <stdexcept>
 
 #include <fmt/format.h>
@@ -155,15 +156,16 @@ struct CheckSite {
   std::vector<Cell> vector_field_cells;   // for forms with a vector field (off the axis)
 };
 
-const CheckSite& check_site(int dim, Coordinates coordinates) {
+const CheckSite& check_site(int dim, Coordinates coordinates, LmeConsistency basis) {
   static std::mutex mutex;
-  static std::map<std::pair<int, Coordinates>, CheckSite> sites;
+  static std::map<std::tuple<int, Coordinates, LmeConsistency>, CheckSite> sites;
   const std::lock_guard<std::mutex> lock(mutex);
-  auto& site = sites[{dim, coordinates}];
+  auto& site = sites[{dim, coordinates, basis}];
   if (!site.geometry) {
     GeometryOptions go;
     go.dim = dim;
     go.coordinates = coordinates;
+    go.basis = basis;
     site.geometry = std::make_unique<CheckGeometry>(go);
     site.cells = site.geometry->check_cells(2, false);
     site.vector_field_cells = site.geometry->check_cells(2, true);
@@ -224,7 +226,7 @@ CheckRecord check_kernels(const FormKernels& form, const std::vector<ConstantCho
     values.push_back(it->value);
   }
   try {
-    const CheckSite& site = check_site(form.dim, coordinates);
+    const CheckSite& site = check_site(form.dim, coordinates, options.basis);
     bool vector_fields = false;
     for (int i = 0; i < form.n_unknowns; ++i) vector_fields = vector_fields || (form.dim > 1 && form.unknowns[i].components == form.dim);
     for (int i = 0; i < form.n_coefficients; ++i)
@@ -277,6 +279,7 @@ ModuleCheck check_module(const std::string& module, const fs::path& source, std:
   ModuleCheck mc;
   mc.module = module;
   mc.source = source;
+  mc.basis = options.basis;
   if (options.coordinates) {
     mc.coordinates = *options.coordinates;
     mc.coordinates_reason = "--coordinates";
@@ -327,7 +330,7 @@ std::string flop_text(double x) { return std::isnan(x) ? "-" : fmt::format("{:.3
 std::string format_table(const ModuleCheck& mc) {
   std::ostringstream os;
   os << fmt::format("lmeform check {} ({})\n", mc.module, mc.source.empty() ? "source unknown" : mc.source.string());
-  os << fmt::format("  coordinates: {} ({})", to_string(mc.coordinates), mc.coordinates_reason);
+  os << fmt::format("  coordinates: {} ({}); basis: {} order", to_string(mc.coordinates), mc.coordinates_reason, to_string(mc.basis));
   if (!mc.provenance.empty()) os << "; module: " << mc.provenance;
   os << "\n";
   if (!mc.constants.empty()) {
@@ -407,6 +410,7 @@ std::string records_json(const std::vector<ModuleCheck>& checks) {
                       {"label", r.kind + " " + kernel_label(r)},
                       {"dim", r.dim},
                       {"coordinates", r.coordinates},
+                      {"basis", to_string(mc.basis)},
                       {"gradient_rel_error", number(r.gradient_rel_error)},
                       {"hessian_rel_error", number(r.hessian_rel_error)},
                       {"symmetry_error", number(r.symmetry_error)},

@@ -626,7 +626,7 @@ std::vector<const BoundOutput*> BoundScene::outputs() const {
 }
 
 LmeOptions BoundScene::lme(AxisParity parity) const {
-  return lme_options(discretization.spacing_smoothing, axisymmetric, parity);
+  return lme_options(discretization.spacing_smoothing, axisymmetric, parity, discretization.basis);
 }
 
 BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, const StationaryDriver& solver, const OutputRoles& extra) {
@@ -638,7 +638,8 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
   b.domain = scene.domain;
   b.geometry = scene.geometry;
   b.boundary_points = scene.nodes.boundary_points;
-  b.discretization = {scene.nodes.gamma, scene.nodes.quadrature_points, scene.nodes.spacing_smoothing, scene.nodes.consistent_integration};
+  b.discretization = {scene.nodes.gamma, scene.nodes.quadrature_points, scene.nodes.spacing_smoothing, scene.nodes.consistent_integration,
+                      scene.nodes.basis};
   b.solver = &solver;
   OutputRoles roles = solver.roles(scene);
   roles.auxiliary.insert(roles.auxiliary.end(), extra.auxiliary.begin(), extra.auxiliary.end());

@@ -130,6 +130,7 @@ struct DiscretizationSettings {
   int quadrature_points = 6;
   int spacing_smoothing = 5;
   bool consistent_integration = false;  ///< gradients corrected cell by cell (DiscretizationOptions)
+  LmeConsistency basis = LmeConsistency::first;  ///< first- or second-order max-ent basis
 };
 
 /// A scene with its forms loaded and every name checked against them.

@@ -142,7 +142,9 @@ const FormModule& compile_error_form(int dim, const std::string& unknown, int co
        << "let error_value = " << unknown << " - (" << exact << ")\n"
        << "let error_gradient = grad(" << unknown << ") - grad(" << exact << ")\n"
        << "energy l2 = inner(error_value, error_value) * dx\n"
-       << "energy h1 = inner(error_gradient, error_gradient) * dx\n";
+       << "let error_hessian = hess(" << unknown << ") - hess(" << exact << ")\n"
+       << "energy h1 = inner(error_gradient, error_gradient) * dx\n"
+       << "energy h2 = inner(error_hessian, error_hessian) * dx\n";
   try {
     return load_generated("scene_errors", body.str(), comm, log);
   } catch (const FormLoadError& e) {

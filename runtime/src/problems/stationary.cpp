@@ -22,7 +22,7 @@ namespace lmeform::problems {
 
 namespace {
 
-/// L2 and H1 errors of each unknown with an exact solution.
+/// L2, H1 and (where the forms tabulate Hessians) H2 errors of each unknown with an exact solution.
 std::vector<FieldError> field_errors(MPI_Comm comm, const BoundScene& b, const ProblemSpace& space, const std::vector<double>& state,
                                      std::ostream* log) {
   std::vector<FieldError> out;
@@ -41,7 +41,18 @@ std::vector<FieldError> field_errors(MPI_Comm comm, const BoundScene& b, const P
     // The error form has this unknown alone: its state is the unknown's components.
     PetscVector v = l2_form.create_vector();
     set_from_original(disc, b.layout.values(state, field), field.components, v);
-    out.push_back({field.name, std::sqrt(std::max(0.0, l2_form.value(v))), std::sqrt(std::max(0.0, h1_form.value(v)))});
+    FieldError e{field.name, std::sqrt(std::max(0.0, l2_form.value(v))), std::sqrt(std::max(0.0, h1_form.value(v)))};
+    // Hessians are tabulated only for forms that need them: a second-order problem does not pay for its H2 error.
+    if (b.basis_order >= 2) {
+      const auto& h2 = errors.at("h2", b.dim);
+      Assembler h2_form(disc, h2);
+      for (int i = 0; i < h2.n_constants; ++i) {
+        const double c = space.constants.at(h2.constants[i]);
+        h2_form.set_constant(h2.constants[i], std::isnan(c) ? 0.0 : c);
+      }
+      e.h2 = std::sqrt(std::max(0.0, h2_form.value(v)));
+    }
+    out.push_back(e);
   }
   return out;
 }
@@ -161,12 +172,24 @@ void describe_equation_solve(const ProblemResult& r, RunReport& report) {
   report.json["residual_norm"] = json_number(r.residual_norm);
 }
 
+void describe_basis(const SceneNodes& nodes, RunReport& report) {
+  report.row("basis", fmt::format("{}-order max-ent, gamma {:g}, {} points per cell{}", to_string(nodes.basis), nodes.gamma,
+                                  nodes.quadrature_points, nodes.consistent_integration ? ", consistent integration" : ""));
+  report.json["basis"] = to_string(nodes.basis);
+  report.json["gamma"] = nodes.gamma;
+  report.json["quadrature_points"] = nodes.quadrature_points;
+}
+
 void describe_errors(const ProblemResult& r, RunReport& report) {
   if (r.active_lower >= 0) report.json["active_set"] = {{"lower", r.active_lower}, {"upper", r.active_upper}};
   report.json["errors"] = nlohmann::json::array();
   for (const auto& e : r.errors) {
-    report.row("error of " + e.unknown, fmt::format("L2 {:.6e}, H1 semi-norm {:.6e}", e.l2, e.h1));
-    report.json["errors"].push_back({{"unknown", e.unknown}, {"l2", json_number(e.l2)}, {"h1", json_number(e.h1)}});
+    const bool h2 = !std::isnan(e.h2);
+    report.row("error of " + e.unknown, fmt::format("L2 {:.6e}, H1 semi-norm {:.6e}{}", e.l2, e.h1,
+                                                    h2 ? fmt::format(", H2 semi-norm {:.6e}", e.h2) : std::string()));
+    nlohmann::json row{{"unknown", e.unknown}, {"l2", json_number(e.l2)}, {"h1", json_number(e.h1)}};
+    if (h2) row["h2"] = json_number(e.h2);
+    report.json["errors"].push_back(row);
   }
 }
 
@@ -191,6 +214,7 @@ RunReport StationaryDriver::run(const DriverContext& ctx) const {
   describe_errors(r, report);
   describe_quantities(r.quantities, report);
   report.row("nodes", fmt::format("{} (h_min {:.4g}, h_mean {:.4g})", r.nodes.size(), r.h_min, r.h_mean));
+  describe_basis(ctx.scene->nodes, report);
   report.row("times", fmt::format("setup {:.2f} s, solve {:.2f} s", r.seconds_setup, r.seconds_solve));
   report.json["nodes"] = r.nodes.size();
   report.json["h_min"] = json_number(r.h_min);

@@ -5,6 +5,7 @@
 
 #include <mpi.h>
 
+#include <limits>
 #include <map>
 #include <memory>
 #include <string>
@@ -23,6 +24,7 @@ struct FieldError {
   std::string unknown;
   double l2 = 0;
   double h1 = 0;                             ///< semi-norm |∇(u − u_exact)|
+  double h2 = std::numeric_limits<double>::quiet_NaN();  ///< semi-norm |∇∇(u − u_exact)|, when the basis has Hessians
 };
 
 struct ProblemResult {
@@ -71,6 +73,9 @@ void take_nonlinear_solve(const struct NonlinearSolve& solve, ProblemResult& res
 /// The closing rows and JSON keys of a solve of equations (residual, linear): the solver's message,
 /// iterations and residual.
 void describe_equation_solve(const ProblemResult& result, RunReport& report);
+
+/// The closing row and JSON keys of the basis: its order, gamma, quadrature points per cell.
+void describe_basis(const SceneNodes& nodes, RunReport& report);
 
 /// The closing rows and JSON keys of the errors against exact solutions.
 void describe_errors(const ProblemResult& result, RunReport& report);

@@ -43,7 +43,8 @@ enum class AxisParity { even, odd };
 /// The LME options of a scene's fields: the smoothing passes on the nodal spacing, and for fields
 /// even in r of an axisymmetric scene the basis mirrored across the axis, so that the symmetry
 /// holds exactly and φ_r / r stays finite.
-[[nodiscard]] LmeOptions lme_options(int spacing_smoothing, bool axisymmetric, AxisParity parity);
+[[nodiscard]] LmeOptions lme_options(int spacing_smoothing, bool axisymmetric, AxisParity parity,
+                                     LmeConsistency basis = LmeConsistency::first);
 [[nodiscard]] LmeOptions lme_options(const Scene& scene, AxisParity parity);
 
 /// The constrained minimizer's options from the scene's [solver] table.

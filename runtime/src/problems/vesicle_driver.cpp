@@ -77,6 +77,7 @@ class VesicleDriver final : public ProblemDriver {
     describe_errors(r, report);
     describe_quantities(r.quantities, report);
     report.row("nodes", fmt::format("{} (h_min {:.4g}, h_mean {:.4g})", last.nodes, r.h_min, r.h_mean));
+    describe_basis(scene.nodes, report);
     report.row(model.width, fmt::format("{:g}", last.eps));
     const auto& reference = scene.reference.energy;
     report.json["nodes"] = last.nodes;

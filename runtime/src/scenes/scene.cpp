@@ -44,7 +44,7 @@ void read_scene_section(const Section& root, Scene& s) {
 
 void read_nodes(const Section& root, const std::filesystem::path& folder, Scene& s) {
   const Section t = root.table("nodes", {"spacing", "counts", "count", "lloyd_iterations", "file", "gamma", "spacing_smoothing",
-                                         "quadrature_points", "refine", "boundary_points", "integration"});
+                                         "quadrature_points", "refine", "boundary_points", "integration", "basis"});
   SceneNodes& n = s.nodes;
   const char* const kinds[] = {"spacing", "counts", "count", "file"};
   std::vector<std::string> present;
@@ -130,6 +130,13 @@ void read_nodes(const Section& root, const std::filesystem::path& folder, Scene&
     t.fail_key("gamma", "= " + format_number(n.gamma) + " makes the LME support (radius h sqrt(" + format_number(largest_gamma) +
                             " / gamma)) shorter than the nodal spacing h: give at most " + format_number(largest_gamma) +
                             " (0.5 to 4 are usual)");
+  n.basis = t.choice_of("basis", t.optional_string("basis").value_or("first"), {"first", "second"}) == "second"
+                ? LmeConsistency::second
+                : LmeConsistency::first;
+  if (n.basis == LmeConsistency::second && n.gamma > lme_second_order_max_gamma)
+    t.fail_key("gamma", "= " + format_number(n.gamma) + " is too large for nodes.basis = \"second\": its nodal gap h^2 / (2 gamma) must be " +
+                            "wider than the holes between nodes; give at most " + format_number(lme_second_order_max_gamma) +
+                            " (0.5 to 0.8 are usual), or the first-order basis");
   n.spacing_smoothing = t.at_least("spacing_smoothing", t.integer("spacing_smoothing", n.spacing_smoothing), 0);
   // Default: a positive rule of degree 4 in 2D (6 points), degree 5 in 3D (14 points).
   n.quadrature_points = t.integer("quadrature_points", s.dim() == 3 ? 14 : n.quadrature_points);
