@@ -483,7 +483,7 @@ double hessian_error(const NodeSet& nodes, LmeConsistency consistency, double ga
 }
 
 TEST(SecondOrder, HessiansConvergeWhereTheFirstOrderOnesStall) {
-  // A jittered grid (0.3 h), gamma 0.8, h = 0.1, 0.05, 0.025 (bench_basis_order has the tables).
+  // A jittered grid (0.3 h), gamma 0.8, h = 0.1, 0.05, 0.025 (bench_basis_approximation has the tables).
   std::vector<double> first, second;
   for (const double h : {0.1, 0.05, 0.025}) {
     const Box box = Box::unit(2);

@@ -9,21 +9,15 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <functional>
 #include <iostream>
-#include <regex>
-#include <sstream>
 #include <string>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
 #include "bench_common.hpp"
-#include "lmeform/output.hpp"
-#include "lmeform/petsc.hpp"
-#include "lmeform/scene.hpp"
-#include "problem_registry.hpp"
+#include "scene_runs.hpp"
 
 namespace {
 
@@ -79,31 +73,15 @@ std::vector<Case> cases() {
   return c;
 }
 
-std::string read_text(const fs::path& p) {
-  std::ifstream in(p);
-  if (!in) throw std::runtime_error("cannot read " + p.string());
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
 nlohmann::json run(const Case& c, double spacing, double gamma, const fs::path& work, double& wall) {
-  std::string text = read_text(fs::path(LMEFORM_DEMOS) / "solids" / (c.scene + ".toml"));
-  text = std::regex_replace(text, std::regex(R"(\nspacing = [0-9.eE+-]+)"), "\nspacing = " + std::to_string(spacing));
-  text = std::regex_replace(text, std::regex(R"(\ngamma = [0-9.eE+-]+)"), "");
-  text = std::regex_replace(text, std::regex(R"(\n\[nodes\]\n)"), "\n[nodes]\ngamma = " + std::to_string(gamma) + "\n");
-  const fs::path path = work / (c.scene + ".toml");
-  fs::create_directories(work);
-  write_text_atomically(path, text);
-  const Scene scene = load_scene(path, problems::driver_tables());
-  problems::DriverContext ctx;
-  ctx.comm = PETSC_COMM_WORLD;
-  ctx.scene = &scene;
-  const bench::Stopwatch clock;
-  const problems::RunReport report = problems::driver_for(scene).run(ctx);
-  wall = clock.seconds();
-  if (!report.success) throw std::runtime_error(c.name + " at spacing " + std::to_string(spacing) + ": " + report.status);
-  return report.json;
+  std::string text = bench::read_text(fs::path(LMEFORM_DEMOS) / "solids" / (c.scene + ".toml"));
+  text = bench::with_key(text, "nodes", "spacing", std::to_string(spacing));
+  text = bench::with_key(text, "nodes", "gamma", std::to_string(gamma));
+  try {
+    return bench::run_scene_text(text, work / (c.scene + ".toml"), wall);
+  } catch (const std::runtime_error& e) {
+    throw std::runtime_error(c.name + " at spacing " + std::to_string(spacing) + ": " + e.what());
+  }
 }
 
 }  // namespace

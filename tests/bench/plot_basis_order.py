@@ -1,14 +1,15 @@
 #!/usr/bin/python3
-"""Draws bench_basis_order and bench_plate_order (docs/lme_basis.md, "Order of the basis").
+"""Draws bench_basis_approximation and bench_plate_convergence (docs/lme_basis.md, docs/convergence.md).
 
     /usr/bin/python3 tests/bench/plot_basis_order.py [build/bench] [-o docs/figures]
 
-Writes, from DIR/basis_order.json and DIR/plate_order.json:
+Writes, from DIR/basis_approximation.json and DIR/basis_order.json:
   lme_order_hessian.png  Hessian error of sum p_a c_a for the generic test function against h,
                          interior and near the hull, uniform / jittered / graded nodes, both bases;
   lme_order_floor.png    first-order basis: the Hessian error, the second-moment floor P and the
                          remainder H - P against h (the floor is the error, the remainder converges);
-  lme_order_plate.png    the Kirchhoff plate: L2, H1 and H2 errors of w_h against h.
+  lme_order_plate.png    the manufactured Kirchhoff plate: L2, H1 and H2 errors of w_h against h;
+  lme_order_cost.png     its L2 and H2 errors against the number of nodes and the wall time.
 """
 import argparse
 import json
@@ -89,20 +90,25 @@ def plot_floor(rs, out):
     fig.savefig(os.path.join(out, "lme_order_floor.png"), dpi=110)
 
 
+def plate_groups(rs):
+    keys = sorted({(r["node_set"], r["basis"], r["gamma"], r["quadrature_points"]) for r in rs})
+    for node_set, basis, gamma, qp in keys:
+        sel = sorted([r for r in rs if (r["node_set"], r["basis"], r["gamma"], r["quadrature_points"]) == (node_set, basis, gamma, qp)],
+                     key=lambda r: -r["spacing"])
+        colour, marker = STYLE.get((basis, gamma), ("k", "."))
+        if node_set != "uniform":
+            marker = {6: "s", 12: "D", 19: "P"}.get(qp, marker)
+        ls = ("-" if basis == "second" else "--") if node_set == "uniform" else ":"
+        style = dict(marker=marker, ls=ls, color=colour, mfc="none" if node_set == "jittered" else colour,
+                     label="%s, %s, $\\gamma$ = %g, %d pts" % (node_set, basis, gamma, qp))
+        yield sel, style
+
+
 def plot_plate(rs, out):
     fig, axes = plt.subplots(1, 3, figsize=(14, 4.2))
-    for ax, key, name in zip(axes, ["l2", "h1", "h2"], ["L2", "H1 semi-norm", "H2 semi-norm"]):
-        groups = sorted({(r["nodes"], r["basis"], r["gamma"], r["quadrature_points"]) for r in rs})
-        for nodes, basis, gamma, qp in groups:
-            sel = sorted([r for r in rs if (r["nodes"], r["basis"], r["gamma"], r["quadrature_points"]) == (nodes, basis, gamma, qp)],
-                         key=lambda r: -r["h"])
-            colour, marker = STYLE.get((basis, gamma), ("k", "."))
-            if nodes != "uniform":
-                marker = {6: "s", 12: "D", 19: "P"}.get(qp, marker)
-            ls = ("-" if basis == "second" else "--") if nodes == "uniform" else ":"
-            ax.loglog([r["h"] for r in sel], [r[key] for r in sel], marker=marker, ls=ls, color=colour,
-                      mfc="none" if nodes == "jittered" else colour,
-                      label="%s, %s, $\\gamma$ = %g, %d pts" % (nodes, basis, gamma, qp))
+    for ax, key, name in zip(axes, ["error_l2", "error_h1", "error_h2"], ["L2", "H1 semi-norm", "H2 semi-norm"]):
+        for sel, style in plate_groups(rs):
+            ax.loglog([r["spacing"] for r in sel], [r[key] for r in sel], **style)
         ax.set_title("plate: %s error of w_h" % name)
         ax.set_xlabel("h")
         ax.grid(True, which="both", alpha=0.3)
@@ -111,17 +117,33 @@ def plot_plate(rs, out):
     fig.savefig(os.path.join(out, "lme_order_plate.png"), dpi=110)
 
 
+def plot_cost(rs, out):
+    fig, axes = plt.subplots(2, 2, figsize=(11, 8))
+    for row, (key, name) in enumerate([("error_l2", "L2"), ("error_h2", "H2 semi-norm")]):
+        for col, (x, xname) in enumerate([("nodes", "nodes"), ("wall_s", "wall time [s] (lmeform run, one core)")]):
+            ax = axes[row][col]
+            for sel, style in plate_groups(rs):
+                ax.loglog([r[x] for r in sel], [r[key] for r in sel], **style)
+            ax.set_xlabel(xname)
+            ax.set_ylabel("%s error of w_h" % name)
+            ax.grid(True, which="both", alpha=0.3)
+    axes[0][0].legend(fontsize=6)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "lme_order_cost.png"), dpi=110)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("dir", nargs="?", default="build/bench")
     parser.add_argument("-o", "--output", default="docs/figures")
     args = parser.parse_args()
-    convergence = records(os.path.join(args.dir, "basis_order.json"), "convergence")
+    convergence = records(os.path.join(args.dir, "basis_approximation.json"), "convergence")
     plot_hessian(convergence, args.output)
     plot_floor(convergence, args.output)
-    plate = os.path.join(args.dir, "plate_order.json")
+    plate = os.path.join(args.dir, "basis_order.json")
     if os.path.exists(plate):
         plot_plate(records(plate), args.output)
+        plot_cost(records(plate), args.output)
 
 
 if __name__ == "__main__":

@@ -819,6 +819,18 @@ TEST(SceneBasics, OutOfRange) {
   EXPECT_EQ(parse(edit(cube, "quadrature_points = 6", "quadrature_points = 4")).nodes.quadrature_points, 4);
 }
 
+TEST(SceneBasics, BasisOrder) {
+  EXPECT_EQ(parse(kMinimal).nodes.basis, LmeConsistency::first);
+  const Scene s = parse(edit(kMinimal, "counts = [21, 21]", "counts = [21, 21]\nbasis = \"second\"\ngamma = 0.5"));
+  EXPECT_EQ(s.nodes.basis, LmeConsistency::second);
+  std::string t = edit(kMinimal, "counts = [21, 21]", "counts = [21, 21]\nbasis = \"quadratic\"");
+  expect_error(t, {at_line(t, "basis ="), "key 'nodes.basis'", "first", "second"});
+  // The second-order basis needs its nodal gap h^2 / (2 gamma) wider than the holes between nodes.
+  t = edit(kMinimal, "counts = [21, 21]", "counts = [21, 21]\nbasis = \"second\"\ngamma = 1.8");
+  expect_error(t, {at_line(t, "gamma ="), "key 'nodes.gamma' = 1.8 is too large for nodes.basis = \"second\"", "at most 1"});
+  EXPECT_EQ(parse(edit(kMinimal, "counts = [21, 21]", "counts = [21, 21]\nbasis = \"first\"\ngamma = 1.8")).nodes.gamma, 1.8);
+}
+
 TEST(SceneBasics, NodeKinds) {
   const Scene s = parse(edit(kMinimal, "counts = [21, 21]", "count = 500\nlloyd_iterations = 40"));
   EXPECT_EQ(s.nodes.kind, SceneNodes::Kind::count);

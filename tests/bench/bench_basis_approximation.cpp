@@ -1,6 +1,6 @@
-// bench_basis_order: do the basis' second derivatives converge as the node spacing h falls at
+// bench_basis_approximation: do the basis' second derivatives converge as the node spacing h falls at
 // fixed gamma? (docs/lme_basis.md, "Order of the basis").
-//   bench_basis_order [--quick] [--out DIR]   writes DIR/basis_order.json
+//   bench_basis_approximation [--quick] [--out DIR]   writes DIR/basis_approximation.json
 //
 // 1. Approximation: f_h = sum_a p_a c_a of f = sin(pi x) sin(pi y) (the plate's solution) and of a
 //    generic smooth f (no symmetry at the boundary), with c_a = f(x_a) (first order) or the
@@ -321,14 +321,14 @@ void cost(bool quick, std::vector<JsonRecord>& records) {
 
 int main(int argc, char** argv) {
   const bench::BenchOptions options = bench::parse_bench_options(argc, argv);
-  for (const auto& u : options.unknown) std::fprintf(stderr, "bench_basis_order: ignoring %s\n", u.c_str());
+  for (const auto& u : options.unknown) std::fprintf(stderr, "bench_basis_approximation: ignoring %s\n", u.c_str());
   std::vector<JsonRecord> records;
   convergence(options.quick, records);
   feasibility(options.quick, records);
   cost(options.quick, records);
   JsonRecord meta;
   meta.set("tol0", LmeOptions{}.tol0).set("second_order_max_gamma", lme_second_order_max_gamma);
-  bench::write_json(options.out / "basis_order.json", "basis_order", options.quick, meta, records);
-  std::printf("\nwrote %s\n", (options.out / "basis_order.json").string().c_str());
+  bench::write_json(options.out / "basis_approximation.json", "basis_approximation", options.quick, meta, records);
+  std::printf("\nwrote %s\n", (options.out / "basis_approximation.json").string().c_str());
   return 0;
 }
