@@ -1,6 +1,6 @@
 // The manufactured simply supported Kirchhoff plate (demos/convergence/plate_mms.toml) with the
 // first- and the second-order max-ent basis, on uniform and jittered node ladders, solved through
-// the same driver as `lmeform run`. Writes DIR/basis_approximation.json: one record per run with basis,
+// the same driver as `lmeform run`. Writes DIR/basis_order.json: one record per run with basis,
 // gamma, node_set, spacing, nodes, quadrature_points, error_l2, error_h1, error_h2, wall_s and
 // the observed rates against the previous spacing; prints the table (docs/convergence.md).
 //   bench_plate_convergence [--quick] [--out DIR]
@@ -125,8 +125,8 @@ int main(int argc, char** argv) {
                                     {"scene", "demos/convergence/plate_mms.toml"},
                                     {"reference", "w = sin(pi x) sin(pi y)"},
                                     {"records", records}};
-      write_text_atomically(options.out / "basis_approximation.json", doc.dump(2) + "\n");
-      std::printf("wrote %s (%zu records)\n", (options.out / "basis_approximation.json").string().c_str(), records.size());
+      write_text_atomically(options.out / "basis_order.json", doc.dump(2) + "\n");
+      std::printf("wrote %s (%zu records)\n", (options.out / "basis_order.json").string().c_str(), records.size());
     }
   } catch (const std::exception& e) {
     std::cerr << "bench_plate_convergence: " << e.what() << "\n";

@@ -137,9 +137,11 @@ def main():
     parser.add_argument("dir", nargs="?", default="build/bench")
     parser.add_argument("-o", "--output", default="docs/figures")
     args = parser.parse_args()
-    convergence = records(os.path.join(args.dir, "basis_approximation.json"), "convergence")
-    plot_hessian(convergence, args.output)
-    plot_floor(convergence, args.output)
+    approximation = os.path.join(args.dir, "basis_approximation.json")
+    if os.path.exists(approximation):
+        convergence = records(approximation, "convergence")
+        plot_hessian(convergence, args.output)
+        plot_floor(convergence, args.output)
     plate = os.path.join(args.dir, "basis_order.json")
     if os.path.exists(plate):
         plot_plate(records(plate), args.output)
