@@ -512,7 +512,7 @@ TEST(Solids, ClampedPlateByNitsche) {
   const problems::RunReport clamped = run("plate_clamped.toml", clamped_scene);
   ASSERT_TRUE(clamped.success) << clamped.status;
   std::string simple = replaced(clamped_scene, "forms = [\"kirchhoff_plate\", \"kirchhoff_clamped\"]", "forms = [\"kirchhoff_plate\"]");
-  simple = replaced(simple, "beta = 20.0\n", "");
+  simple = replaced(simple, "beta = 20.0", "");
   simple = replaced(simple, "[qdata]\n", "");
   simple = replaced(simple, "h = \"support_size\"", "");
   const problems::RunReport supported = run("plate_supported.toml", simple);
