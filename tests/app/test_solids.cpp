@@ -779,6 +779,29 @@ TEST(BadInput, AMisspeltBoundaryPartOfAForm) {
   }
 }
 
+// The second-order basis needs nodes around every point spread wider than its gaps; the steeply
+// graded patch node set has points where no non-negative weights meet the quadratic constraints.
+// The refusal names the scene key, the point and the fixes; the same nodes without grading run.
+TEST(BadInput, ASecondOrderBasisOnTooSteeplyGradedNodes) {
+  std::string graded = replaced(demo("patch"), "integration = \"consistent\"", "integration = \"consistent\"\nbasis = \"second\"");
+  try {
+    const problems::RunReport r = run("patch_second.toml", graded);
+    ADD_FAILURE() << "the graded patch ran with the second-order basis: " << r.status;
+  } catch (const SceneError& e) {
+    const std::string m = e.what();
+    std::printf("message: %s\n", m.c_str());
+    EXPECT_NE(m.find("patch_second.toml: key 'nodes.basis' = \"second\""), std::string::npos) << m;
+    EXPECT_NE(m.find("at x = ("), std::string::npos) << m;
+    EXPECT_NE(m.find("'nodes.gamma'"), std::string::npos) << m;
+    EXPECT_NE(m.find("'nodes.basis' = \"first\""), std::string::npos) << m;
+  }
+  std::string uniform = replaced(graded, "spacing = 0.2", "spacing = 0.1");
+  uniform = replaced(uniform, "refine = [", "# refine = [");
+  const problems::RunReport r = run("patch_second_uniform.toml", uniform);
+  ASSERT_TRUE(r.success) << r.status;
+  EXPECT_LT(r.json.at("errors").at(0).at("l2").get<double>(), 1e-12) << "the patch test with the second-order basis";
+}
+
 TEST(BadInput, ANodeFileWithAPointOutsideThePolygon) {
   auto scene = [](const std::string& file) {
     return "[scene]\nname = \"nodes\"\ncoordinates = \"cartesian\"\n[domain]\n"

@@ -41,7 +41,15 @@ std::shared_ptr<Discretization> discretization_of(MPI_Comm comm, const BoundScen
       throw SceneError(fmt::format("{}: the boundary quadrature of ds({}): {}", b.source, part, e.what()));
     }
   }
-  return std::make_shared<Discretization>(comm, input.nodes, options);
+  try {
+    return std::make_shared<Discretization>(comm, input.nodes, options);
+  } catch (const LmeEvaluationError& e) {
+    if (e.reason() != LmeFailure::infeasible_second_moment) throw;
+    throw SceneError(fmt::format("{}: key 'nodes.basis' = \"second\" cannot be evaluated on these nodes: {}\n  in the scene: a smaller "
+                                 "'nodes.gamma' (now {:g}), more nodes there (or less steep 'nodes.refine' grading), or "
+                                 "'nodes.basis' = \"first\"",
+                                 b.source, e.what(), b.discretization.gamma));
+  }
 }
 
 /// The bound constants, the input's overrides and the constraint targets; the constraints' targets
