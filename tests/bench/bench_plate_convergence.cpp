@@ -25,7 +25,8 @@ struct Case {
   LmeConsistency basis;
   double gamma;
   int quadrature_points;
-  bool quick;  ///< part of the quick sweep
+  bool quick;                 ///< part of the quick sweep
+  bool consistent = false;    ///< integration = "consistent" (gradients and Hessians corrected cell by cell)
 };
 
 std::vector<Case> cases() {
@@ -33,7 +34,9 @@ std::vector<Case> cases() {
   return {{"uniform", first, 0.5, 6, false},   {"uniform", first, 0.8, 6, true},    {"uniform", first, 1.8, 6, false},
           {"uniform", second, 0.5, 6, false},  {"uniform", second, 0.8, 6, true},   {"jittered", first, 0.8, 6, false},
           {"jittered", first, 0.8, 12, false}, {"jittered", second, 0.8, 6, false}, {"jittered", second, 0.8, 12, true},
-          {"jittered", second, 0.8, 19, false}, {"jittered", second, 0.5, 12, false}};
+          {"jittered", second, 0.8, 19, false}, {"jittered", second, 0.5, 12, false},
+          {"uniform", second, 0.8, 6, false, true}, {"jittered", first, 0.8, 6, false, true},
+          {"jittered", second, 0.8, 6, true, true}, {"jittered", second, 0.5, 6, false, true}};
 }
 
 /// The error of unknown w in the report: l2, h1 or h2.
@@ -73,7 +76,7 @@ int main(int argc, char** argv) {
     const std::vector<double> spacings = options.quick ? std::vector<double>{0.1, 0.05, 0.025}
                                                        : std::vector<double>{0.1, 0.05, 0.025, 0.0125, 0.00625};
     nlohmann::ordered_json records = nlohmann::ordered_json::array();
-    std::printf("%-8s %-6s %5s %3s %8s %6s %10s %10s %10s %6s %6s %6s %7s\n", "nodes", "basis", "gamma", "qp", "h", "N", "L2", "H1 semi",
+    std::printf("%-8s %-6s %5s %3s %-10s %8s %6s %10s %10s %10s %6s %6s %6s %7s\n", "nodes", "basis", "gamma", "qp", "integration", "h", "N", "L2", "H1 semi",
                 "H2 semi", "r L2", "r H1", "r H2", "wall s");
     for (const Case& c : cases()) {
       if (options.quick && !c.quick) continue;
@@ -82,6 +85,7 @@ int main(int argc, char** argv) {
         std::string text = bench::with_key(scene, "nodes", "basis", fmt::format("\"{}\"", to_string(c.basis)));
         text = bench::with_key(text, "nodes", "gamma", fmt::format("{:g}", c.gamma));
         text = bench::with_key(text, "nodes", "quadrature_points", std::to_string(c.quadrature_points));
+        text = bench::with_key(text, "nodes", "integration", c.consistent ? "\"consistent\"" : "\"gauss\"");
         if (c.node_set == "uniform") {
           text = bench::with_key(text, "nodes", "spacing", fmt::format("{:g}", h));
         } else {
@@ -89,14 +93,15 @@ int main(int argc, char** argv) {
           text = bench::with_key(text, "nodes", "file", "\"" + jittered_nodes(h, work).string() + "\"");
         }
         double wall = 0;
-        const fs::path path = work / fmt::format("plate_{}_{}_{:g}_{}_{:g}.toml", c.node_set, to_string(c.basis), c.gamma, c.quadrature_points, h);
+        const fs::path path = work / fmt::format("plate_{}_{}_{:g}_{}{}_{:g}.toml", c.node_set, to_string(c.basis), c.gamma, c.quadrature_points,
+                                                 c.consistent ? "_consistent" : "", h);
         const nlohmann::json report = bench::run_scene_text(text, path, wall);
         const double e[3] = {error_of(report, "l2"), error_of(report, "h1"), error_of(report, "h2")};
         double rate[3];
         for (int k = 0; k < 3; ++k) rate[k] = std::log(previous[k] / e[k]) / std::log(previous_h / h);
         const auto nodes = report.at("nodes").get<long>();
-        std::printf("%-8s %-6s %5.2g %3d %8.5g %6ld %10.3e %10.3e %10.3e %6.2f %6.2f %6.2f %7.2f\n", c.node_set.c_str(), to_string(c.basis),
-                    c.gamma, c.quadrature_points, h, nodes, e[0], e[1], e[2], rate[0], rate[1], rate[2], wall);
+        std::printf("%-8s %-6s %5.2g %3d %-10s %8.5g %6ld %10.3e %10.3e %10.3e %6.2f %6.2f %6.2f %7.2f\n", c.node_set.c_str(), to_string(c.basis),
+                    c.gamma, c.quadrature_points, c.consistent ? "consistent" : "gauss", h, nodes, e[0], e[1], e[2], rate[0], rate[1], rate[2], wall);
         std::fflush(stdout);
         auto number = [](double v) { return std::isfinite(v) ? nlohmann::ordered_json(v) : nlohmann::ordered_json(); };
         records.push_back({{"basis", to_string(c.basis)},
@@ -105,6 +110,7 @@ int main(int argc, char** argv) {
                            {"spacing", h},
                            {"nodes", nodes},
                            {"quadrature_points", c.quadrature_points},
+                           {"integration", c.consistent ? "consistent" : "gauss"},
                            {"error_l2", number(e[0])},
                            {"error_h1", number(e[1])},
                            {"error_h2", number(e[2])},

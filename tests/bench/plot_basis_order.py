@@ -91,16 +91,19 @@ def plot_floor(rs, out):
 
 
 def plate_groups(rs):
-    keys = sorted({(r["node_set"], r["basis"], r["gamma"], r["quadrature_points"]) for r in rs})
-    for node_set, basis, gamma, qp in keys:
-        sel = sorted([r for r in rs if (r["node_set"], r["basis"], r["gamma"], r["quadrature_points"]) == (node_set, basis, gamma, qp)],
-                     key=lambda r: -r["spacing"])
+    def key(r):
+        return (r["node_set"], r["basis"], r["gamma"], r["quadrature_points"], r.get("integration", "gauss"))
+    for node_set, basis, gamma, qp, integration in sorted({key(r) for r in rs}):
+        sel = sorted([r for r in rs if key(r) == (node_set, basis, gamma, qp, integration)], key=lambda r: -r["spacing"])
         colour, marker = STYLE.get((basis, gamma), ("k", "."))
         if node_set != "uniform":
             marker = {6: "s", 12: "D", 19: "P"}.get(qp, marker)
         ls = ("-" if basis == "second" else "--") if node_set == "uniform" else ":"
+        if integration == "consistent":
+            ls, colour = "-.", {"first": "tab:purple", "second": "k"}[basis]
         style = dict(marker=marker, ls=ls, color=colour, mfc="none" if node_set == "jittered" else colour,
-                     label="%s, %s, $\\gamma$ = %g, %d pts" % (node_set, basis, gamma, qp))
+                     label="%s, %s, $\\gamma$ = %g, %d pts%s" % (node_set, basis, gamma, qp,
+                                                             ", consistent" if integration == "consistent" else ""))
         yield sel, style
 
 

@@ -178,6 +178,7 @@ class ElementSet {
   /// Consistent integration: per element node (element_nodes_ order) dim values added to the
   /// gradient at every point of the element; empty otherwise.
   std::vector<double> gradient_correction_;
+  std::vector<double> hessian_correction_;  ///< packed d(d+1)/2 per element node (basis_order >= 2)
 };
 
 class Discretization {

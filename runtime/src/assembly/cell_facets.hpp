@@ -12,8 +12,12 @@
 // facet rule integrates x ⊗ n exactly and the weights sum to |C|), so a linear field still has a
 // constant gradient, and the symmetric Galerkin solution reproduces it: the patch test passes to the
 // LME Newton tolerance with any interior rule. This is the variationally consistent integration of
-// Chen, Hillman and Rüter (2013), applied per cell to the test and trial functions alike. Second
-// derivatives are left as they are.
+// Chen, Hillman and Rüter (2013), applied per cell to the test and trial functions alike. When the
+// forms need second derivatives the Hessians get the same treatment one order up,
+//     C_aC = sym(∮_∂C ∇N_a ⊗ n ds − ∑_q w_q ∇∇N_a(x_q)) / |C|,
+// with the uncorrected gradients on the facets (so interior facets still cancel): a fourth-order
+// form is then integrated consistently for quadratic fields, and the Kirchhoff plate on irregular
+// nodes converges where the Gauss rule alone stalled (docs/convergence.md).
 #pragma once
 
 #include <cstddef>

@@ -274,16 +274,29 @@ void Discretization::build_gradient_correction() {
   const auto d = static_cast<std::size_t>(dim());
   const auto per_cell = d + 1, per_facet = static_cast<std::size_t>(facets.points_per_facet);
   const auto points_per_cell = static_cast<std::size_t>(quadrature_.points_per_cell);
-  const auto jet = static_cast<std::size_t>(kernel::jet_size(dim(), 1));
+  // With Hessians tabulated, they are corrected as well: sum_q w_q HN_a(x_q) = sym(oint grad N_a (x) n ds)
+  // cell by cell, the divergence theorem a fourth-order form needs to be integrated consistently.
+  const bool hessians = options_.basis_order >= 2;
+  const int order = hessians ? 2 : 1;
+  const auto jet = static_cast<std::size_t>(kernel::jet_size(dim(), order));
+  const std::size_t packed = d * (d + 1) / 2;
   std::vector<double> correction(cells.element_nodes_.indices.size() * d, 0.0);
-  std::vector<double> tabulation;
+  std::vector<double> hessian_correction(hessians ? cells.element_nodes_.indices.size() * packed : 0, 0.0);
+  // Hull facets belong to one cell. Exactly on the hull the derivatives are the limit of a singular
+  // solve: their gradients are taken a thousandth of the facet inside, as on the boundary domains.
+  std::vector<int> facet_cells(facets.size(), 0);
+  if (hessians)
+    for (const int f : facets.cell_facets) ++facet_cells[static_cast<std::size_t>(f)];
+  std::vector<double> tabulation, inner(d);
   LmeWorkspace ws;
   for (int e = 0; e < cells.n_elements(); ++e) {
     const auto element = cells.element_nodes(e);
     const std::size_t n = element.size();
-    const std::span<double> c(correction.data() + static_cast<std::size_t>(cells.element_nodes_.offsets[std::size_t(e)]) * d, n * d);
+    const auto offset = static_cast<std::size_t>(cells.element_nodes_.offsets[std::size_t(e)]);
+    const std::span<double> c(correction.data() + offset * d, n * d);
+    const std::span<double> h(hessians ? hessian_correction.data() + offset * packed : nullptr, hessians ? n * packed : 0);
     tabulation.assign(points_per_cell * jet * n, 0.0);
-    cells.tabulate(e, 1, tabulation, ws);
+    cells.tabulate(e, order, tabulation, ws);
     const auto first = static_cast<std::size_t>(cells.element_first_point(e));
     double measure = 0;
     for (std::size_t k = 0; k < points_per_cell; ++k) {
@@ -291,6 +304,8 @@ void Discretization::build_gradient_correction() {
       measure += w;
       for (std::size_t i = 0; i < d; ++i)
         for (std::size_t a = 0; a < n; ++a) c[a * d + i] -= w * tabulation[(k * jet + 1 + i) * n + a];
+      for (std::size_t slot = 0; slot < (hessians ? packed : 0); ++slot)
+        for (std::size_t a = 0; a < n; ++a) h[a * packed + slot] -= w * tabulation[(k * jet + 1 + d + slot) * n + a];
     }
     const std::size_t cell = first / points_per_cell;
     for (std::size_t k = 0; k < per_cell; ++k) {
@@ -300,16 +315,35 @@ void Discretization::build_gradient_correction() {
       for (std::size_t g = 0; g < per_facet; ++g) {
         const std::size_t p = f * per_facet + g;
         const auto list = facet_point_lists_[p];
-        const std::vector<double> values = basis_->evaluate(std::span<const double>(facets.points.data() + p * d, d), list, 0);
-        for (std::size_t m = 0; m < list.size(); ++m) {
+        const std::size_t m_count = list.size();
+        const std::span<const double> x(facets.points.data() + p * d, d);
+        std::vector<double> values = basis_->evaluate(x, list, hessians && facet_cells[f] != 1 ? 1 : 0);
+        if (hessians && facet_cells[f] == 1) {
+          double size = 0;
+          for (std::size_t q = 0; q < per_facet; ++q) size += facets.weights[f * per_facet + q];
+          for (std::size_t i = 0; i < d; ++i) inner[i] = x[i] - 1e-3 * std::pow(size, 1.0 / double(d - 1)) * sign * normal[i];
+          std::vector<double> jets = basis_->evaluate(inner, list, 1);
+          std::copy(values.begin(), values.end(), jets.begin());  // values on the hull itself
+          values = std::move(jets);
+        }
+        const double w = sign * facets.weights[p];
+        for (std::size_t m = 0; m < m_count; ++m) {
           const auto a = static_cast<std::size_t>(std::lower_bound(element.begin(), element.end(), list[m]) - element.begin());
-          for (std::size_t i = 0; i < d; ++i) c[a * d + i] += sign * facets.weights[p] * values[m] * normal[i];
+          for (std::size_t i = 0; i < d; ++i) c[a * d + i] += w * values[m] * normal[i];
+          if (!hessians) continue;
+          for (std::size_t i = 0; i < d; ++i)
+            for (std::size_t j = i; j < d; ++j) {
+              const auto slot = static_cast<std::size_t>(kernel::hessian_slot(int(i), int(j), dim()) - 1 - dim());
+              h[a * packed + slot] += w * 0.5 * (values[(1 + j) * m_count + m] * normal[i] + values[(1 + i) * m_count + m] * normal[j]);
+            }
         }
       }
     }
     for (double& v : c) v /= measure;
+    for (double& v : h) v /= measure;
   }
   cells.gradient_correction_ = std::move(correction);
+  cells.hessian_correction_ = std::move(hessian_correction);
 }
 
 void Discretization::build_boundary_domain(const BoundaryQuadrature& q) {
@@ -510,6 +544,12 @@ void ElementSet::tabulate(int e, int order, std::span<double> out, LmeWorkspace&
   for (std::size_t k = 0; k < count; ++k)
     for (std::size_t i = 0; i < d; ++i)
       for (std::size_t a = 0; a < n; ++a) out[(k * jet + 1 + i) * n + a] += c[a * d + i];
+  if (hessian_correction_.empty() || order < 2) return;
+  const std::size_t packed = d * (d + 1) / 2;
+  const double* hc = hessian_correction_.data() + static_cast<std::size_t>(element_nodes_.offsets[static_cast<std::size_t>(e)]) * packed;
+  for (std::size_t k = 0; k < count; ++k)
+    for (std::size_t slot = 0; slot < packed; ++slot)
+      for (std::size_t a = 0; a < n; ++a) out[(k * jet + 1 + d + slot) * n + a] += hc[a * packed + slot];
 }
 
 std::size_t ElementSet::storage_doubles() const noexcept {
