@@ -4,6 +4,7 @@
 #include <hdf5.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cctype>
 #include <cmath>
 #include <cstring>
@@ -11,6 +12,7 @@
 #include <fstream>
 #include <map>
 #include <span>
+#include <thread>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -491,6 +493,30 @@ TEST(AtomicText, WritesAndReplaces) {
   write_text_atomically(dir / "empty.csv", "");
   EXPECT_EQ(slurp(dir / "empty.csv"), "");
   EXPECT_EQ(listing(dir), (std::vector<std::string>{"empty.csv", "run.json"}));
+}
+
+// Two runs filling one JIT cache wrote the same generated form at once; with one temporary name per
+// path the second rename found its temporary gone ("cannot rename ... No such file or directory").
+TEST(AtomicText, ConcurrentWritersOfOnePathAllSucceed) {
+  const fs::path dir = scratch("text_concurrent");
+  const fs::path file = dir / "shared.form";
+  std::vector<std::thread> writers;
+  std::atomic<int> failures{0};
+  for (int t = 0; t < 8; ++t)
+    writers.emplace_back([&, t] {
+      for (int k = 0; k < 50; ++k) {
+        try {
+          write_text_atomically(file, "writer " + std::to_string(t) + "\n");
+        } catch (const std::exception&) {
+          ++failures;
+        }
+      }
+    });
+  for (auto& w : writers) w.join();
+  EXPECT_EQ(failures.load(), 0);
+  const std::string content = slurp(file);
+  EXPECT_EQ(content.rfind("writer ", 0), 0u) << content;
+  EXPECT_EQ(listing(dir), (std::vector<std::string>{"shared.form"})) << "no temporary left behind";
 }
 
 TEST(AtomicText, FailureNamesThePathAndLeavesNothing) {

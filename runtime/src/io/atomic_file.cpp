@@ -1,11 +1,13 @@
-// Atomic file writing: "<path>.tmp", fsync, rename. POSIX calls so that every OS error is reported.
+// Atomic file writing: "<path>.<pid>.<n>.tmp", fsync, rename. POSIX calls so that every OS error is reported.
 #include "io_detail.hpp"
 
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cerrno>
+#include <string>
 #include <stdexcept>
 #include <system_error>
 
@@ -43,8 +45,11 @@ class Descriptor {
 }  // namespace
 
 std::filesystem::path temporary_path(const std::filesystem::path& path) {
+  // Unique per process and call: two runs that write the same file (two ranks or two tests filling
+  // one JIT cache) must not rename each other's half-written temporary away.
+  static std::atomic<unsigned long> counter{0};
   std::filesystem::path tmp = path;
-  tmp += ".tmp";
+  tmp += "." + std::to_string(::getpid()) + "." + std::to_string(counter.fetch_add(1)) + ".tmp";
   return tmp;
 }
 

@@ -10,7 +10,7 @@
 
 namespace lmeform::io_detail {
 
-/// "<path>.tmp"
+/// "<path>.<pid>.<n>.tmp": unique per process and call
 [[nodiscard]] std::filesystem::path temporary_path(const std::filesystem::path& path);
 
 /// Writes `content` to `file` (created or truncated), flushes and fsyncs it. Throws
