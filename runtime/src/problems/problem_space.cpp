@@ -8,6 +8,7 @@
 #include <fmt/format.h>
 #include <fmt/ranges.h>
 
+#include "expressions.hpp"
 #include "quadrature_data.hpp"
 
 namespace lmeform::problems {
@@ -123,19 +124,14 @@ std::vector<PetscInt> owned_dofs(const Discretization& disc, const std::vector<s
   return dofs;
 }
 
-/// The prescribed coefficients of Dirichlet entry d at node `node` (renumbered) at x, every component.
-/// For the second-order basis a coefficient is not the nodal value g(x_a) but g(x_a) - G_a : H g(x_a) / 2
-/// (LmeBasis::gap_corrected): with nodal values the data's error is O(h^2), and a Poisson problem
-/// with curved boundary data converges at O(h^2) in L2 with either basis. The curvature of g along
-/// each principal direction e of G_a (on the hull: tangent to it) is a central difference of step
-/// sqrt(lambda), O(h^2) accurate, so the coefficient is O(h^4).
-void dirichlet_value(const BoundScene& b, const BoundDirichlet& d, const LmeBasis& basis, int node, std::span<const double> x,
-                     std::vector<double>& value) {
-  if (!d.value.is_expression()) {
-    std::fill(value.begin(), value.end(), d.value.number);
-    return;
-  }
-  b.expressions->evaluate(d.value.expression, x, value);
+/// Turns `value` (expression `handle` at x, every component) into the coefficient of node `node`
+/// (renumbered) for the second-order basis: g(x_a) - G_a : Hg(x_a) / 2 (LmeBasis::gap_corrected).
+/// With nodal values as coefficients the data's error is O(h^2), and a Poisson problem with curved
+/// boundary data converges at O(h^2) in L2 with either basis. The curvature of g along each
+/// principal direction e of G_a (on the hull: tangent to it) is a central difference of step
+/// sqrt(lambda), O(h^2) accurate, so the coefficient is O(h^4). The first-order basis keeps `value`.
+void gap_correct(const PointExpressions& expressions, int handle, const LmeBasis& basis, int node, std::span<const double> x,
+                 std::vector<double>& value) {
   if (basis.consistency() != LmeConsistency::second) return;
   const int dim = static_cast<int>(x.size());
   const std::size_t packed = std::size_t(dim * (dim + 1) / 2);
@@ -154,10 +150,39 @@ void dirichlet_value(const BoundScene& b, const BoundDirichlet& d, const LmeBasi
       y[std::size_t(i)] = x[std::size_t(i)] + step * eigen.eigenvectors()(i, k);
       z[std::size_t(i)] = x[std::size_t(i)] - step * eigen.eigenvectors()(i, k);
     }
-    b.expressions->evaluate(d.value.expression, y, plus);
-    b.expressions->evaluate(d.value.expression, z, minus);
+    expressions.evaluate(handle, y, plus);
+    expressions.evaluate(handle, z, minus);
     // lambda * curvature / 2 = (g(x + s e) + g(x - s e) - 2 g(x)) / 2 with s^2 = lambda.
     for (std::size_t c = 0; c < value.size(); ++c) value[c] -= 0.5 * (plus[c] + minus[c] - 2 * centre[c]);
+  }
+}
+
+/// The prescribed coefficients of Dirichlet entry d at node `node` (renumbered) at x, every component.
+void dirichlet_value(const BoundScene& b, const BoundDirichlet& d, const LmeBasis& basis, int node, std::span<const double> x,
+                     std::vector<double>& value) {
+  if (!d.value.is_expression()) {
+    std::fill(value.begin(), value.end(), d.value.number);
+    return;
+  }
+  b.expressions->evaluate(d.value.expression, x, value);
+  gap_correct(*b.expressions, d.value.expression, basis, node, x, value);
+}
+
+/// The scene's [initial] expressions as coefficients of the second-order basis (gap_correct): a
+/// curved start (a tanh profile) is then represented to O(h^3) instead of O(h^2).
+void gap_correct_initial(const BoundScene& b, const NodeSet& nodes, const Discretization& disc, std::vector<double>& state) {
+  if (disc.basis().consistency() != LmeConsistency::second) return;
+  const auto bs = static_cast<std::size_t>(b.layout.dofs_per_node);
+  const auto renumbered = disc.renumbered_index();
+  std::vector<double> value(3);
+  for (const BoundNodalField& f : b.initial) {
+    if (!b.layout.has(f.name) || !f.file.empty() || !f.value.is_expression()) continue;
+    const UnknownField& u = b.layout.field(f.name);
+    for (std::size_t a = 0; a < nodes.size(); ++a) {
+      b.expressions->evaluate(f.value.expression, nodes.point(a), value);
+      gap_correct(*b.expressions, f.value.expression, disc.basis(), renumbered[a], nodes.point(a), value);
+      for (int c = 0; c < u.components; ++c) state[a * bs + std::size_t(u.offset + c)] = value[std::size_t(c)];
+    }
   }
 }
 
@@ -166,7 +191,12 @@ void impose_dirichlet(const BoundScene& b, const ProblemInput& input, ProblemSpa
   const NodeSet& nodes = input.nodes;
   const int bs = b.layout.dofs_per_node;
   std::vector<double>& state = space.state;
-  state = input.initial.empty() ? initial_state(b, nodes) : input.initial;
+  if (input.initial.empty()) {
+    state = initial_state(b, nodes);
+    gap_correct_initial(b, nodes, *space.disc, state);
+  } else {
+    state = input.initial;
+  }
   if (state.size() != nodes.size() * std::size_t(bs))
     throw std::invalid_argument(fmt::format("build_problem_space: the initial state has {} values for {} nodes x {} dofs", state.size(),
                                             nodes.size(), bs));
