@@ -76,10 +76,10 @@ TEST(SceneCoefficients, NumberAndExpressionGiveTheSameField) {
   EXPECT_GT(biggest, 0.1);
 }
 
-// With the second-order basis a coefficient is not a nodal value: an [initial] expression is taken
-// as g(x_a) - G_a : Hg(x_a) / 2, and a quadratic start is then represented exactly (misfit at
-// round-off); the first-order basis cannot (misfit O(h^4)).
-TEST(SceneCoefficients, InitialQuadraticIsExactWithTheSecondOrderBasis) {
+// With the second-order basis a coefficient is not a nodal value: an [initial] or [coefficients]
+// expression is taken as g(x_a) - G_a : Hg(x_a) / 2, and a quadratic field is then represented
+// exactly (misfit at round-off); the first-order basis cannot (misfit O(h^4)).
+TEST(SceneCoefficients, QuadraticInitialAndCoefficientAreExactWithTheSecondOrderBasis) {
   const fs::path dir = fs::path(LMEFORM_TEST_TMPDIR) / "coefficients";
   fs::create_directories(dir);
   fs::copy_file(fs::path(LMEFORM_TEST_DATA) / "initial_misfit.form", dir / "initial_misfit.form", fs::copy_options::overwrite_existing);
@@ -87,19 +87,24 @@ TEST(SceneCoefficients, InitialQuadraticIsExactWithTheSecondOrderBasis) {
     const fs::path path = dir / ("initial_" + basis + ".toml");
     std::ofstream(path) << "[scene]\nname = \"initial\"\ncoordinates = \"cartesian\"\n[domain]\nlower = [0.0, 0.0]\nupper = [1.0, 1.0]\n"
                            "[nodes]\nspacing = 0.1\ngamma = 0.8\nbasis = \"" + basis + "\"\n[model]\nforms = [\"initial_misfit.form\"]\n"
-                           "[initial]\nu = \"x[0]^2 + 3*x[0]*x[1] - x[1]^2\"\n";
+                           "[initial]\nu = \"x[0]^2 + 3*x[0]*x[1] - x[1]^2\"\n"
+                           "[coefficients]\nf = \"x[0]^2 + 3*x[0]*x[1] - x[1]^2\"\n";
     const Scene s = load_scene(path);
     const problems::BoundScene bound = problems::bind_scene(s, PETSC_COMM_WORLD, nullptr);
     problems::ProblemInput input;
     input.nodes = problems::initial_nodes(s);
     input.evaluate_only = true;
     input.lme = bound.lme(problems::AxisParity::even);
-    return problems::solve_problem(PETSC_COMM_WORLD, bound, input).values.at("initial_misfit.misfit");
+    const auto values = problems::solve_problem(PETSC_COMM_WORLD, bound, input).values;
+    return std::pair{values.at("initial_misfit.misfit"), values.at("initial_misfit.coefficient_misfit")};
   };
-  const double second = misfit("second"), first = misfit("first");
-  std::printf("misfit of the quadratic start: %.3e (second order), %.3e (first order)\n", second, first);
-  EXPECT_LT(second, 1e-20);
-  EXPECT_GT(first, 1e-10);
+  const auto second = misfit("second"), first = misfit("first");
+  std::printf("misfit of the quadratic start: %.3e (second order), %.3e (first order); of the coefficient: %.3e, %.3e\n",
+              second.first, first.first, second.second, first.second);
+  EXPECT_LT(second.first, 1e-20);
+  EXPECT_GT(first.first, 1e-10);
+  EXPECT_LT(second.second, 1e-20);
+  EXPECT_GT(first.second, 1e-10);
 }
 
 TEST(SceneCoefficients, MissingAndMisspeltAreNamed) {

@@ -163,14 +163,19 @@ std::vector<double> initial_state(const BoundScene& b, const NodeSet& nodes) {
   return nodal_values(b, b.initial, b.layout, nodes);
 }
 
-/// Values of every coefficient field a kernel reads, in the kernel's own layout.
-std::vector<double> kernel_coefficient_values(const BoundScene& b, const kernel::FormKernels& k, const NodeSet& nodes,
-                                              const std::map<std::string, std::vector<double>, std::less<>>& given) {
+StateLayout kernel_coefficient_layout(const kernel::FormKernels& k) {
   StateLayout layout;
   for (int i = 0; i < k.n_coefficients; ++i) {
     layout.fields.push_back({k.coefficients[i].name, k.coefficients[i].components, layout.dofs_per_node});
     layout.dofs_per_node += k.coefficients[i].components;
   }
+  return layout;
+}
+
+/// Values of every coefficient field a kernel reads, in the kernel's own layout.
+std::vector<double> kernel_coefficient_values(const BoundScene& b, const kernel::FormKernels& k, const NodeSet& nodes,
+                                              const std::map<std::string, std::vector<double>, std::less<>>& given) {
+  const StateLayout layout = kernel_coefficient_layout(k);
   std::vector<double> values = nodal_values(b, b.coefficients, layout, nodes);
   for (const auto& field : layout.fields) {
     const auto it = given.find(field.name);

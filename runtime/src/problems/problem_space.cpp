@@ -86,44 +86,6 @@ std::vector<double> qdata_of(const BoundScene& b, const kernel::FormKernels& k, 
   return data;
 }
 
-/// An assembler of one output with its coefficients, constants and quadrature data set.
-std::unique_ptr<Assembler> make_assembler(const BoundScene& b, const BoundOutput& output, const ProblemInput& input,
-                                          QuadratureData& qdata, ProblemSpace& space) {
-  const Discretization& disc = *space.disc;
-  const kernel::FormKernels& k = output.first();
-  auto a = std::make_unique<Assembler>(disc, output.kernels);
-  if (k.n_coefficients > 0) {
-    const std::vector<double> values = kernel_coefficient_values(b, k, input.nodes, input.coefficient_values);
-    PetscVector& c = space.coefficient_vectors[output.label] = a->create_coefficient_vector();
-    set_from_original(disc, values, k.coefficient_components_per_node, c);
-    a->set_coefficients(c);
-  }
-  for (int i = 0; i < k.n_constants; ++i) {
-    const bool initial_target = std::any_of(b.constraints.begin(), b.constraints.end(), [&](const BoundConstraint& c) {
-      return c.initial && c.target_constant == k.constants[i];
-    });
-    const double v = initial_target ? 0.0 : space.constants.at(k.constants[i]);  // an initial target: set from the start
-    if (std::isnan(v)) throw SceneError(fmt::format("{}: the constant '{}' of {} has no value", b.source, k.constants[i], output.label));
-    a->set_constant(k.constants[i], v);
-  }
-  if (k.qdata_per_point > 0)
-    for (const Assembler::Integral& integral : a->integrals()) a->set_qdata(*integral.domain, qdata_of(b, k, *integral.domain, qdata));
-  return a;
-}
-
-/// Owned global (renumbered) dofs of (original node, component) pairs.
-std::vector<PetscInt> owned_dofs(const Discretization& disc, const std::vector<std::pair<int, int>>& node_components, int bs) {
-  std::vector<PetscInt> dofs;
-  const auto renumbered = disc.renumbered_index();
-  for (const auto& [node, comp] : node_components) {
-    const int r = renumbered[static_cast<std::size_t>(node)];
-    if (disc.owns(r)) dofs.push_back(static_cast<PetscInt>(r) * bs + comp);
-  }
-  std::sort(dofs.begin(), dofs.end());
-  dofs.erase(std::unique(dofs.begin(), dofs.end()), dofs.end());
-  return dofs;
-}
-
 /// Turns `value` (expression `handle` at x, every component) into the coefficient of node `node`
 /// (renumbered) for the second-order basis: g(x_a) - G_a : Hg(x_a) / 2 (LmeBasis::gap_corrected).
 /// With nodal values as coefficients the data's error is O(h^2), and a Poisson problem with curved
@@ -157,6 +119,66 @@ void gap_correct(const PointExpressions& expressions, int handle, const LmeBasis
   }
 }
 
+/// Nodal fields of `entries` given as expressions (the scene's [initial] or [coefficients]) as
+/// coefficients of the second-order basis (gap_correct): a curved field (a tanh profile, a load) is
+/// then represented to O(h^3) instead of O(h^2). Fields in `given` (a transfer's values) are left.
+void gap_correct_fields(const BoundScene& b, const std::vector<BoundNodalField>& entries, const StateLayout& layout, const NodeSet& nodes,
+                        const Discretization& disc, std::vector<double>& values,
+                        const std::map<std::string, std::vector<double>, std::less<>>& given = {}) {
+  if (disc.basis().consistency() != LmeConsistency::second) return;
+  const auto bs = static_cast<std::size_t>(layout.dofs_per_node);
+  const auto renumbered = disc.renumbered_index();
+  std::vector<double> value(3);
+  for (const BoundNodalField& f : entries) {
+    if (!layout.has(f.name) || !f.file.empty() || !f.value.is_expression() || given.contains(f.name)) continue;
+    const UnknownField& u = layout.field(f.name);
+    for (std::size_t a = 0; a < nodes.size(); ++a) {
+      b.expressions->evaluate(f.value.expression, nodes.point(a), value);
+      gap_correct(*b.expressions, f.value.expression, disc.basis(), renumbered[a], nodes.point(a), value);
+      for (int c = 0; c < u.components; ++c) values[a * bs + std::size_t(u.offset + c)] = value[std::size_t(c)];
+    }
+  }
+}
+
+/// An assembler of one output with its coefficients, constants and quadrature data set.
+std::unique_ptr<Assembler> make_assembler(const BoundScene& b, const BoundOutput& output, const ProblemInput& input,
+                                          QuadratureData& qdata, ProblemSpace& space) {
+  const Discretization& disc = *space.disc;
+  const kernel::FormKernels& k = output.first();
+  auto a = std::make_unique<Assembler>(disc, output.kernels);
+  if (k.n_coefficients > 0) {
+    std::vector<double> values = kernel_coefficient_values(b, k, input.nodes, input.coefficient_values);
+    gap_correct_fields(b, b.coefficients, kernel_coefficient_layout(k), input.nodes, disc, values, input.coefficient_values);
+    PetscVector& c = space.coefficient_vectors[output.label] = a->create_coefficient_vector();
+    set_from_original(disc, values, k.coefficient_components_per_node, c);
+    a->set_coefficients(c);
+  }
+  for (int i = 0; i < k.n_constants; ++i) {
+    const bool initial_target = std::any_of(b.constraints.begin(), b.constraints.end(), [&](const BoundConstraint& c) {
+      return c.initial && c.target_constant == k.constants[i];
+    });
+    const double v = initial_target ? 0.0 : space.constants.at(k.constants[i]);  // an initial target: set from the start
+    if (std::isnan(v)) throw SceneError(fmt::format("{}: the constant '{}' of {} has no value", b.source, k.constants[i], output.label));
+    a->set_constant(k.constants[i], v);
+  }
+  if (k.qdata_per_point > 0)
+    for (const Assembler::Integral& integral : a->integrals()) a->set_qdata(*integral.domain, qdata_of(b, k, *integral.domain, qdata));
+  return a;
+}
+
+/// Owned global (renumbered) dofs of (original node, component) pairs.
+std::vector<PetscInt> owned_dofs(const Discretization& disc, const std::vector<std::pair<int, int>>& node_components, int bs) {
+  std::vector<PetscInt> dofs;
+  const auto renumbered = disc.renumbered_index();
+  for (const auto& [node, comp] : node_components) {
+    const int r = renumbered[static_cast<std::size_t>(node)];
+    if (disc.owns(r)) dofs.push_back(static_cast<PetscInt>(r) * bs + comp);
+  }
+  std::sort(dofs.begin(), dofs.end());
+  dofs.erase(std::unique(dofs.begin(), dofs.end()), dofs.end());
+  return dofs;
+}
+
 /// The prescribed coefficients of Dirichlet entry d at node `node` (renumbered) at x, every component.
 void dirichlet_value(const BoundScene& b, const BoundDirichlet& d, const LmeBasis& basis, int node, std::span<const double> x,
                      std::vector<double>& value) {
@@ -168,24 +190,6 @@ void dirichlet_value(const BoundScene& b, const BoundDirichlet& d, const LmeBasi
   gap_correct(*b.expressions, d.value.expression, basis, node, x, value);
 }
 
-/// The scene's [initial] expressions as coefficients of the second-order basis (gap_correct): a
-/// curved start (a tanh profile) is then represented to O(h^3) instead of O(h^2).
-void gap_correct_initial(const BoundScene& b, const NodeSet& nodes, const Discretization& disc, std::vector<double>& state) {
-  if (disc.basis().consistency() != LmeConsistency::second) return;
-  const auto bs = static_cast<std::size_t>(b.layout.dofs_per_node);
-  const auto renumbered = disc.renumbered_index();
-  std::vector<double> value(3);
-  for (const BoundNodalField& f : b.initial) {
-    if (!b.layout.has(f.name) || !f.file.empty() || !f.value.is_expression()) continue;
-    const UnknownField& u = b.layout.field(f.name);
-    for (std::size_t a = 0; a < nodes.size(); ++a) {
-      b.expressions->evaluate(f.value.expression, nodes.point(a), value);
-      gap_correct(*b.expressions, f.value.expression, disc.basis(), renumbered[a], nodes.point(a), value);
-      for (int c = 0; c < u.components; ++c) state[a * bs + std::size_t(u.offset + c)] = value[std::size_t(c)];
-    }
-  }
-}
-
 /// The start (the input's, else the scene's [initial]) with the Dirichlet values imposed.
 void impose_dirichlet(const BoundScene& b, const ProblemInput& input, ProblemSpace& space) {
   const NodeSet& nodes = input.nodes;
@@ -193,7 +197,7 @@ void impose_dirichlet(const BoundScene& b, const ProblemInput& input, ProblemSpa
   std::vector<double>& state = space.state;
   if (input.initial.empty()) {
     state = initial_state(b, nodes);
-    gap_correct_initial(b, nodes, *space.disc, state);
+    gap_correct_fields(b, b.initial, b.layout, nodes, *space.disc, state);
   } else {
     state = input.initial;
   }

@@ -110,6 +110,9 @@ struct ProblemSpace {
 /// Throws SceneError when the scene gives no such field.
 [[nodiscard]] std::vector<double> coefficient_values(const BoundScene& b, const std::string& name, int components, const NodeSet& nodes);
 
+/// The layout of the coefficient fields kernel `k` reads (coefficient_components_per_node per node).
+[[nodiscard]] StateLayout kernel_coefficient_layout(const kernel::FormKernels& k);
+
 /// Values at the nodes (original order) of the coefficient fields kernel `k` reads, in its layout
 /// (coefficient_components_per_node per node): from [coefficients], or from `given` for scalar fields.
 [[nodiscard]] std::vector<double> kernel_coefficient_values(const BoundScene& b, const kernel::FormKernels& k, const NodeSet& nodes,
