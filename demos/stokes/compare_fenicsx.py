@@ -57,17 +57,18 @@ def fenicsx_records(path):
 def lmeform_records(path):
     raw = load(path)
     out = []
-    by_problem = collections.defaultdict(list)
+    by_problem = collections.defaultdict(list)  # (problem, basis): the first- and second-order series apart
     for r in raw:
         if r.get("node_set", "uniform") == "uniform" and str(r.get("stabilization", "")).lower() == "gls":
-            by_problem[r["problem"]].append(r)
+            by_problem[(r["problem"], r.get("basis", "first"))].append(r)
     if not by_problem:
         stabs = sorted({str(r.get("stabilization")) for r in raw})
         print(f"note: {path} has no uniform-node 'gls' records (stabilizations present: {stabs})")
-    for problem, rows in by_problem.items():
+    for (problem, basis), rows in by_problem.items():
         counts = collections.Counter((num(r.get("gamma")), num(r.get("C"))) for r in rows)
         (gamma, c), _ = max(counts.items(), key=lambda kv: (kv[1], -(kv[0][0] or 0)))
-        label = f"LME gls gamma={gamma}" + (f" C={c}" if c is not None else "")
+        label = ("LME gls" if basis == "first" else "2nd-order max-ent gls, consistent") + f" gamma={gamma:g}" + \
+            (f" C={c}" if c is not None else "")
         kept = [r for r in rows if (num(r.get("gamma")), num(r.get("C"))) == (gamma, c)]
         if len(counts) > 1:
             print(f"note: {problem}: {len(counts)} (gamma, C) pairs among uniform gls runs; "

@@ -44,11 +44,12 @@ inline std::vector<Stabilization> stabilizations() {
 }
 
 /// The scene text of a problem (the node set is given to solve_problem directly).
-inline std::string scene_text(const Problem& pb, double gamma, const std::string& extra = "") {
+/// `nodes_extra`: more [nodes] keys (e.g. the basis), `extra`: more tables.
+inline std::string scene_text(const Problem& pb, double gamma, const std::string& extra = "", const std::string& nodes_extra = "") {
   std::ostringstream s;
   s << "[scene]\nname = \"" << pb.name << "\"\ncoordinates = \"cartesian\"\n"
     << "[domain]\nlower = [" << pb.lower << ", " << pb.lower << "]\nupper = [" << pb.upper << ", " << pb.upper << "]\n"
-    << "[nodes]\ncounts = [9, 9]\ngamma = " << gamma << "\nquadrature_points = 6\n"
+    << "[nodes]\ncounts = [9, 9]\ngamma = " << gamma << "\nquadrature_points = 6\n" << nodes_extra
     << "[model]\nforms = [\"stokes\"]\nbilinear = \"a\"\nlinear = \"l\"\nzero_mean = [\"p\"]\n"
     << "[constants]\nnu = 1.0\nC = 0.1\nalpha = 1.0\nbeta = 1.0\n"
     << "[qdata]\nrho_bar = \"support_size\"\nf = \"" << pb.f << "\"\n"
