@@ -30,28 +30,21 @@ std::vector<FieldError> field_errors(MPI_Comm comm, const BoundScene& b, const P
   for (const BoundExactSolution& exact : b.exact) {
     const UnknownField& field = exact.field;
     const FormModule& errors = compile_error_form(b.dim, field.name, field.components, exact.expression, b.constants, exact.where, comm, log);
-    const auto& l2 = errors.at("l2", b.dim);
-    const auto& h1 = errors.at("h1", b.dim);
-    Assembler l2_form(disc, l2), h1_form(disc, h1);
-    for (int i = 0; i < l2.n_constants; ++i) {
-      const double v = space.constants.at(l2.constants[i]);
-      l2_form.set_constant(l2.constants[i], std::isnan(v) ? 0.0 : v);
-      h1_form.set_constant(h1.constants[i], std::isnan(v) ? 0.0 : v);
-    }
     // The error form has this unknown alone: its state is the unknown's components.
-    PetscVector v = l2_form.create_vector();
+    PetscVector v = Assembler(disc, errors.at("l2", b.dim)).create_vector();
     set_from_original(disc, b.layout.values(state, field), field.components, v);
-    FieldError e{field.name, std::sqrt(std::max(0.0, l2_form.value(v))), std::sqrt(std::max(0.0, h1_form.value(v)))};
-    // Hessians are tabulated only for forms that need them: a second-order problem does not pay for its H2 error.
-    if (b.basis_order >= 2) {
-      const auto& h2 = errors.at("h2", b.dim);
-      Assembler h2_form(disc, h2);
-      for (int i = 0; i < h2.n_constants; ++i) {
-        const double c = space.constants.at(h2.constants[i]);
-        h2_form.set_constant(h2.constants[i], std::isnan(c) ? 0.0 : c);
+    auto norm = [&](const char* output) {
+      const kernel::FormKernels& k = errors.at(output, b.dim);
+      Assembler form(disc, k);
+      for (int i = 0; i < k.n_constants; ++i) {
+        const double c = space.constants.at(k.constants[i]);
+        form.set_constant(k.constants[i], std::isnan(c) ? 0.0 : c);
       }
-      e.h2 = std::sqrt(std::max(0.0, h2_form.value(v)));
-    }
+      return std::sqrt(std::max(0.0, form.value(v)));
+    };
+    FieldError e{field.name, norm("l2"), norm("h1")};
+    // Hessians are tabulated only for forms that need them: a second-order problem does not pay for its H2 error.
+    if (b.basis_order >= 2) e.h2 = norm("h2");
     out.push_back(e);
   }
   return out;
