@@ -779,8 +779,8 @@ TEST(SceneBasics, WrongTypes) {
   expect_error(t, {at_line(t, "spacing ="), "key 'nodes.spacing' must be a number, found a string"});
   t = edit(kMinimal, "upper = [1.0, 1.0]", "upper = [1.0, 1.0, 3.0]");
   expect_error(t, {at_line(t, "upper ="), "key 'domain.upper' must be an array of 2 numbers, found 3 entries"});
-  t = edit(kMinimal, "lower = [0.0, 0.0]", "lower = [0.0]");
-  expect_error(t, {"key 'domain.lower' must be an array of 2 or 3 numbers, found 1 entry"});
+  t = edit(kMinimal, "lower = [0.0, 0.0]", "lower = []");
+  expect_error(t, {"key 'domain.lower' must be an array of 1, 2 or 3 numbers, found 0 entries"});
   t = edit(kMinimal, "upper = [1.0, 1.0]", "upper = [1.0, \"1\"]");
   expect_error(t, {"key 'domain.upper[1]' must be a number, found a string"});
   t = edit(kMinimal, "counts = [21, 21]", "counts = [21, 21.5]");

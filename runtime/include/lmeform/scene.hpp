@@ -195,6 +195,7 @@ struct SceneQuantity {
     probe,      ///< a field's value at a point
     integral,   ///< ∫ expression dx, or ds(part) with `part`
     constant,   ///< a constant's value (a load parameter)
+    energy,     ///< the value of one energy output of the problem (e.g. the surface energy of a crack)
   } kind = Kind::constant;
   std::string part;                  ///< reaction: the boundary part; integral: "" (dx) or the part of ds
   std::string field;                 ///< reaction, probe: the unknown
@@ -202,6 +203,7 @@ struct SceneQuantity {
   int component = -1;                ///< probe, reaction: one component (-1: every one)
   std::string expression;            ///< integral (of x, the constants and the unknowns)
   std::string constant;              ///< constant
+  std::string output;                ///< energy: the output's name, or module.output
   std::string where;
 };
 

@@ -294,15 +294,15 @@ class SceneTable {
     fail_key(key, msg);
   }
 
-  /// An array of `count` numbers (count = 0: 2 or 3 numbers).
+  /// An array of `count` numbers (count = 0: 1, 2 or 3 numbers).
   [[nodiscard]] std::vector<double> numbers(std::string_view key, int count) const {
     const toml::node& n = require(key);
     const auto* a = n.as_array();
     const std::string expected = count > 0 ? "an array of " + std::to_string(count) + " numbers"
-                                           : std::string("an array of 2 or 3 numbers");
+                                           : std::string("an array of 1, 2 or 3 numbers");
     if (a == nullptr) wrong_type(key, n, expected.c_str());
     const auto size = static_cast<int>(a->size());
-    if ((count > 0 && size != count) || (count == 0 && (size < 2 || size > 3)))
+    if ((count > 0 && size != count) || (count == 0 && (size < 1 || size > 3)))
       fail(ctx_, &n, "key '" + key_path(key) + "' must be " + expected + ", found " + std::to_string(size) +
                          (size == 1 ? " entry" : " entries"));
     std::vector<double> v;

@@ -455,6 +455,22 @@ void bind_quantities(const Scene& scene, MPI_Comm comm, std::ostream* log, const
       for (const auto& [n, v] : b.constants) names.push_back(n);
       throw SceneError(fmt::format("{}: '{}' is no constant of the forms{}", q.where, q.constant, did_you_mean(q.constant, names)));
     }
+    if (q.kind == Kind::energy) {
+      std::vector<std::string> names;
+      for (const BoundOutput& e : b.energy) {
+        const std::string short_name = e.label.substr(e.label.find('.') + 1);
+        names.push_back(short_name);
+        if (q.output == e.label || q.output == short_name) {
+          if (bq.integral)
+            throw SceneError(fmt::format("{}: '{}' names several energy outputs: write MODULE.OUTPUT ({} or {})", q.where, q.output,
+                                         bq.integral->label, e.label));
+          bq.integral = e;
+        }
+      }
+      if (!bq.integral)
+        throw SceneError(fmt::format("{}: '{}' is no energy output of the problem{} (energies: {})", q.where, q.output,
+                                     did_you_mean(q.output, names), fmt::join(names, ", ")));
+    }
     if (q.kind == Kind::integral) {
       integrals.push_back({q.expression, q.part, !q.part.empty()});
       where.push_back(q.where);

@@ -121,7 +121,7 @@ struct BoundQuantity {
   SceneQuantity scene;
   UnknownField field;                 ///< reaction, probe of an unknown
   const kernel::FormKernels* point = nullptr;  ///< probe of a point output
-  std::optional<BoundOutput> integral;  ///< integral: its generated kernels
+  std::optional<BoundOutput> integral;  ///< integral: its generated kernels; energy: the problem's output
 };
 
 /// What the discretization of a scene is made of.

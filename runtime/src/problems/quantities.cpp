@@ -93,6 +93,7 @@ QuantityValues evaluate_quantities(const BoundScene& b, ProblemSpace& space, Vec
         break;
       case SceneQuantity::Kind::integral: out.emplace_back(q.scene.name, space.assemblers.at(q.integral->label)->value(u)); break;
       case SceneQuantity::Kind::constant: out.emplace_back(q.scene.name, space.constants.at(q.scene.constant)); break;
+      case SceneQuantity::Kind::energy: out.emplace_back(q.scene.name, space.assemblers.at(q.integral->label)->value(u)); break;
     }
   }
   return out;

@@ -139,8 +139,18 @@ void read_nodes(const Section& root, const std::filesystem::path& folder, Scene&
                             " (0.5 to 0.8 are usual), or the first-order basis");
   n.spacing_smoothing = t.at_least("spacing_smoothing", t.integer("spacing_smoothing", n.spacing_smoothing), 0);
   // Default: a positive rule of degree 4 in 2D (6 points), degree 5 in 3D (14 points).
-  n.quadrature_points = t.integer("quadrature_points", s.dim() == 3 ? 14 : n.quadrature_points);
+  // 1D: Gauss-Legendre points per segment between nodes (4: exact to degree 7).
+  n.quadrature_points = t.integer("quadrature_points", s.dim() == 3 ? 14 : s.dim() == 1 ? 4 : n.quadrature_points);
   n.boundary_points = t.integer("boundary_points", s.dim() == 3 ? 6 : n.boundary_points);
+  if (s.dim() == 1) {
+    if (n.quadrature_points < 1 || n.quadrature_points > 10)
+      t.fail_key("quadrature_points", "= " + std::to_string(n.quadrature_points) + " must lie in 1..10 (Gauss-Legendre points per segment in 1D)");
+    const std::string integration = t.choice_of("integration", t.optional_string("integration").value_or("gauss"), {"gauss", "consistent"});
+    if (integration == "consistent")
+      t.fail_key("integration", "= \"consistent\" corrects gradients against the facets of 2D or 3D cells; a 1D scene integrates with "
+                                "Gauss-Legendre points per segment (nodes.quadrature_points)");
+    return;
+  }
   if (s.dim() == 2 ? (n.boundary_points < 1 || n.boundary_points > 10)
                    : std::find(triangle_rule_sizes().begin(), triangle_rule_sizes().end(), n.boundary_points) == triangle_rule_sizes().end())
     t.fail_key("boundary_points", "= " + std::to_string(n.boundary_points) + (s.dim() == 2 ? " must lie in 1..10 (Gauss-Legendre points per boundary segment)"

@@ -175,14 +175,14 @@ void read_quantities(const SceneTable& root, Scene& s) {
   const auto table = root.optional_any_table("quantities");
   if (!table) return;
   for (const auto& [name, node] : in_file_order(table->entries())) {
-    const SceneTable t = table->table_of(name, *node, {"reaction", "unknown", "probe", "field", "component", "integral", "part", "constant"});
+    const SceneTable t = table->table_of(name, *node, {"reaction", "unknown", "probe", "field", "component", "integral", "part", "constant", "energy"});
     SceneQuantity q;
     q.name = name;
     q.where = where_of(*table, name);
-    const int kinds = int(t.has("reaction")) + int(t.has("probe")) + int(t.has("integral")) + int(t.has("constant"));
+    const int kinds = int(t.has("reaction")) + int(t.has("probe")) + int(t.has("integral")) + int(t.has("constant")) + int(t.has("energy"));
     if (kinds != 1)
       table->fail_key(name, "must be one of { reaction = PART, unknown }, { probe = POINT, field }, { integral = EXPRESSION }, "
-                            "{ constant = NAME }");
+                            "{ constant = NAME }, { energy = OUTPUT }");
     if (t.has("reaction")) {
       q.kind = SceneQuantity::Kind::reaction;
       q.part = t.string("reaction");
@@ -207,6 +207,9 @@ void read_quantities(const SceneTable& root, Scene& s) {
         q.part = t.string("part");
         if (!s.geometry.has_part(q.part)) t.fail_key("part", "names '" + q.part + "', no boundary part of the domain");
       }
+    } else if (t.has("energy")) {
+      q.kind = SceneQuantity::Kind::energy;
+      q.output = t.string("energy");
     } else {
       q.kind = SceneQuantity::Kind::constant;
       q.constant = t.string("constant");
