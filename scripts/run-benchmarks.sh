@@ -13,6 +13,15 @@ while IFS= read -r exe; do
     status=1
   fi
 done < "$build/benchmarks.txt"
+# Scene-level studies (python drivers of lmeform run), quick mode.
+lmeform_exe="$build/lmeform"
+if [ -x "$lmeform_exe" ]; then
+  echo "== fracture: Gamma-convergence in 1D (demos/fracture/gamma_convergence.py)"
+  if ! /usr/bin/python3 demos/fracture/gamma_convergence.py "$lmeform_exe" "$out" --quick; then
+    echo "benchmark fracture gamma_convergence failed" >&2
+    status=1
+  fi
+fi
 echo "benchmark results in $out/:"
 ls -1 "$out"
 exit $status

@@ -105,7 +105,8 @@ class Assembler {
   /// cost nothing.
   void matrix_sum(Vec u, std::span<const MatrixTerm> terms, Mat out);
 
-  [[nodiscard]] const AssemblyTimes& times() const noexcept { return times_; }
+  [[nodiscard]] const AssemblyTimes& times() const noexcept { return times_; }  ///< of the last call of each kind
+  [[nodiscard]] const AssemblyTimes& totals() const noexcept { return totals_; }  ///< summed over every call
 
  private:
   void check_ready() const;  // constants, coefficients and data set
@@ -146,6 +147,7 @@ class Assembler {
   std::vector<PetscInt> scalar_cols_;
   LmeWorkspace lme_ws_;
   AssemblyTimes times_;
+  AssemblyTimes totals_;
 };
 
 /// Dirichlet conditions on node values, applied symmetrically: rows and columns of the

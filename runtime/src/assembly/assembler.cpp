@@ -226,6 +226,7 @@ PetscMatrix Assembler::create_matrix(MatrixInsertion insertion) {
     (void)detail::AijDirectAdd::attach(A);
   }
   times_.create_matrix = clock.seconds();
+  totals_.create_matrix += times_.create_matrix;
   return A;
 }
 
@@ -333,6 +334,7 @@ double Assembler::value(Vec u) {
   double total = 0.0;
   MPI_Allreduce(&local_sum, &total, 1, MPI_DOUBLE, MPI_SUM, disc_->comm());
   times_.value = clock.seconds();
+  totals_.value += times_.value;
   return total;
 }
 
@@ -382,6 +384,7 @@ double Assembler::vector_pass(Vec u, Vec out, double scale, bool with_value) {
   double total = 0.0;
   if (with_value) MPI_Allreduce(&local_sum, &total, 1, MPI_DOUBLE, MPI_SUM, disc_->comm());
   times_.vector = clock.seconds();
+  totals_.vector += times_.vector;
   return total;
 }
 
@@ -523,6 +526,8 @@ void Assembler::add_matrix_terms(Vec u, std::span<const MatrixTerm> all_terms, M
   }
   times_.matrix = clock.seconds();
   times_.matrix_kernel = kernel_seconds;
+  totals_.matrix += times_.matrix;
+  totals_.matrix_kernel += kernel_seconds;
 }
 
 void apply_dirichlet(Mat A, Vec b, Vec x, std::span<const PetscInt> dofs) {

@@ -202,6 +202,7 @@ void LoadStepper::record(int step, double lambda, const ProblemResult& result, i
     s.quantities.emplace_back("active_lower", double(result.active_lower));
     s.quantities.emplace_back("active_upper", double(result.active_upper));
   }
+  s.quantities.insert(s.quantities.end(), result.solver_figures.begin(), result.solver_figures.end());
   s.iterations = result.iterations;
   s.cuts = cuts;
   s.wall_s = clock_.seconds();
@@ -264,6 +265,7 @@ void LoadStepper::resume() {
     throw std::runtime_error(fmt::format("--restart: {} was written for other nodes than the scene's", checkpoint.string()));
   const int step = static_cast<int>(std::get<std::int64_t>(cp.attributes.at("step")));
   set_from_original(*space_.disc, cp.fields.at("state").values, bound_.layout.dofs_per_node, u_);
+  space_.update_previous_bounds(bound_, u_);  // irreversibility continues from the checkpoint, not from the start
   lambda_ = std::get<double>(cp.attributes.at("load"));
   set_load(lambda_);
   std::ifstream in(history);

@@ -11,6 +11,7 @@
 // Each group's solve is the problem's own stationary solve (with its bounds), the other groups'
 // dofs fixed. Load steps ([steps]) take it as their stationary solve.
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 
 #include <fmt/format.h>
@@ -131,6 +132,14 @@ void StaggeredDriver::solve(MPI_Comm comm, const BoundScene& b, ProblemSpace& sp
   const PetscInt first = static_cast<PetscInt>(space.disc->owned_begin()) * b.layout.dofs_per_node;
   PetscVector before = space.primary->create_vector();
   int iterations = 0, inner_iterations = 0;
+  // Per group: Newton steps, assembly seconds (every assembler's clocks) and wall seconds.
+  std::vector<int> group_newton(s.groups.size(), 0);
+  std::vector<double> group_assembly(s.groups.size(), 0.0), group_wall(s.groups.size(), 0.0);
+  auto assembly_seconds = [&space] {
+    double t = 0;
+    for (const auto& [label, a] : space.assemblers) t += a->totals().create_matrix + a->totals().value + a->totals().vector + a->totals().matrix;
+    return t;
+  };
   double change = 0;
   bool converged = false;
   std::string failure;
@@ -145,7 +154,12 @@ void StaggeredDriver::solve(MPI_Comm comm, const BoundScene& b, ProblemSpace& sp
       space.fixed.erase(std::unique(space.fixed.begin(), space.fixed.end()), space.fixed.end());
       LMEFORM_PETSC_CHECK(VecCopy(u, before));
       ProblemResult part;
+      const double assembly_before = assembly_seconds();
+      const auto started = std::chrono::steady_clock::now();
       inner.solve(comm, b, space, input, u, part);
+      group_wall[g] += std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+      group_assembly[g] += assembly_seconds() - assembly_before;
+      group_newton[g] += part.iterations;
       inner_iterations += part.iterations;
       if (!part.converged) failure = fmt::format("the solve of group {} ({}) did not converge: {}", g, fmt::join(s.groups[g], ", "), part.message);
       change = std::max(change, relative_change(comm, u, before, dofs[g], first));
@@ -156,6 +170,13 @@ void StaggeredDriver::solve(MPI_Comm comm, const BoundScene& b, ProblemSpace& sp
     converged = failure.empty() && change <= s.tolerance;
   }
   space.fixed = prescribed;
+  result.solver_figures.emplace_back("alternations", double(iterations));
+  for (std::size_t g = 0; g < s.groups.size(); ++g) {
+    const std::string name = fmt::format("{}", fmt::join(s.groups[g], "+"));
+    result.solver_figures.emplace_back(name + "_newton", double(group_newton[g]));
+    result.solver_figures.emplace_back(name + "_assembly_s", group_assembly[g]);
+    result.solver_figures.emplace_back(name + "_solve_s", group_wall[g] - group_assembly[g]);
+  }
   result.converged = converged;
   result.iterations = inner_iterations;
   result.energy = space.energy_terms.empty() ? std::nan("") : space.energy(u);

@@ -43,6 +43,9 @@ struct ProblemResult {
   std::vector<FieldError> errors;
   /// Bounded problems: the free dofs at their lower and upper bounds at the end (-1: no bounds).
   long active_lower = -1, active_upper = -1;
+  /// A driver's own figures of the solve, by column (a staggered solve: alternations, and per group
+  /// its Newton steps, assembly and solve seconds): a load-stepped run adds them to every step's row.
+  std::vector<std::pair<std::string, double>> solver_figures;
   /// The scene's [quantities] at the solution, by column.
   std::vector<std::pair<std::string, double>> quantities;
   /// Each energy term ("module.output") and constraint (by name) at the state: filled by
