@@ -820,6 +820,10 @@ void ModuleWriter::descriptor(const EmittedKernel& k) {
     h_ << "  k.point = &" << d << k.symbol << "_point;\n  k.n_values = " << point_values(p) << ";\n  k.point_rank = "
        << p.point.shape.size() << ";\n";
     for (std::size_t i = 0; i < p.point.shape.size(); ++i) h_ << "  k.point_extents[" << i << "] = " << p.point.shape[i] << ";\n";
+    if (!p.output->requirement.empty())
+      h_ << "  k.requirement = \"" << json_escape(p.output->requirement) << "\";\n  k.requirement_condition = \""
+         << json_escape(p.output->requirement_condition) << "\";\n  k.requirement_pointwise = " << (p.output->requirement_pointwise ? "true" : "false")
+         << ";\n";
   }
   // A point kernel's cost is reported as the value's: it is the one kernel of a point output.
   const FlopModel& value = p.is_point() ? k.point : k.value;
@@ -868,6 +872,8 @@ std::string ModuleWriter::kernel_json(const EmittedKernel& k) const {
     j << ", \"point\": {\"shape\": \"" << point_shape_name(p.point.shape) << "\", \"rank\": " << p.point.shape.size() << ", \"extents\": [";
     for (std::size_t i = 0; i < p.point.shape.size(); ++i) j << (i ? ", " : "") << p.point.shape[i];
     j << "], \"n_values\": " << point_values(p) << "}";
+    if (!p.output->requirement.empty())
+      j << ", \"requirement\": \"" << json_escape(p.output->requirement) << "\", \"condition\": \"" << json_escape(p.output->requirement_condition) << "\"";
   }
   j << ",\n     \"flops\": {";
   bool first = true;

@@ -317,6 +317,7 @@ class Lowering {
     auto it = std::find_if(form_.outputs.begin(), form_.outputs.end(), [&](const OutputDecl& o) { return o.name == s.name; });
     OutputDecl& out = *it;
     const Value v = expr(*s.body);
+    if (s.keyword == "require") return requirement(s, out, v);
     if (out.kind == OutputKind::Point) return point_output(s, out, v);
     if (!v.measure)
       fail(s.body->loc, std::string("the right-hand side of ") + to_string(out.kind) + " '" + s.name +
@@ -363,6 +364,33 @@ class Lowering {
   }
 
   /// `point NAME = EXPR`: a value at each quadrature point of the cells, of any shape up to tensor3.
+  /// `require CONDITION, "MESSAGE"`: a scalar condition of the constants, the coordinate and the
+  /// unknowns, kept as the point value 1 (holds) or 0 (fails).
+  void requirement(const Stmt& s, OutputDecl& out, const Value& v) {
+    const std::string what = "the requirement \"" + s.message + "\"";
+    if (!v.condition || v.rank() != 0)
+      fail(s.body->loc, what + " must be a condition (a comparison such as Gc > 0, combined with and, or, not); found " + shape_name(v));
+    if (s.message.empty()) fail(s.loc, "a requirement needs a message that says what the model requires");
+    const auto roles = used_roles(v.c);
+    if (roles.count(ir::Role::Test) || roles.count(ir::Role::Trial) || roles.count(ir::Role::Coefficient))
+      fail(s.body->loc, what + " may read the constants, the coordinate and the unknowns (at the start), not test, trial or coefficient fields");
+    bool pointwise = roles.count(ir::Role::Unknown) > 0;
+    const NodeId roots[] = {v.c[0]};
+    for (NodeId id : g_->reachable(roots)) {
+      const Op op = g_->node(id).op;
+      if (op == Op::Qdata) fail(s.body->loc, what + " must not read quadrature-point data: it is checked at the nodes");
+      if (op == Op::Normal) fail(s.body->loc, what + " must not read the normal n: it is checked at the nodes");
+      pointwise = pointwise || op == Op::Coord;
+    }
+    const std::string& text = form_.sources.file(s.body->begin.file).text;
+    const std::size_t from = s.body->begin.offset, to = text.find_last_of(',', text.find('"', from));
+    out.requirement_condition = text.substr(from, to == std::string::npos ? std::string::npos : to - from);
+    while (!out.requirement_condition.empty() && std::isspace(static_cast<unsigned char>(out.requirement_condition.back())))
+      out.requirement_condition.pop_back();
+    out.requirement_pointwise = out.requirement_pointwise || pointwise;
+    out.point[dim_] = PointValue{{}, {g_->select(v.c[0], g_->constant(1.0), g_->constant(0.0))}};
+  }
+
   void point_output(const Stmt& s, OutputDecl& out, const Value& v) {
     const std::string what = "point output '" + s.name + "'";
     if (v.measure)
@@ -1141,6 +1169,7 @@ void collect_declarations(CompiledForm& form, const std::vector<const Stmt*>& st
         o.kind = s->keyword == "energy" ? OutputKind::Energy : s->keyword == "constraint" ? OutputKind::Constraint
                : s->keyword == "residual" ? OutputKind::Residual : s->keyword == "bilinear" ? OutputKind::Bilinear
                : s->keyword == "linear"   ? OutputKind::Linear : OutputKind::Point;
+        if (s->keyword == "require") o.requirement = s->message;
         if (s->target) {
           if (s->target->kind == ExprKind::Number) {
             o.target_value = s->target->number;

@@ -41,7 +41,7 @@ const std::set<std::string>& keywords() {
   static const std::set<std::string> k = {
       "form", "dimension", "unknown", "test", "trial", "coefficient", "qdata", "constant",
       "coordinate", "let", "def", "measure", "include", "energy", "constraint", "residual",
-      "bilinear", "linear", "point", "if", "then", "else", "and", "or", "not"};
+      "bilinear", "linear", "point", "require", "if", "then", "else", "and", "or", "not"};
   return k;
 }
 
@@ -318,6 +318,13 @@ const auto add_param = [](auto& ctx) {
 const auto set_body = [](auto& ctx) { state_of(ctx).statements.back().body = _attr(ctx); };
 const auto set_target = [](auto& ctx) { state_of(ctx).statements.back().target = _attr(ctx); };
 const auto set_path = [](auto& ctx) { state_of(ctx).statements.back().path = _attr(ctx); };
+const auto set_message = [](auto& ctx) {
+  Stmt& s = state_of(ctx).statements.back();
+  s.message = _attr(ctx);
+  // A requirement has no name of its own: its place in the sources makes one (a C++ identifier).
+  s.name = "require_" + std::to_string(s.loc.file) + "_" + std::to_string(s.loc.offset);
+  s.name_loc = s.loc;
+};
 
 // Each action-carrying piece after an expectation point is its own named rule, so that an
 // expectation failure can say what was expected in words.
@@ -343,6 +350,10 @@ const x3::rule<class sum_body_tag> sum_body = "an expression";
 const auto sum_body_def = sum[set_body];
 const x3::rule<class path_tag> include_path = "a file name in double quotes";
 const auto include_path_def = string_lit[set_path];
+const x3::rule<class message_tag> require_message = "the requirement's message in double quotes";
+const auto require_message_def = string_lit[set_message];
+const x3::rule<class comma_tag> require_comma = "',' and the requirement's message";
+const auto require_comma_def = x3::lit(',');
 const x3::rule<class eqeq_tag> equals_target = "'==' and the constraint's target";
 const auto equals_target_def = x3::omit[tok({"=="})];
 const x3::rule<class field_list_tag> field_list = "a name to declare";
@@ -354,7 +365,7 @@ const auto dimension_list_def = dimension_value % ',';
 const x3::rule<class param_list_tag> param_list = "a parameter name";
 const auto param_list_def = param % ',';
 BOOST_SPIRIT_DEFINE(equals_target, stmt_name, shape_word, item_default, field_item, const_item, target, dimension_value, param,
-                    body, sum_body, include_path, field_list, const_list, dimension_list, param_list)
+                    body, sum_body, include_path, require_message, require_comma, field_list, const_list, dimension_list, param_list)
 
 const auto statement =
     (kw("form")[begin_stmt(StmtKind::Form)] > stmt_name) |
@@ -369,7 +380,8 @@ const auto statement =
     (tok({"energy", "residual", "bilinear", "linear", "point"}, true)[begin_stmt(StmtKind::Output)] > stmt_name > '=' >
      body) |
     (kw("constraint")[begin_stmt(StmtKind::Output)] > stmt_name > '=' > sum_body > equals_target >
-     target);
+     target) |
+    (kw("require")[begin_stmt(StmtKind::Output)] > body > require_comma > require_message);
 
 const auto skipper = x3::space | x3::lexeme['#' >> *(x3::char_ - x3::eol)];
 
@@ -464,7 +476,7 @@ std::vector<Stmt> parse_form(const SourceSet& sources, int file) {
     const std::string found = w == first ? std::string(1, *first) : std::string(first, w);
     fail_at(sources, Loc{file, static_cast<std::size_t>(first - text.begin())},
             "expected a statement (form, dimension, unknown, test, trial, coefficient, qdata, constant, "
-            "coordinate, let, def, measure, include, energy, constraint, residual, bilinear, linear, point), found '" +
+            "coordinate, let, def, measure, include, energy, constraint, residual, bilinear, linear, point, require), found '" +
                 found + "'");
   }
   return std::move(st.statements);

@@ -80,6 +80,21 @@ run restarted
   { tail -20 "$out/restart.log"; fail "lmeform run --restart failed (log: $out/restart.log)"; }
 grep -q "^step    3/6" "$out/restart.log" && fail "the restart solved step 3 again instead of continuing after it"
 
+# Bad input: the forms' requirements refuse a negative toughness and a start outside [0, 1] before
+# anything is solved or written.
+refused() {
+  local name=$1 expected=$2
+  shift 2
+  sed "$@" "$out/profile_at2.toml" > "$out/$name.toml"
+  if "$lmeform" run "$out/$name.toml" --output "$out/$name" > "$out/$name.log" 2>&1; then fail "$name: the run was not refused"; fi
+  grep -q "$expected" "$out/$name.log" || { cat "$out/$name.log"; fail "$name: no message '$expected'"; }
+  # The output folder is created (and checked writable) before the run; nothing may be in it.
+  [ -z "$(ls -A "$out/$name" 2>/dev/null)" ] || fail "$name: the refused run wrote into $out/$name: $(ls -A "$out/$name")"
+}
+refused negative_gc "form fracture_at2 requires Gc > 0 and l > 0 (the toughness Gc" -e 's/^Gc = 1.0/Gc = -1.0/'
+refused start_above_one "requires v > -1e-9 and v < 1 + 1e-9 (the phase field v starts in \[0, 1\].*at the start state: it fails at node" \
+  -e 's/^v = 1.0/v = "1 + x[0]"/'
+
 /usr/bin/python3 - "$out" <<'PY'
 import json, sys, pathlib
 import h5py, numpy as np

@@ -49,7 +49,7 @@
 
 namespace lmeform::kernel {
 
-inline constexpr int kContractVersion = 4;
+inline constexpr int kContractVersion = 5;
 
 /// Number of jet slots of a scalar field for dimension d and derivative order k (0, 1, 2).
 constexpr int jet_size(int dim, int order) noexcept {
@@ -197,6 +197,11 @@ struct FormKernels {
   int n_values = 0;                    ///< Point: values per quadrature point
   int point_rank = 0;                  ///< Point: 0 scalar, 1 vector, 2 matrix, 3 tensor3
   int point_extents[3] = {0, 0, 0};    ///< Point: extent of each of the point_rank indices
+  /// Point: a requirement of the model (`require CONDITION, "MESSAGE"`) instead of a value: the
+  /// kernel is 1 where CONDITION holds, 0 where it fails; the runtime refuses a start that fails it.
+  const char* requirement = nullptr;        ///< MESSAGE (nullptr: an ordinary point output)
+  const char* requirement_condition = "";   ///< CONDITION as written
+  bool requirement_pointwise = false;       ///< it reads the coordinate or the unknowns (else only constants)
 };
 
 /// A compiled form module: every functional it defines (each output in each declared dimension).

@@ -499,7 +499,7 @@ void bind_point_outputs(const Scene& scene, BoundScene& b) {
   b.write_point_fields = scene.output && scene.output->hdf5;
   for (const FormModule* m : b.modules)
     for (const auto* k : m->kernels) {
-      if (k->kind != FunctionalKind::Point || k->dim != b.dim || !PointEvaluator::can_evaluate(*k, b.layout)) continue;
+      if (k->kind != FunctionalKind::Point || k->requirement != nullptr || k->dim != b.dim || !PointEvaluator::can_evaluate(*k, b.layout)) continue;
       bool known = true;
       for (int i = 0; i < k->n_constants; ++i) known = known && b.constants.contains(k->constants[i]);
       if (!known) continue;

@@ -8,6 +8,7 @@
 #include <fmt/format.h>
 #include <fmt/ranges.h>
 
+#include "requirements.hpp"
 #include "expressions.hpp"
 #include "quadrature_data.hpp"
 
@@ -382,6 +383,7 @@ ProblemSpace build_problem_space(MPI_Comm comm, const BoundScene& b, const Probl
   make_assemblers(b, input, targets, scales, space);
   set_initial_targets(b, input, space);
   make_bounds(b, space);
+  check_requirements(b, space);
   return space;
 }
 

@@ -55,6 +55,7 @@ struct Stmt {
   ExprPtr body;                ///< Let, Def, Measure, Output
   ExprPtr target;              ///< Output "constraint"
   std::string path;            ///< Include
+  std::string message;         ///< Output "require": what the model requires, in words
 };
 
 /// Parses one file's text (index `file` in sources). Throws CompileError on syntax errors.

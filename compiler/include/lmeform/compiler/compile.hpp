@@ -68,6 +68,11 @@ struct OutputDecl {
   std::map<int, std::map<int, ir::NodeId>> integrands;
   /// Point outputs, per dimension.
   std::map<int, PointValue> point;
+  /// A requirement (`require CONDITION, "MESSAGE"`): a point output that is 1 where the condition
+  /// holds and 0 where it fails; the runtime checks it at every node of the start state.
+  std::string requirement;
+  std::string requirement_condition;   ///< the condition as written
+  bool requirement_pointwise = false;  ///< it reads the coordinate or an unknown (else constants only)
   /// The integrand over one domain (by default the cells) at dimension dim.
   ir::NodeId integrand(int dim, int domain = kCellDomain) const { return integrands.at(dim).at(domain); }
 };
