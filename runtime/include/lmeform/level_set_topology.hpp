@@ -54,6 +54,9 @@ struct LevelSetTopology {
   /// One line: "1 component, genus 0 (a sphere)", "2 components, genus 0, 1 (a sphere and a
   /// torus)", "1 closed curve", "no interface (the field has one sign)".
   [[nodiscard]] std::string describe() const;
+  /// What the pieces are, briefly: "a sphere", "a torus", "2 spheres", "a sphere and a torus",
+  /// "1 closed curve", "none".
+  [[nodiscard]] std::string shapes() const;
 };
 
 /// The topology of {f = 0} of the nodal values `values` on `cells` over `nodes`. Axisymmetric: a

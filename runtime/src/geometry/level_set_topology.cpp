@@ -214,8 +214,8 @@ bool LevelSetTopology::same_as(const LevelSetTopology& other) const {
   return signature(*this) == signature(other);
 }
 
-std::string LevelSetTopology::describe() const {
-  if (components.empty()) return "no interface (the field has one sign)";
+std::string LevelSetTopology::shapes() const {
+  if (components.empty()) return "none";
   if (geometry == LevelSetGeometry::planar) {
     const auto closed = static_cast<std::size_t>(std::count_if(components.begin(), components.end(), [](const auto& c) { return c.closed; }));
     const std::size_t open = components.size() - closed;
@@ -224,12 +224,8 @@ std::string LevelSetTopology::describe() const {
     if (open > 0) text += (text.empty() ? "" : ", ") + count_of(open, "1 open curve", "open curves") + " (reaching the boundary)";
     return text;
   }
-  std::string genera;
   std::map<int, std::size_t> kinds;  // genus (-1: open) -> count
-  for (const auto& c : components) {
-    genera += (genera.empty() ? "" : ", ") + (c.closed ? std::to_string(c.genus) : std::string("open"));
-    ++kinds[c.closed ? c.genus : -1];
-  }
+  for (const auto& c : components) ++kinds[c.closed ? c.genus : -1];
   std::vector<std::string> nouns;
   for (const auto& [genus, n] : kinds) {
     if (genus == -1) nouns.push_back(count_of(n, "an open surface", "open surfaces") + " (reaching the boundary)");
@@ -237,9 +233,17 @@ std::string LevelSetTopology::describe() const {
     else if (genus == 1) nouns.push_back(count_of(n, "a torus", "tori"));
     else nouns.push_back(count_of(n, "a genus-" + std::to_string(genus) + " surface", "genus-" + std::to_string(genus) + " surfaces"));
   }
-  std::string noun;
-  for (std::size_t i = 0; i < nouns.size(); ++i) noun += (i == 0 ? "" : i + 1 == nouns.size() ? " and " : ", ") + nouns[i];
-  return count_of(components.size(), "1 component", "components") + ", genus " + genera + " (" + noun + ")";
+  std::string text;
+  for (std::size_t i = 0; i < nouns.size(); ++i) text += (i == 0 ? "" : i + 1 == nouns.size() ? " and " : ", ") + nouns[i];
+  return text;
+}
+
+std::string LevelSetTopology::describe() const {
+  if (components.empty()) return "no interface (the field has one sign)";
+  if (geometry == LevelSetGeometry::planar) return shapes();
+  std::string genera;
+  for (const auto& c : components) genera += (genera.empty() ? "" : ", ") + (c.closed ? std::to_string(c.genus) : std::string("open"));
+  return count_of(components.size(), "1 component", "components") + ", genus " + genera + " (" + shapes() + ")";
 }
 
 }  // namespace lmeform
