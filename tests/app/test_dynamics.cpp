@@ -349,6 +349,13 @@ TEST_P(DynamicsRestart, ARunResumedFromItsCheckpointEndsLikeTheUninterruptedRun)
   EXPECT_EQ(c.hessian_evaluations, a.hessian_evaluations);
   EXPECT_EQ(c.remeshes, a.remeshes);
   EXPECT_EQ(c.remesh_changes, a.remesh_changes);
+  // The membrane's topology of every step, the start's among them, read back from the history.
+  ASSERT_TRUE(a.initial_topology.has_value() && c.initial_topology.has_value());
+  EXPECT_TRUE(c.initial_topology->same_as(*a.initial_topology));
+  for (std::size_t s = 0; s < a.history.size(); ++s) {
+    ASSERT_TRUE(c.history[s].topology.has_value()) << "step " << s;
+    EXPECT_TRUE(c.history[s].topology->same_as(*a.history[s].topology)) << "step " << s;
+  }
   if (GetParam().name == "remesh") {
     EXPECT_GE(a.remeshes, 3);  // every 3 steps: the checkpoint at step 4 follows the first
     EXPECT_EQ(b.remeshes, 1);
@@ -533,6 +540,15 @@ TEST(Dynamics, AReMeshProjectsTheFieldOntoAnAdaptedGridAndTheRunGoesOn) {
   EXPECT_LT(relative_drift(a, 0), 1e-10);
   EXPECT_LT(relative_drift(a, 1), 1e-10);
   for (std::size_t s = 5; s < a.history.size(); ++s) EXPECT_LT(a.history[s].energy, a.history[s - 1].energy) << "step " << s;
+  // The membrane (phi = 0 of the material field) is one sphere at every step, the re-mesh's
+  // projection included.
+  ASSERT_TRUE(c.initial_topology.has_value());
+  EXPECT_EQ(c.initial_topology->describe(), "1 component, genus 0 (a sphere)");
+  for (const auto& s : c.history) {
+    ASSERT_TRUE(s.topology.has_value()) << "step " << s.step;
+    EXPECT_TRUE(s.topology->same_as(*c.initial_topology)) << "step " << s.step << ": " << s.topology->describe();
+  }
+  EXPECT_TRUE(c.warnings.empty());
 }
 
 TEST(Dynamics, AReMeshCanChangeTheNodeCount) {
@@ -745,6 +761,10 @@ TEST(Dynamics, BadScenesNameTheKey) {
   msg = error_of("t_end = 0.01\ndt = -1.0\n");
   EXPECT_NE(msg.find("dynamics.dt"), std::string::npos) << msg;
   EXPECT_NE(error_of("t_end = 0.01\ndt = 1e-3\nadaptive = false\nreport_times = [0.5]\n").find("outside"), std::string::npos);
+  msg = error_of("t_end = 0.01\ndt = 1e-3\ntopology_field = \"psi\"\n");
+  EXPECT_NE(msg.find("'dynamics.topology_field': 'psi' is no scalar field of [coefficients]"), std::string::npos) << msg;
+  msg = error_of("t_end = 0.01\ndt = 1e-3\nremesh_field = \"psi\"\ntopology_guard = true\n");
+  EXPECT_NE(msg.find("'dynamics.topology_guard'"), std::string::npos) << msg;
 }
 
 }  // namespace
