@@ -349,6 +349,13 @@ TEST_P(DynamicsRestart, ARunResumedFromItsCheckpointEndsLikeTheUninterruptedRun)
   EXPECT_EQ(c.hessian_evaluations, a.hessian_evaluations);
   EXPECT_EQ(c.remeshes, a.remeshes);
   EXPECT_EQ(c.remesh_changes, a.remesh_changes);
+  // The membrane's topology of every step, the start's among them, read back from the history.
+  ASSERT_TRUE(a.initial_topology.has_value() && c.initial_topology.has_value());
+  EXPECT_TRUE(c.initial_topology->same_as(*a.initial_topology));
+  for (std::size_t s = 0; s < a.history.size(); ++s) {
+    ASSERT_TRUE(c.history[s].topology.has_value()) << "step " << s;
+    EXPECT_TRUE(c.history[s].topology->same_as(*a.history[s].topology)) << "step " << s;
+  }
   if (GetParam().name == "remesh") {
     EXPECT_GE(a.remeshes, 3);  // every 3 steps: the checkpoint at step 4 follows the first
     EXPECT_EQ(b.remeshes, 1);
@@ -533,6 +540,55 @@ TEST(Dynamics, AReMeshProjectsTheFieldOntoAnAdaptedGridAndTheRunGoesOn) {
   EXPECT_LT(relative_drift(a, 0), 1e-10);
   EXPECT_LT(relative_drift(a, 1), 1e-10);
   for (std::size_t s = 5; s < a.history.size(); ++s) EXPECT_LT(a.history[s].energy, a.history[s - 1].energy) << "step " << s;
+  // The membrane (phi = 0 of the material field) is one sphere at every step, the re-mesh's
+  // projection included.
+  ASSERT_TRUE(c.initial_topology.has_value());
+  EXPECT_EQ(c.initial_topology->describe(), "1 component, genus 0 (a sphere)");
+  for (const auto& s : c.history) {
+    ASSERT_TRUE(s.topology.has_value()) << "step " << s.step;
+    EXPECT_TRUE(s.topology->same_as(*c.initial_topology)) << "step " << s.step << ": " << s.topology->describe();
+  }
+  EXPECT_TRUE(c.warnings.empty());
+}
+
+// Two spheres 0.06 apart (about one spacing; eps = 2h): a re-mesh whose projection copies the nodal
+// values (LME smooths them a second time) joins them. The change is warned of; the guard stops
+// the run at the step before that re-mesh instead.
+TEST(Dynamics, AReMeshThatJoinsTwoSpheresIsWarnedOfAndTheGuardStopsBeforeIt) {
+  auto two_spheres = [](const std::string& keys) {
+    std::string text = scene_text("t_end = 0.003\ndt = 1e-3\nadaptive = false\nremesh_every = 1\nremesh_factor = 10.0\n"
+                                  "remesh_projection = \"nodes\"\nremesh_fit_iterations = 0\n" + keys);
+    const auto from = text.find("phi = \"tanh("), to = text.find('\n', from);
+    text.replace(from, to - from,
+                 "phi = \"max(tanh((0.2 - sqrt(x[0]^2 + (x[1] - 0.52)^2)) / (sqrt(2)*eps)), "
+                 "tanh((0.2 - sqrt(x[0]^2 + (x[1] - 0.98)^2)) / (sqrt(2)*eps)))\"");
+    const std::string_view extensions[] = {problems::kDynamicsExtension};
+    Case r{parse_scene(text, "two_spheres.toml", extensions), {}};
+    r.settings = *problems::read_dynamics(r.scene);
+    return r;
+  };
+  const Case warned = two_spheres("");
+  const DynamicsRun a = problems::run_dynamics(PETSC_COMM_WORLD, warned.scene, warned.settings, nullptr, nullptr);
+  ASSERT_TRUE(a.failure.empty()) << a.failure;
+  ASSERT_TRUE(a.initial_topology.has_value());
+  EXPECT_EQ(a.initial_topology->describe(), "2 components, genus 0, 0 (2 spheres)");
+  ASSERT_EQ(a.history.size(), 4u);
+  EXPECT_TRUE(a.history[1].topology->same_as(*a.initial_topology));  // the motion keeps it
+  EXPECT_EQ(a.history[2].topology->describe(), "1 component, genus 0 (a sphere)");
+  ASSERT_GE(a.warnings.size(), 1u);
+  EXPECT_NE(a.warnings[0].find("the membrane's topology changed at re-mesh 1 (step 1): 2 components, genus 0, 0 (2 spheres) -> "
+                               "1 component, genus 0 (a sphere)"),
+            std::string::npos)
+      << a.warnings[0];
+
+  const Case guarded = two_spheres("topology_guard = true\n");
+  const DynamicsRun b = problems::run_dynamics(PETSC_COMM_WORLD, guarded.scene, guarded.settings, nullptr, nullptr);
+  EXPECT_NE(b.failure.find("dynamics.topology_guard rejects the re-mesh"), std::string::npos) << b.failure;
+  EXPECT_EQ(b.remeshes, 0);
+  ASSERT_EQ(b.history.size(), 2u);  // the start and step 1, as in the warned run
+  EXPECT_EQ(b.history[1].energy, a.history[1].energy);
+  EXPECT_TRUE(b.history[1].topology->same_as(*a.initial_topology));
+  EXPECT_TRUE(b.warnings.empty());
 }
 
 TEST(Dynamics, AReMeshCanChangeTheNodeCount) {
@@ -745,6 +801,10 @@ TEST(Dynamics, BadScenesNameTheKey) {
   msg = error_of("t_end = 0.01\ndt = -1.0\n");
   EXPECT_NE(msg.find("dynamics.dt"), std::string::npos) << msg;
   EXPECT_NE(error_of("t_end = 0.01\ndt = 1e-3\nadaptive = false\nreport_times = [0.5]\n").find("outside"), std::string::npos);
+  msg = error_of("t_end = 0.01\ndt = 1e-3\ntopology_field = \"psi\"\n");
+  EXPECT_NE(msg.find("'dynamics.topology_field': 'psi' is no scalar field of [coefficients]"), std::string::npos) << msg;
+  msg = error_of("t_end = 0.01\ndt = 1e-3\nremesh_field = \"psi\"\ntopology_guard = true\n");
+  EXPECT_NE(msg.find("'dynamics.topology_guard'"), std::string::npos) << msg;
 }
 
 }  // namespace

@@ -711,3 +711,21 @@ TEST(VesicleScene, InterfaceResolvingDemos) {
     EXPECT_EQ(m->adaptivity->stages.back().eps, 0.01);
   }
 }
+
+TEST(VesicleScene, TopologyGuardKeyAndTheDemosOfBothRoutes) {
+  EXPECT_FALSE(vesicle_of(kVesicle).topology_guard);
+  EXPECT_TRUE(vesicle_of(edit(kVesicle, "reduced_volume = 0.8\n", "reduced_volume = 0.8\ntopology_guard = true\n")).topology_guard);
+  const std::string bad = edit(kVesicle, "reduced_volume = 0.8\n", "reduced_volume = 0.8\ntopology_guard = \"yes\"\n");
+  expect_error(bad, {at_line(bad, "topology_guard"), "vesicle.topology_guard"});
+  // The oblate start at v = 0.6 that ends on a torus, and the route that stays on genus 0.
+  for (const char* name : {"oblate_v06_torus", "oblate_v06_discocyte"}) {
+    SCOPED_TRACE(name);
+    const Scene s = load_scene(std::filesystem::path(LMEFORM_SOURCE_DIR) / "demos" / "shapes" / (std::string(name) + ".toml"),
+                               problems::driver_tables());
+    const auto m = read_vesicle(s);
+    ASSERT_TRUE(m && m->adaptivity);
+    EXPECT_EQ(m->reduced_volume, 0.6);
+    EXPECT_EQ(m->topology_guard, std::string(name) == "oblate_v06_discocyte");
+    EXPECT_EQ(m->adaptivity->stages.back().eps, 0.01);
+  }
+}

@@ -321,11 +321,17 @@ TEST(Vesicle, InterfaceResolvingScheduleLowersTheEnergyAtEveryStage) {
   const problems::VesicleRun run = problems::run_vesicle(PETSC_COMM_SELF, scene, *problems::read_vesicle(scene), nullptr);
   ASSERT_TRUE(run.failure.empty()) << run.failure;
   ASSERT_EQ(run.stages.size(), 4u);
+  ASSERT_TRUE(run.initial_topology.has_value());
+  EXPECT_EQ(run.initial_topology->describe(), "1 component, genus 0 (a sphere)");
+  EXPECT_TRUE(run.warnings.empty());
   for (std::size_t i = 0; i < run.stages.size(); ++i) {
     const auto& st = run.stages[i];
     SCOPED_TRACE("stage " + std::to_string(i));
     EXPECT_TRUE(st.result.converged) << st.result.message;
     EXPECT_GE(st.eps, 2.0 * st.h_min);
+    // The membrane stays one sphere through the new grid and the lower eps.
+    ASSERT_TRUE(st.topology.has_value());
+    EXPECT_EQ(st.topology->describe(), "1 component, genus 0 (a sphere)");
     if (i > 0) {
       EXPECT_LT(st.result.energy, run.stages[i - 1].result.energy);
     }

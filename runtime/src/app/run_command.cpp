@@ -129,6 +129,7 @@ void write_json(const Scene& scene, const RunReport& report, double total_s, con
   js["converged"] = report.success;
   js["status"] = report.status;
   js["wall_s"] = problems::json_number(total_s);
+  if (!report.warnings.empty()) js["warnings"] = report.warnings;
   write_text_atomically(path, js.dump(2) + "\n");
 }
 
@@ -164,6 +165,7 @@ int run_command(const RunOptions& options) {
     if (report.fields && writes_files) write_fields(scene, out_dir, report);
     const double total_s = clock.seconds();
     print_report(scene, report, total_s);
+    for (const auto& warning : report.warnings) std::cerr << "lmeform: warning: " << warning << "\n";
     if (!options.json.empty()) write_json(scene, report, total_s, options.json);
   }
   return report.success ? 0 : 2;

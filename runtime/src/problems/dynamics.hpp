@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "lmeform/delaunay.hpp"
+#include "lmeform/level_set_topology.hpp"
 #include "lmeform/node_set.hpp"
 #include "lmeform/scene.hpp"
 #include "problem_registry.hpp"
@@ -74,6 +75,12 @@ struct DynamicsSettings {
   /// nodal values interpolated at the new nodes and fitted (remesh_fit_iterations).
   enum class Projection { points, nodes } remesh_projection = Projection::points;
   int remesh_fit_iterations = 20;         ///< `nodes`: iterations fitting the new nodal values to the old field (0: copy)
+  /// The scalar [coefficients] field whose φ = 0 is the membrane, its topology reported per step
+  /// (default: remesh_field when the scene has it, else none). The motion carries the field, so
+  /// only a re-mesh's projection can change the topology.
+  std::string topology_field;
+  bool topology_field_given = false;
+  bool topology_guard = false;            ///< a re-mesh that changes the topology stops the run before it
   /// `points`: ℓ of an H1 fit, Σ w [(φ − φ_q)² + ℓ² |∇φ − ∇φ_q|²], for fields with a gradient jet
   /// too (0: the L2 projection)
   double remesh_gradient_length = 0;
@@ -103,6 +110,7 @@ struct DynamicsStep {
   double distortion = 1;                  ///< max σ_max/σ_min of F over the quadrature points
   int resets = 0;                         ///< resets of the reference configuration so far
   double wall_s = 0;                      ///< since the start of the run
+  std::optional<LevelSetTopology> topology;  ///< of the membrane (DynamicsSettings::topology_field)
 };
 
 /// What a reset of the reference configuration changed (relative): zero up to round-off and the
@@ -128,6 +136,8 @@ struct DynamicsRun {
   std::vector<ResetChange> reset_changes; ///< one per reset
   int remeshes = 0;
   std::vector<double> remesh_changes;     ///< relative change of E by each re-mesh's projection
+  std::optional<LevelSetTopology> initial_topology;  ///< the membrane's at the start
+  std::vector<std::string> warnings;      ///< changes of the membrane's topology
   NodeSet reference_nodes;                ///< original order
   BackgroundCells cells;
   std::vector<double> final_state;        ///< original order

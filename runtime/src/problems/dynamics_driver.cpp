@@ -9,6 +9,7 @@
 
 #include "dynamics.hpp"
 #include "dynamics_integrator.hpp"
+#include "membrane_topology.hpp"
 
 namespace lmeform::problems {
 
@@ -71,6 +72,15 @@ void describe_run(const Scene& scene, const DynamicsSettings& settings, const Dy
   report.json["hessian_evaluations"] = run.hessian_evaluations;
   report.json["dt_min"] = json_number(s.dt_lo);
   report.json["dt_max"] = json_number(s.dt_hi);
+  if (run.initial_topology || last.topology) {
+    std::string text = last.topology ? last.topology->describe() : std::string("not evaluated");
+    if (last.topology && run.initial_topology)
+      text += last.topology->same_as(*run.initial_topology) ? ", as at the start" : ", CHANGED from the start's " + run.initial_topology->describe();
+    report.row("membrane (" + settings.topology_field + " = 0)", text);
+    report.json["topology_start"] = run.initial_topology ? topology_json(*run.initial_topology) : nlohmann::json();
+    report.json["topology"] = last.topology ? topology_json(*last.topology) : nlohmann::json();
+  }
+  report.warnings = run.warnings;
   report.json["max_relative_drift"] = nlohmann::json::object();
   for (std::size_t i = 0; i < s.max_drift.size(); ++i) report.json["max_relative_drift"][run.constraint_names[i]] = s.max_drift[i];
 }

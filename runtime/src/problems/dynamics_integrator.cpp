@@ -10,6 +10,7 @@
 
 #include "dynamics_reference.hpp"
 #include "lmeform/constrained_minimizer.hpp"
+#include "membrane_topology.hpp"
 #include "lmeform/delaunay.hpp"
 #include "lmeform/petsc.hpp"
 
@@ -103,6 +104,17 @@ void DynamicsIntegrator::check_scene(const Scene& scene, const DynamicsSettings&
     throw SceneError(fmt::format("{}: key 'dynamics.remesh_field': '{}' is no scalar field of [coefficients] (the re-mesh adapts the "
                                  "nodes to its gradient)",
                                  scene.source, settings.remesh_field));
+  const bool has_topology_field = std::any_of(bound.coefficient_fields.begin(), bound.coefficient_fields.end(), [&](const UnknownField& c) {
+    return c.name == settings.topology_field && c.components == 1;
+  });
+  if (settings.topology_field_given && !has_topology_field)
+    throw SceneError(fmt::format("{}: key 'dynamics.topology_field': '{}' is no scalar field of [coefficients] (the membrane is its "
+                                 "zero level set)",
+                                 scene.source, settings.topology_field));
+  if (settings.topology_guard && !has_topology_field)
+    throw SceneError(fmt::format("{}: key 'dynamics.topology_guard' watches the membrane phi = 0 of a scalar [coefficients] field: "
+                                 "the scene has no field '{}'; name one with dynamics.topology_field",
+                                 scene.source, settings.topology_field));
   if (settings.reset_every > 0 || settings.reset_distortion > 0)
     for (const auto& [field, j] : field_jets(bound))
       if (!j.hessian.empty() && j.gradient.empty())
@@ -298,7 +310,7 @@ bool DynamicsIntegrator::advance() {
   double energy_before = run_.history.back().energy;
   bool new_reference = false;  // the recorded distortion belongs to the previous reference
   if (settings_.remesh_every > 0 && steps_since_remesh_ >= settings_.remesh_every) {
-    remesh();
+    if (!remesh()) return false;
     energy_before = energy_of(ref_->u);  // a projection changes E: the next decrement is measured from here
     new_reference = true;
   }
@@ -395,6 +407,7 @@ DynamicsRun DynamicsIntegrator::run() {
   // values, carried by the nodes.
   for (const auto& c : bound_.coefficient_fields)
     if (c.components == 1) scalar_fields_.emplace_back(c.name, coefficient_values(bound_, c.name, 1, material_nodes_));
+  if (const auto* field = topology_values()) topology_ = run_.initial_topology = membrane_topology(material_nodes_, run_.cells, *field);
 
   if (output_ != nullptr && output_->restart) resume();
   run_.seconds_setup = clock_.seconds();
@@ -420,6 +433,24 @@ DynamicsRun DynamicsIntegrator::run() {
   for (std::size_t i = 0; i < k_; ++i) run_.final_multipliers.push_back(nu_[i] / ref_->space.constraints[i].scale);
   run_.wall_s = clock_.seconds();
   return std::move(run_);
+}
+
+const std::vector<double>* DynamicsIntegrator::topology_values() const {
+  for (const auto& [name, values] : scalar_fields_)
+    if (name == settings_.topology_field) return &values;
+  return nullptr;
+}
+
+// The material field on the material nodes: the motion maps it to the current configuration
+// without changing its topology while det F > 0.
+std::optional<LevelSetTopology> DynamicsIntegrator::membrane_topology(const NodeSet& nodes, const BackgroundCells& cells,
+                                                                      const std::vector<double>& field) const {
+  try {
+    return field_topology(nodes, cells, field, bound_.discretization.gamma, bound_.lme(AxisParity::even), level_set_geometry(dim_, scene_.axisymmetric()));
+  } catch (const std::exception& e) {
+    if (out_ != nullptr) *out_ << "the membrane's topology could not be evaluated: " << e.what() << "\n";
+    return std::nullopt;
+  }
 }
 
 DynamicsRun run_dynamics(MPI_Comm comm, const Scene& scene, const DynamicsSettings& settings, const DynamicsOutput* output,

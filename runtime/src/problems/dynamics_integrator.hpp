@@ -78,7 +78,10 @@ class DynamicsIntegrator {
   [[nodiscard]] Attempt euler_attempt(double dt_step);
   void accept(const Attempt& a, double dt_step, double dt_try, double energy_before);
   void reset_reference();
-  void remesh();
+  [[nodiscard]] bool remesh();
+  [[nodiscard]] std::optional<LevelSetTopology> membrane_topology(const NodeSet& nodes, const BackgroundCells& cells,
+                                                                  const std::vector<double>& field) const;
+  [[nodiscard]] const std::vector<double>* topology_values() const;
   [[nodiscard]] NodeSet remeshed_nodes(const NodeSet& current, std::string& notes) const;
   [[nodiscard]] std::map<std::string, std::vector<double>, std::less<>> projected_fields(const NodeSet& current, const NodeSet& nodes,
                                                                                          const std::vector<double>& y, std::string& notes) const;
@@ -118,6 +121,7 @@ class DynamicsIntegrator {
   std::unique_ptr<ReferenceConfiguration> ref_;
   std::vector<std::pair<std::string, std::vector<double>>> scalar_fields_;  ///< material nodal fields
   std::vector<double> nu_;                  ///< scaled multipliers
+  std::optional<LevelSetTopology> topology_;  ///< of the current material field (set at the start and by re-meshes)
   double t_ = 0, dt_ = 0, target_decrement_ = 0;
   int step_ = 0, steps_since_reset_ = 0, steps_since_remesh_ = 0;
   std::size_t next_report_ = 0;

@@ -10,6 +10,7 @@
 #include "dynamics_integrator.hpp"
 #include "dynamics_reference.hpp"
 #include "lmeform/output.hpp"
+#include "membrane_topology.hpp"
 
 namespace lmeform::problems {
 
@@ -32,14 +33,16 @@ void DynamicsIntegrator::record(Vec state, double energy, int newton, int reject
   s.distortion = m.max_distortion;
   s.resets = run_.resets;
   s.wall_s = clock_.seconds();
+  s.topology = topology_;
   run_.history.push_back(s);
   if (out_ == nullptr) return;
   std::string drift;
   for (std::size_t i = 0; i < k_; ++i)
     drift += fmt::format("  {} {:+.1e}", ref_->space.constraints[i].name,
                          (s.constraints[i] - start_constraints_[i]) / std::max(std::abs(start_constraints_[i]), 1e-300));
-  *out_ << fmt::format("step {:5d}  t* {:.4e}  dt* {:.3e}  E {:.8f}  Newton {:2d}  rejected {}  resets {}{}  det F {:.3f}  {:.1f} s", s.step,
-                       s.t_star, s.dt_star, s.energy, newton, rejected, run_.resets, drift, s.min_jacobian, s.wall_s)
+  *out_ << fmt::format("step {:5d}  t* {:.4e}  dt* {:.3e}  E {:.8f}  Newton {:2d}  rejected {}  resets {}{}  det F {:.3f}  {:.1f} s{}", s.step,
+                       s.t_star, s.dt_star, s.energy, newton, rejected, run_.resets, drift, s.min_jacobian, s.wall_s,
+                       s.topology ? "  membrane: " + s.topology->shapes() : std::string())
         << std::endl;
 }
 
@@ -83,7 +86,8 @@ nlohmann::json DynamicsIntegrator::history_json() const {
                            {"min_jacobian", json_number(s.min_jacobian)},
                            {"distortion", json_number(s.distortion)},
                            {"resets", s.resets},
-                           {"wall_s", s.wall_s}});
+                           {"wall_s", s.wall_s},
+                           {"topology", s.topology ? topology_json(*s.topology) : nlohmann::json()}});
   js["series"] = nlohmann::json::array();
   for (const auto& s : series_ ? series_->steps() : std::vector<TimeSeriesStep>{})
     js["series"].push_back({{"time", s.time}, {"file", s.h5_file.generic_string()}, {"nodes", s.nodes}, {"cells", s.cells}});
@@ -180,6 +184,8 @@ void DynamicsIntegrator::read_history(const fs::path& path) {
     d.distortion = number_or_nan(s.at("distortion"));
     d.resets = s.at("resets");
     d.wall_s = s.at("wall_s");
+    if (s.contains("topology") && !s["topology"].is_null())
+      d.topology = topology_from_json(s["topology"], level_set_geometry(dim_, scene_.axisymmetric()));
     run_.history.push_back(d);
   }
   std::vector<TimeSeriesStep> series;
@@ -252,6 +258,9 @@ void DynamicsIntegrator::resume() {
   steps_since_reset_ = cp.integer("steps_since_reset");
   for (std::size_t i = 0; i < k_; ++i) nu_[i] = cp.number(fmt::format("multiplier_{}", i));
   read_history(history_path_);
+  // The membrane as the checkpoint left it, and as the run started (the history's first step).
+  if (const auto* field = topology_values()) topology_ = membrane_topology(material_nodes_, run_.cells, *field);
+  run_.initial_topology = run_.history.empty() ? topology_ : run_.history.front().topology;
   if (out_ != nullptr)
     *out_ << fmt::format("resumed from {} at step {}, t* {:.6e}, {} resets\n", checkpoint_path_.string(), step_, t_, run_.resets) << std::flush;
 }

@@ -11,6 +11,7 @@
 #include "field_transfer.hpp"
 #include "lmeform/cvt.hpp"
 #include "lmeform/delaunay.hpp"
+#include "membrane_topology.hpp"
 
 namespace lmeform::problems {
 
@@ -227,7 +228,7 @@ std::map<std::string, std::vector<double>, std::less<>> DynamicsIntegrator::proj
 // CVT for the density 1 + f |∇φ| of the current field, every scalar nodal field projected onto
 // them (a projection changes E, and the change is reported), the motion restarted from the
 // identity on a new triangulation and quadrature.
-void DynamicsIntegrator::remesh() {
+bool DynamicsIntegrator::remesh() {
   const double t0 = MPI_Wtime();
   apply_schedule(t_);
   const double energy_before = energy_of(ref_->u);
@@ -253,11 +254,32 @@ void DynamicsIntegrator::remesh() {
   const NodeSet nodes = remeshed_nodes(current, notes);
   // The new values are gathered first and replace the old ones only when every field is carried.
   std::map<std::string, std::vector<double>, std::less<>> projected = projected_fields(current, nodes, y, notes);
+  BackgroundCells cells = delaunay(nodes);
+  // The projection is the one operation that can change the membrane's topology: checked before
+  // anything is replaced, so that the guard leaves the last accepted step as it was.
+  std::optional<LevelSetTopology> topology;
+  if (topology_values() != nullptr) topology = membrane_topology(nodes, cells, projected.at(settings_.topology_field));
+  if (topology && topology_) {
+    const std::string where = fmt::format("re-mesh {} (step {})", run_.remeshes + 1, step_);
+    const std::string change = topology_change_warning(*topology_, *topology, where);
+    if (!change.empty() && settings_.topology_guard) {
+      run_.failure = change + "; dynamics.topology_guard rejects the re-mesh and stops at the step before it";
+      run_.seconds_reset += MPI_Wtime() - t0;
+      return false;
+    }
+    if (!change.empty()) {
+      const std::string warning = change + " (the projection onto the new nodes joined or split the interface; "
+                                           "dynamics.topology_guard = true stops the run before such a re-mesh)";
+      run_.warnings.push_back(warning);
+      if (out_ != nullptr) *out_ << "lmeform: warning: " << warning << "\n";
+    }
+  }
+  if (topology) topology_ = topology;
   for (auto& [name, values] : scalar_fields_) values = projected.at(name);
   material_nodes_ = nodes;
   dirichlet_sets_ = dirichlet_nodes(bound_, material_nodes_);
   n_nodes_ = nodes.size();
-  run_.cells = delaunay(nodes);
+  run_.cells = std::move(cells);
   velocity_.assign(n_nodes_ * std::size_t(bs_), 0.0);
   std::vector<double> identity(n_nodes_ * std::size_t(bs_), 0.0);
   for (std::size_t a = 0; a < n_nodes_; ++a)
@@ -273,6 +295,7 @@ void DynamicsIntegrator::remesh() {
                          n_nodes_, run_.remesh_changes.back(), notes)
           << std::flush;
   run_.seconds_reset += MPI_Wtime() - t0;
+  return true;
 }
 
 }  // namespace lmeform::problems

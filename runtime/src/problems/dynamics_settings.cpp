@@ -90,7 +90,8 @@ std::optional<DynamicsSettings> read_dynamics(const Scene& s) {
       {"method", "deformation", "dissipation", "time_unit", "t_start", "t_end", "dt", "adaptive", "dt_max",
        "dt_min", "growth", "energy_decrement", "target_newton", "max_steps", "max_retries", "hessian", "min_jacobian",
        "output_every", "checkpoint_every", "report_times", "schedule", "reset_every", "reset_distortion", "require_decrease", "remesh_every", "remesh_factor",
-       "remesh_iterations", "remesh_field", "remesh_fit_iterations", "remesh_projection", "remesh_gradient_length", "remesh_nodes"});
+       "remesh_iterations", "remesh_field", "remesh_fit_iterations", "remesh_projection", "remesh_gradient_length", "remesh_nodes",
+       "topology_field", "topology_guard"});
   if (!t) return std::nullopt;
   DynamicsSettings d;
   const std::string method = t->choice_of("method", t->optional_string("method").value_or("vti"), {"vti", "forward_euler"});
@@ -125,6 +126,9 @@ std::optional<DynamicsSettings> read_dynamics(const Scene& s) {
                             : DynamicsSettings::Projection::nodes;
   d.remesh_fit_iterations = t->at_least("remesh_fit_iterations", t->integer("remesh_fit_iterations", d.remesh_fit_iterations), 0);
   d.remesh_gradient_length = t->non_negative("remesh_gradient_length", t->number("remesh_gradient_length", 0.0));
+  d.topology_field_given = t->has("topology_field");
+  d.topology_field = d.topology_field_given ? t->string("topology_field") : d.remesh_field;
+  d.topology_guard = t->boolean("topology_guard", d.topology_guard);
   d.reset_every = t->at_least("reset_every", t->integer("reset_every", d.reset_every), 0);
   d.reset_distortion = t->non_negative("reset_distortion", t->number("reset_distortion", 0.0));
   if (d.reset_distortion > 0 && d.reset_distortion <= 1)

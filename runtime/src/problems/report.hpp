@@ -53,6 +53,7 @@ struct RunReport {
   nlohmann::json json = nlohmann::json::object();  ///< the --json document's keys
   std::optional<ReportFields> fields;  ///< written by the command, not by the driver
   std::vector<std::pair<std::string, std::string>> files;  ///< written by the driver: label, path
+  std::vector<std::string> warnings;   ///< what the user must know although the run went on (stderr, JSON "warnings")
 
   void row(std::string label, std::string value) { rows.emplace_back(std::move(label), std::move(value)); }
 };

@@ -16,6 +16,7 @@
 #include "lmeform/scene_table.hpp"
 #include "lmeform/stopwatch.hpp"
 #include "field_transfer.hpp"
+#include "membrane_topology.hpp"
 
 namespace lmeform::problems {
 
@@ -176,7 +177,7 @@ void check_boundary_values(const Scene& s, const VesicleModel& m) {
 
 std::optional<VesicleModel> read_vesicle(const Scene& s) {
   const auto t = extension_table(s, kVesicleExtension,
-                                 {"field", "width", "radius", "reduced_volume", "resolution_factor", "initial", "adaptivity"});
+                                 {"field", "width", "radius", "reduced_volume", "resolution_factor", "initial", "adaptivity", "topology_guard"});
   if (!t) return std::nullopt;
   VesicleModel m;
   m.field = t->optional_string("field").value_or(m.field);
@@ -189,6 +190,7 @@ std::optional<VesicleModel> read_vesicle(const Scene& s) {
   m.eps = eps->second;
   if (!(m.eps > 0)) throw SceneError(fmt::format("{}: must be positive, got {}", s.where_constant(m.width), m.eps));
   m.resolution_factor = t->positive("resolution_factor", t->number("resolution_factor", m.resolution_factor));
+  m.topology_guard = t->boolean("topology_guard", m.topology_guard);
 
   // Targets from a sphere: area 4πR² (2πR in 2D), volume v · 4/3 πR³ (v · πR² in 2D).
   const int measure_dim = s.axisymmetric() ? 3 : s.dim();
@@ -423,10 +425,25 @@ std::vector<double> first_start(const BoundScene& bound, const VesicleModel& mod
   return start;
 }
 
+/// The topology of φ = 0 for coefficients on a solve's discretization; none (and a note in the
+/// log) when the field cannot be evaluated, which ends no run.
+std::optional<LevelSetTopology> topology_or_none(const ProblemResult& solved, std::span<const double> coefficients, const BoundScene& bound,
+                                                 std::ostream* log) {
+  if (!solved.discretization) return std::nullopt;
+  try {
+    return field_topology(*solved.discretization, coefficients, level_set_geometry(bound.dim, bound.axisymmetric));
+  } catch (const std::exception& e) {
+    if (log != nullptr) *log << "the membrane's topology could not be evaluated: " << e.what() << "\n";
+    return std::nullopt;
+  }
+}
+
 /// One stage of the schedule: the relocation (if any), the resolution check and the solve,
 /// continuing from stage `from` of `stages` (none for stage 0). Throws when the stage cannot run.
+/// Stage 0 also gives the topology of its start.
 StageRecord run_vesicle_stage(MPI_Comm comm, const BoundScene& bound, const VesicleModel& model, std::ostream* log, int stage,
-                              const std::vector<StageRecord>& stages, std::size_t main_stage, NodeSet& nodes) {
+                              const std::vector<StageRecord>& stages, std::size_t main_stage, NodeSet& nodes,
+                              std::optional<LevelSetTopology>& start_topology) {
   const Scene& scene = *bound.scene;
   const Stopwatch clock;
   StageRecord rec;
@@ -464,6 +481,10 @@ StageRecord run_vesicle_stage(MPI_Comm comm, const BoundScene& bound, const Vesi
          << rec.h_min << "\n";
   rec.result = solve_problem(comm, bound, input);
   rec.nodes = static_cast<int>(nodes.size());
+  const Stopwatch topology_clock;
+  if (stage == 0) start_topology = topology_or_none(rec.result, input.initial, bound, log);
+  rec.topology = topology_or_none(rec.result, rec.result.state, bound, log);
+  rec.topology_s = topology_clock.seconds();
   rec.wall_s = clock.seconds();
   return rec;
 }
@@ -492,6 +513,43 @@ BoundScene bind_vesicle(const Scene& completed, MPI_Comm comm, std::ostream* log
   return bound;
 }
 
+namespace {
+
+/// The last stage's membrane topology against the one before it (for the first stage: its start):
+/// logged, and a change either warned of or, with the guard, the end of the run (the stage moves
+/// to run.rejected). False when the run ends here.
+bool watch_topology(const VesicleModel& model, int stage, std::ostream* log, VesicleRun& run) {
+  const StageRecord& rec = run.stages.back();
+  if (!rec.topology) return true;
+  const auto before = run.stages.size() > 1 ? run.stages[run.stages.size() - 2].topology : run.initial_topology;
+  if (log != nullptr) {
+    if (stage == 0 && run.initial_topology) *log << "the membrane (phi = 0) at the start: " << run.initial_topology->describe() << "\n";
+    *log << "the membrane (phi = 0) after stage " << stage << ": " << rec.topology->describe()
+         << fmt::format(" ({:.2f} s)\n", rec.topology_s);
+  }
+  if (!before) return true;
+  const std::string change = topology_change_warning(*before, *rec.topology, "stage " + std::to_string(stage));
+  if (change.empty()) return true;
+  if (model.topology_guard) {
+    run.failure = fmt::format("stage {}: the membrane's topology changed: {} -> {}; vesicle.topology_guard rejects the stage", stage,
+                              before->describe(), rec.topology->describe());
+    run.rejected = std::move(run.stages.back());
+    run.stages.pop_back();
+    if (log != nullptr)
+      *log << "lmeform: " << run.failure << "\nlmeform: "
+           << (run.stages.empty() ? "no stage kept the start's topology: writing the rejected stage\n" : "writing the last stage that kept it\n");
+    return false;
+  }
+  const std::string warning = change + " (the phase field joins or splits the membrane where its parts come within about the "
+                                       "interface width, a change the sharp model cannot make: another branch than the start's; "
+                                       "vesicle.topology_guard = true stops the run at such a stage)";
+  run.warnings.push_back(warning);
+  if (log != nullptr) *log << "lmeform: warning: " << warning << "\n";
+  return true;
+}
+
+}  // namespace
+
 VesicleRun run_vesicle(MPI_Comm comm, const Scene& scene, const VesicleModel& model, std::ostream* log) {
   const Stopwatch clock;
   const Scene completed = with_vesicle_targets(scene, model);
@@ -503,13 +561,14 @@ VesicleRun run_vesicle(MPI_Comm comm, const Scene& scene, const VesicleModel& mo
   const int n_stages = 1 + (model.adaptivity ? static_cast<int>(model.adaptivity->stages.size()) : 0);
   for (int stage = 0; stage < n_stages; ++stage) {
     try {
-      run.stages.push_back(run_vesicle_stage(comm, bound, model, log, stage, run.stages, main_stage, nodes));
+      run.stages.push_back(run_vesicle_stage(comm, bound, model, log, stage, run.stages, main_stage, nodes, run.initial_topology));
     } catch (const std::exception& e) {
       if (run.stages.empty()) throw;  // nothing to write
       run.failure = "stage " + std::to_string(stage) + ": " + e.what();
       if (log != nullptr) *log << "lmeform: " << run.failure << "\nlmeform: writing the last finished stage\n";
       break;
     }
+    if (!watch_topology(model, stage, log, run)) break;
     const bool branch = stage > 0 && model.adaptivity->stages[static_cast<std::size_t>(stage - 1)].branch;
     if (!branch) main_stage = run.stages.size() - 1;
     // Later stages continue from the last stage or the main one: only their discretizations are kept.

@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "lmeform/cvt.hpp"
+#include "lmeform/level_set_topology.hpp"
 #include "lmeform/lme_basis.hpp"
 #include "lmeform/node_set.hpp"
 #include "lmeform/scene.hpp"
@@ -86,6 +87,9 @@ struct VesicleModel {
   std::optional<double> initial_resolve;
   double resolution_factor = 2.0;      ///< ε ≥ resolution_factor · h_min (seed App. B)
   std::optional<VesicleAdaptivity> adaptivity;
+  /// A stage whose membrane (φ = 0) has another topology than the start's is rejected and ends the
+  /// run; else it is kept with a warning.
+  bool topology_guard = false;
 };
 
 /// The extension tables this model reads (for load_scene).
@@ -123,6 +127,9 @@ struct StageRecord {
   int nodes = 0;
   double h_min = 0;    ///< SpacingSummary::h_min of the stage's grid
   ProblemResult result;
+  /// The topology of the solution's φ = 0 (none when it could not be evaluated).
+  std::optional<LevelSetTopology> topology;
+  double topology_s = 0;  ///< evaluating it (stage 0: the start's too)
   double wall_s = 0;   ///< this stage: relocation + setup + solve
   double adapt_s = 0;  ///< of which the relocation
 };
@@ -134,11 +141,18 @@ struct VesicleRun {
   std::string failure;
   double wall_s = 0;                ///< the whole run, node set generation included
   StateLayout layout;               ///< the layout of every stage's state
+  /// The topology of the first stage's start (the initial profile or [initial]).
+  std::optional<LevelSetTopology> initial_topology;
+  /// A stage the topology guard rejected (not in `stages`): it ends the run.
+  std::optional<StageRecord> rejected;
+  std::vector<std::string> warnings;  ///< changes of topology from one stage to the next
 };
 
 /// Runs a vesicle scene: binds it with the model's targets filled in, then solves the first stage
 /// and every adaptivity stage (relocation, resolution check, continuation in eps from the previous
 /// stage, multipliers warm-started). A stage that cannot run ends the schedule (VesicleRun::failure).
+/// Each stage's membrane topology is compared with the previous stage's (the first: its start's):
+/// a change is a warning, or with topology_guard the end of the run.
 [[nodiscard]] VesicleRun run_vesicle(MPI_Comm comm, const Scene& scene, const VesicleModel& model, std::ostream* log);
 
 /// The scene with what the model derives: the area and volume targets of its sphere, and the

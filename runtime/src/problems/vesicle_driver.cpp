@@ -2,6 +2,7 @@
 // stages (run_vesicle) and reports the last stage with a table of all of them.
 #include <fmt/format.h>
 
+#include "membrane_topology.hpp"
 #include "minimization.hpp"
 #include "quantities.hpp"
 #include "vesicle.hpp"
@@ -14,19 +15,26 @@ namespace {
 void describe_stages(const VesicleRun& run, const VesicleModel& model, const std::optional<double>& reference, RunReport& report) {
   auto rel_error = [&](double e) { return reference ? (e - *reference) / *reference : std::nan(""); };
   ReportTable table;
-  table.header = {"stage", "nodes", model.width, "h_min", "energy", "rel. error", "AL+KKT", "adapt s", "setup s", "AL s", "KKT s"};
+  table.header = {"stage", "nodes", model.width, "h_min", "energy", "rel. error", "AL+KKT", "adapt s", "setup s", "AL s", "KKT s", "membrane"};
   report.json["stages"] = nlohmann::json::array();
-  for (const auto& s : run.stages) {
+  std::vector<const StageRecord*> stages;
+  for (const auto& s : run.stages) stages.push_back(&s);
+  if (run.rejected) stages.push_back(&*run.rejected);
+  for (const StageRecord* stage : stages) {
+    const StageRecord& s = *stage;
+    const bool rejected = run.rejected && stage == &*run.rejected;
     const ConstrainedResult& m = s.result.minimization;
-    table.rows.push_back({std::to_string(s.stage) + " " + s.grid + s.label, std::to_string(s.nodes), fmt::format("{:g}", s.eps),
+    table.rows.push_back({std::to_string(s.stage) + " " + s.grid + s.label + (rejected ? " (rejected)" : ""), std::to_string(s.nodes), fmt::format("{:g}", s.eps),
                           fmt::format("{:.4g}", s.h_min), fmt::format("{:.5f}", s.result.energy),
                           reference ? fmt::format("{:+.3f}%", 100 * rel_error(s.result.energy)) : "-",
                           fmt::format("{}+{}", m.augmented_iterations, m.newton_iterations), fmt::format("{:.2f}", s.adapt_s),
                           fmt::format("{:.2f}", s.result.seconds_setup), fmt::format("{:.2f}", m.seconds_augmented),
-                          fmt::format("{:.2f}", m.seconds_newton)});
+                          fmt::format("{:.2f}", m.seconds_newton), s.topology ? s.topology->shapes() : "-"});
     report.json["stages"].push_back({{"stage", s.stage},
                                      {"grid", s.grid},
                                      {"branch", !s.label.empty()},
+                                     {"rejected", rejected},
+                                     {"topology", s.topology ? topology_json(*s.topology) : nlohmann::json()},
                                      {model.width, json_number(s.eps)},
                                      {"nodes", s.nodes},
                                      {"h_min", json_number(s.h_min)},
@@ -48,6 +56,21 @@ void describe_stages(const VesicleRun& run, const VesicleModel& model, const std
   report.table = std::move(table);
 }
 
+/// The closing row and JSON keys of the membrane's topology: the written stage's against the start's.
+void describe_topology(const VesicleRun& run, const StageRecord& written, RunReport& report) {
+  report.warnings.insert(report.warnings.end(), run.warnings.begin(), run.warnings.end());
+  report.json["topology_start"] = run.initial_topology ? topology_json(*run.initial_topology) : nlohmann::json();
+  report.json["topology"] = written.topology ? topology_json(*written.topology) : nlohmann::json();
+  if (!written.topology) {
+    report.row("membrane (phi = 0)", "topology not evaluated");
+    return;
+  }
+  std::string text = written.topology->describe();
+  if (run.initial_topology)
+    text += written.topology->same_as(*run.initial_topology) ? ", as at the start" : ", CHANGED from the start's " + run.initial_topology->describe();
+  report.row("membrane (phi = 0)", text);
+}
+
 class VesicleDriver final : public ProblemDriver {
  public:
   [[nodiscard]] std::string_view name() const override { return "vesicle"; }
@@ -64,7 +87,8 @@ class VesicleDriver final : public ProblemDriver {
     const Scene& scene = *ctx.scene;
     const VesicleModel model = *read_vesicle(scene);
     const VesicleRun run = run_vesicle(ctx.comm, scene, model, ctx.log);
-    const StageRecord& last = run.stages.back();
+    // The guard may have rejected the first stage: then that one is written (the status says why).
+    const StageRecord& last = run.stages.empty() ? *run.rejected : run.stages.back();
     const ProblemResult& r = last.result;
     RunReport report;
     report.problem = "minimization";
@@ -87,6 +111,7 @@ class VesicleDriver final : public ProblemDriver {
     report.json[model.width] = json_number(last.eps);
     report.json["grid"] = run.stages.size() > 1 ? "adapted" : "uniform";
     report.json["relative_error_sharp"] = json_number(reference ? (r.energy - *reference) / *reference : std::nan(""));
+    describe_topology(run, last, report);
     describe_stages(run, model, reference, report);
     return report;
   }
