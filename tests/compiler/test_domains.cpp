@@ -105,7 +105,7 @@ TEST(DomainKernels, OneOutputHasOneKernelPerDomain) {
     EXPECT_STREQ(E[1]->boundary_part, "top");
     for (const FormKernels* k : E) {
       EXPECT_EQ(k->kind, FunctionalKind::Energy);
-      EXPECT_EQ(k->contract_version, 4);
+      EXPECT_EQ(k->contract_version, lmeform::kernel::kContractVersion);
       EXPECT_EQ(k->basis_order, 1) << "one layout for the output: the cells' gradient";
       EXPECT_EQ(k->dofs_per_node, 1);
       EXPECT_EQ(k->n_constants, 1);

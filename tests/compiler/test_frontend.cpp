@@ -445,6 +445,36 @@ TEST(CompilerFrontend, PointOutputs) {
   EXPECT_NE(compile_error("unknown point\nenergy E = point*dx\n"), "");
 }
 
+TEST(CompilerFrontend, Requirements) {
+  const auto form = compile_source(
+      "dimension 1, 2\nunknown u : vector, v\nconstant Gc = 1, l\ncoordinate x\n"
+      "require Gc > 0 and l > 0, \"Gc and l must be positive\"\n"
+      "require v >= 0 or x[0] < 0, \"v starts non-negative\"\n"
+      "energy E = Gc*v^2*dx\n",
+      "t.form");
+  ASSERT_EQ(form.outputs.size(), 3U);
+  const OutputDecl& constants_only = form.outputs[0];
+  EXPECT_EQ(constants_only.kind, OutputKind::Point);
+  EXPECT_EQ(constants_only.requirement, "Gc and l must be positive");
+  EXPECT_EQ(constants_only.requirement_condition, "Gc > 0 and l > 0");
+  EXPECT_FALSE(constants_only.requirement_pointwise);
+  EXPECT_TRUE(form.outputs[1].requirement_pointwise) << "it reads v and x";
+  EXPECT_EQ(form.outputs[1].point.at(2).components.size(), 1U);
+  const auto gen = generate(form, "t.form");
+  EXPECT_NE(gen.header.find("k.requirement = \"Gc and l must be positive\";"), std::string::npos);
+  EXPECT_NE(gen.header.find("k.requirement_pointwise = true;"), std::string::npos);
+  EXPECT_NE(gen.json.find("\"requirement\": \"v starts non-negative\", \"condition\": \"v >= 0 or x[0] < 0\""), std::string::npos);
+  EXPECT_NE(compile_error("constant a = 1\nunknown v\nrequire a + 1, \"x\"\nenergy E = v*dx\n")
+                .find("the requirement \"x\" must be a condition (a comparison such as Gc > 0, combined with and, or, not); found scalar"),
+            std::string::npos);
+  EXPECT_NE(compile_error("constant a = 1\nunknown v\nrequire a > 1 \"x\"\nenergy E = v*dx\n").find("expected ',' and the requirement's message"),
+            std::string::npos);
+  EXPECT_NE(compile_error("unknown v\nqdata q\nrequire q > 0, \"q\"\nenergy E = v*dx\n").find("must not read quadrature-point data"),
+            std::string::npos);
+  EXPECT_NE(compile_error("unknown v\ncoefficient c\nrequire c > 0, \"c\"\nenergy E = v*dx\n").find("not test, trial or coefficient fields"),
+            std::string::npos);
+}
+
 TEST(CompilerFrontend, KernelNamesOfDomainsMustNotCollide) {
   EXPECT_NE(compile_error_generating("unknown u\nenergy E_ds = u^2*dx\nenergy E = u^2*dx + u*ds\n")
                 .find("t.form:3:1: error: the kernels of energy E [ds] and of energy 'E_ds' would both be named 't_E_ds_2d'"),

@@ -55,11 +55,19 @@ void PointEvaluator::evaluate(const LmeBasis& basis, std::span<const double> x, 
   auto move_inward = [&](double f) {
     double h = 0;
     std::vector<double> centre(at.size(), 0.0);
+    // The centre of the other neighbours: at a node, the node itself would pull it onto x.
+    std::size_t others = 0;
     for (const int a : list) {
       const auto xa = basis.nodes().point(static_cast<std::size_t>(a));
-      for (std::size_t i = 0; i < at.size(); ++i) centre[i] += xa[i] / double(list.size());
+      double d2 = 0;
+      for (std::size_t i = 0; i < at.size(); ++i) d2 += (xa[i] - at[i]) * (xa[i] - at[i]);
       h += basis.spacing()[static_cast<std::size_t>(a)] / double(list.size());
+      if (d2 <= 1e-24 * basis.spacing()[static_cast<std::size_t>(a)] * basis.spacing()[static_cast<std::size_t>(a)]) continue;
+      for (std::size_t i = 0; i < at.size(); ++i) centre[i] += xa[i];
+      ++others;
     }
+    if (others == 0) return;
+    for (double& c : centre) c /= double(others);
     double distance = 0;
     for (std::size_t i = 0; i < at.size(); ++i) distance += (centre[i] - at[i]) * (centre[i] - at[i]);
     distance = std::sqrt(distance);
@@ -72,7 +80,9 @@ void PointEvaluator::evaluate(const LmeBasis& basis, std::span<const double> x, 
   try {
     jet = basis.evaluate(at, list, order);
   } catch (const LmeEvaluationError& e) {
-    if (order == 0 || e.reason() != LmeFailure::singular_jacobian) throw;
+    // At a node whose neighbours carry almost no weight the dual problem's Hessian J vanishes
+    // (p is the Kronecker delta to round-off): a hundredth of a spacing away it is regular.
+    if (e.reason() != LmeFailure::singular_jacobian) throw;
     move_inward(1e-2);
     jet = basis.evaluate(at, list, order);
   }
