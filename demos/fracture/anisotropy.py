@@ -12,6 +12,9 @@ crack directions are the minima of G as a function of the crack direction (norma
     anisotropy.py polar OUT.png [--g1111 1 --g1122 0.5 --g1212 4.25 --a1 1 --a2 1]
     anisotropy.py angle SERIES.h5 X0 Y0      the crack angle of a run: a line through the nodes
                                               with v < 0.5 ahead of the initial tip (X0, Y0)
+    anisotropy.py record RUN_DIR THETA0_DEG OUT   the last step's crack angle, the mean upward and
+                                              downward angles of its ridge (a sawtooth), a record in
+                                              OUT/fracture.json and OUT/fracture_anisotropic_THETA0.png
 """
 import math
 import sys
@@ -101,9 +104,71 @@ def crack_angle(series, x0, y0):
     return math.degrees(math.atan2(t[1], t[0])), len(pts)
 
 
+def crack_path(series, x0, bin_width=0.01):
+    """The crack's ridge ahead of the initial tip: per bin of x, the y of the node of least v (< 0.5)."""
+    import h5py
+    with h5py.File(series, "r") as f:
+        x = np.array(f["nodes"])
+        v = np.array(f["fields"]["v"]).ravel()
+    points = []
+    edges = np.arange(x0, x[:, 0].max(), bin_width)
+    for lo in edges:
+        sel = (x[:, 0] >= lo) & (x[:, 0] < lo + bin_width) & (v < 0.5)
+        if not sel.any():
+            break
+        j = np.argmin(np.where(sel, v, np.inf))
+        points.append(x[j])
+    return np.array(points)
+
+
+def record(run, degrees, out):
+    """Appends the anisotropic run's crack angles to OUT/fracture.json."""
+    import json
+    import pathlib
+    run, out = pathlib.Path(run), pathlib.Path(out)
+    last = sorted((run / "series").glob("*.h5"))[-1]
+    angle, n = crack_angle(last, 0.3, 0.0)
+    path = crack_path(last, 0.31)
+    local = []
+    for a, b in zip(path[:-2], path[2:]):
+        local.append(math.degrees(math.atan2(b[1] - a[1], b[0] - a[0])))
+    up = [a for a in local if a > 5]
+    down = [a for a in local if a < -5]
+    # preferred crack directions (minima of G: crack normal along a material axis) nearest to x
+    minima = sorted(((degrees + k * 90 + 90) % 180 + 180) % 180 for k in range(2))
+    minima = [m - 180 if m > 90 else m for m in minima]
+    rec = {"case": "anisotropic", "model": "anisotropic", "l": 0.02, "h_min": 0.01, "theta0": degrees, "crack_angle_deg": angle,
+           "sawtooth_up_deg": float(np.mean(up)) if up else None, "sawtooth_down_deg": float(np.mean(down)) if down else None,
+           "reference": min(minima, key=abs), "reference_minima_deg": minima, "path_points": len(path), "damaged_nodes": n}
+    print(json.dumps(rec))
+    file = out / "fracture.json"
+    old = json.loads(file.read_text()) if file.exists() else {"records": []}
+    old["records"] = [r for r in old["records"] if not (r.get("case") == "anisotropic" and r.get("theta0") == degrees)] + [rec]
+    file.write_text(json.dumps(old, indent=1))
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        import h5py
+        with h5py.File(last, "r") as f:
+            x = np.array(f["nodes"])
+            v = np.array(f["fields"]["v"]).ravel()
+        fig, ax = plt.subplots(figsize=(6, 3.2))
+        t = ax.tricontourf(x[:, 0], x[:, 1], v, levels=np.linspace(0, 1, 11), cmap="viridis")
+        fig.colorbar(t, ax=ax, label="v")
+        ax.set_aspect("equal")
+        ax.set_title(f"theta0 = {degrees} deg: crack at {angle:.1f} deg")
+        fig.tight_layout()
+        fig.savefig(out / f"fracture_anisotropic_{degrees}.png", dpi=120)
+    except ImportError:
+        pass
+
+
 if __name__ == "__main__":
     if sys.argv[1] == "polar":
         polar(sys.argv[2], params(sys.argv))
+    elif sys.argv[1] == "record":
+        record(sys.argv[2], float(sys.argv[3]), sys.argv[4])
     elif sys.argv[1] == "angle":
         angle, n = crack_angle(sys.argv[2], float(sys.argv[3]), float(sys.argv[4]))
         print(f"crack angle {angle:.1f} deg ({n} nodes with v < 0.5 ahead of the tip)")
