@@ -54,6 +54,9 @@ struct ProblemResult {
   /// Linear problems with zero-mean unknowns: how the level was fixed ("constraint": a bordered
   /// system, "null space": the Krylov method's null space + the mean removed afterwards).
   std::string zero_mean_method;
+  /// Saddle points: negative eigenvalues of the last factored (reduced) Hessian, and how many a
+  /// saddle that is a minimum in the other unknowns and a maximum in the maximized ones has (-1: unknown).
+  long negative_eigenvalues = -1, expected_negative_eigenvalues = -1;
   /// The solve's discretization, for a later solve on the same nodes (ProblemInput::discretization).
   std::shared_ptr<Discretization> discretization;
 };
