@@ -103,6 +103,8 @@ nlohmann::ordered_json record(const std::string& case_name, const std::string& s
                               {"wall_s", o.wall},
                               {"setup_s", o.report.at("setup_s")},
                               {"solve_s", o.report.at("solve_s")},
+                              {"assembly_s", o.report.at("assembly_s")},
+                              {"factorization_s", o.report.at("factorization_s")},
                               {"negative_eigenvalues", o.report.at("negative_eigenvalues")},
                               {"expected_negative_eigenvalues", o.report.at("expected_negative_eigenvalues")}};
   r["quantities"] = o.report.at("quantities");
