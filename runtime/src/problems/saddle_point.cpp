@@ -516,6 +516,7 @@ class SaddlePointDriver final : public StationaryDriver {
     std::string failure;
     double assembly_s = 0, factorization_s = 0;
     PetscMatrix A, K;  // the reduced Hessian and, with zero-mean conditions, its bordered system
+    bool refine = false;
     for (;;) {
       const Stopwatch gradient_clock;
       gradient(u, g);
@@ -554,8 +555,8 @@ class SaddlePointDriver final : public StationaryDriver {
         break;
       }
       // After a step that removed all but a millionth of |grad|, what is left is rounding (or a
-      // nonlinearity that small): the step is refined with the factorization already at hand.
-      const bool refine = steps > 0 && norm <= 1e-6 * previous_norm;
+      // nonlinearity that small): this and later steps refine with the factorization at hand.
+      refine = refine || (steps > 0 && norm <= 1e-6 * previous_norm);
       previous_norm = norm;
       if (steps >= max_steps) {
         failure = fmt::format("|grad| {:.3e} after {} Newton steps, {:.1e} of the start's (newton_tolerance {:.0e})", norm, steps,
