@@ -216,6 +216,36 @@ TEST(ModuleCheck, FractureFormsByName) {
         for (const int d : dims)
           EXPECT_NE(std::find(energy_dims.begin(), energy_dims.end(), d), energy_dims.end()) << name << ": no energy checked in " << d << "d";
       }
+
+// The flexoelectric enthalpies (seed Eqs. 5.15 and 5.16) with every coupling switched on: a poled
+// piezoelectric tensor, a cubic flexoelectric tensor with a shear constant, rotated crystal axes.
+// The Hessian's check covers its mixed displacement-potential block, which these constants fill.
+TEST(ModuleCheck, FlexoelectricFormsWithEveryCoupling) {
+  const std::map<std::string, std::vector<std::pair<std::string, double>>> forms = {
+      {"flexoelectric", {{"e31", -4.4}, {"e33", 18.6}, {"e15", 11.6}, {"theta", 0.3}, {"mu_L", 1.3}, {"mu_T", 0.7}, {"mu_S", 0.4}}},
+      {"flexoelectric_fd",
+       {{"e31", -4.4}, {"e33", 18.6}, {"e15", 11.6}, {"theta", 0.3}, {"f_L", -0.5}, {"f_T", 0.2}, {"f_S", 0.3}, {"d_L", 0.8}, {"d_T", 0.9}, {"d_S", 0.1}}},
+      {"flexoelectric_loads", {{"k_support", 2.0}}}};
+  for (const auto basis : {lmeform::LmeConsistency::first, lmeform::LmeConsistency::second}) {
+    for (const auto& [name, constants] : forms) {
+      const lmeform::FormModule& module = lmeform::load_form(name);
+      fc::ModuleCheckOptions options;
+      options.basis = basis;
+      options.constants = constants;
+      const fc::ModuleCheck check = fc::check_module(module.name, module.source, module.kernels, options);
+      std::vector<int> dims;
+      for (const fc::CheckRecord& r : check.records) {
+        const std::string what = name + "." + r.output + " " + std::to_string(r.dim) + "d (" + lmeform::to_string(basis) + " order)";
+        EXPECT_TRUE(r.passed) << what;
+        if (r.kind != "energy") continue;
+        dims.push_back(r.dim);
+        EXPECT_LT(r.gradient_rel_error, 1e-5) << what;
+        if (!std::isnan(r.hessian_rel_error)) {
+          EXPECT_LT(r.hessian_rel_error, 1e-5) << what;
+        }
+        EXPECT_LT(r.symmetry_error, 1e-12) << what;
+      }
+      for (const int d : {2, 3}) EXPECT_NE(std::find(dims.begin(), dims.end(), d), dims.end()) << name << ": no energy checked in " << d << "d";
     }
   }
 }

@@ -699,7 +699,7 @@ TEST(SceneTables, UnknownTableWithSuggestion) {
   // Nothing close: the tables are listed.
   t = kMinimal + "[mesh]\nsize = 3\n";
   expect_error(t, {"unknown table [mesh]; the tables of a scene are [scene], [domain], [nodes], [model], [constants], [parameters], "
-                   "[constraints], [dirichlet], [initial], [coefficients], [qdata], [solver], [reference], [quantities], [bounds], [output]"});
+                   "[constraints], [dirichlet], [equipotential], [initial], [coefficients], [qdata], [solver], [reference], [quantities], [bounds], [output]"});
   // The old format's [adaptivity] is no table of the reader.
   t = kMinimal + "[adaptivity]\nstages = []\n";
   expect_error(t, {"unknown table [adaptivity]"});

@@ -95,6 +95,10 @@ struct SceneModel {
   /// Unknowns determined by the equations only up to a constant (the pressure of enclosed Stokes
   /// flow): the solve adds the condition ∫ u dx = 0 for each (linear problems only).
   std::vector<SceneName> zero_mean;
+  /// Unknowns over which the energy is maximized (an electric enthalpy's potential): the problem
+  /// is a saddle point, min over the other unknowns, max over these, solved by Newton's method on
+  /// the symmetric indefinite Hessian (energy problems only).
+  std::vector<SceneName> maximize;
 };
 
 /// A value given as a number or as an expression of the coordinates `x` and the scene's constants
@@ -124,6 +128,16 @@ struct SceneDirichlet {
   std::string unknown;
   std::vector<int> components;         ///< empty: every component
   SceneValue value;                    ///< one number for every component, or an expression (scalar or vector)
+  std::string where;
+};
+
+/// [[equipotential]]: a scalar unknown constant but unknown on parts of the boundary (a floating
+/// electrode), optionally with the total of its conjugate flux given (the electrode's charge).
+struct SceneEquipotential {
+  std::vector<std::string> boundary;
+  std::string unknown;
+  double charge = 0;                   ///< the prescribed total charge on the parts (0: an isolated electrode)
+  std::string name;                    ///< the reported quantities' prefix (default: the first part)
   std::string where;
 };
 
@@ -241,6 +255,7 @@ struct Scene {
   std::map<std::string, std::string, std::less<>> parameter_where;
   std::vector<SceneConstraint> constraints;
   std::vector<SceneDirichlet> dirichlet;
+  std::vector<SceneEquipotential> equipotentials;
   std::vector<SceneInitialField> initial;
   /// [coefficients]: the known nodal fields the forms read (`coefficient NAME` in a form), by the
   /// same kinds of value as [initial] (`unknown` holds the coefficient's name).

@@ -16,6 +16,7 @@
 #include "problem_registry.hpp"
 #include "point_values.hpp"
 #include "problem_space.hpp"
+#include "saddle_point.hpp"
 
 namespace lmeform::problems {
 
@@ -678,6 +679,7 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
   bind_bounds(scene, b);
   bind_point_outputs(scene, b);
   bind_reference(scene, comm, log, expression_constants, b);
+  bind_saddle_point(scene, b);
   bind_quantities(scene, comm, log, expression_constants, b);
   b.expressions->compile(comm, log);
   check_expression_values(scene, b);

@@ -90,6 +90,16 @@ struct BoundDirichlet {
   std::string where;
 };
 
+/// An [[equipotential]] entry: a scalar unknown held equal, at a value the solve finds, on the
+/// nodes of some boundary parts (a floating electrode), with its total charge given.
+struct BoundEquipotential {
+  std::vector<std::string> parts;
+  UnknownField field;
+  double charge = 0;            ///< the prescribed total charge: the energy gains charge × the common value
+  std::string name;             ///< prefix of the reported quantities <name>_potential, <name>_charge
+  std::string where;
+};
+
 /// Where a quadrature datum comes from.
 struct BoundQdata {
   std::string name;
@@ -170,6 +180,9 @@ struct BoundScene {
   std::vector<BoundDirichlet> dirichlet;
   std::vector<BoundQdata> qdata;
   std::vector<std::string> zero_mean;    ///< scalar unknowns fixed by ∫ u dx = 0
+  /// Saddle points: the unknowns the energy is maximized over (model.maximize).
+  std::vector<std::string> maximize;
+  std::vector<BoundEquipotential> equipotentials;
   std::vector<BoundExactSolution> exact;
   std::vector<BoundQuantity> quantities;
   /// The point outputs of the forms (`point NAME = ...`) that the unknowns and constants alone

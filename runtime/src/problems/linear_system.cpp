@@ -39,8 +39,8 @@ void name_field_splits(MPI_Comm comm, PC pc, Mat A, const LinearSystemLayout& la
   }
 }
 
-/// [A C; Cᵀ 0] with the columns of C given as vectors of A's layout; the new rows and columns are
-/// owned by the last rank, so that every dof of A keeps its global index.
+}  // namespace
+
 PetscMatrix bordered_matrix(MPI_Comm comm, Mat A, std::span<const Vec> columns) {
   int rank = 0, size = 1;
   MPI_Comm_rank(comm, &rank);
@@ -119,6 +119,8 @@ PetscVector bordered_vector(MPI_Comm comm, Vec v, PetscInt k) {
   }
   return out;
 }
+
+namespace {
 
 double relative_residual(Mat A, Vec x, Vec b) {
   PetscVector r;

@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "lmeform/petsc.hpp"
 #include "toolkit.hpp"
 
 namespace lmeform::problems {
@@ -35,6 +36,12 @@ struct LinearSolveReport {
   std::string zero_mean_method;        ///< "", "constraint" or "null space"
   double seconds = 0;
 };
+
+/// [A C; Cᵀ 0] with the columns of C given as vectors of A's layout; the new rows and columns are
+/// owned by the last rank, so that every dof of A keeps its global index.
+[[nodiscard]] PetscMatrix bordered_matrix(MPI_Comm comm, Mat A, std::span<const Vec> columns);
+/// A vector of the bordered layout holding v in its first part and zeros in the k border entries.
+[[nodiscard]] PetscVector bordered_vector(MPI_Comm comm, Vec v, PetscInt k);
 
 /// Solves A x = b (x: the start, with any Dirichlet values already in it). Collective.
 [[nodiscard]] LinearSolveReport solve_linear_system(MPI_Comm comm, Mat A, Vec b, Vec x, const LinearSystemLayout& layout);

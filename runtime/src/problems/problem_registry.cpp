@@ -6,6 +6,7 @@
 #include "dynamics.hpp"
 #include "load_steps.hpp"
 #include "minimization.hpp"
+#include "saddle_point.hpp"
 #include "vesicle.hpp"
 
 namespace lmeform::problems {
@@ -19,15 +20,17 @@ namespace {
 
 /// Drivers of a table first (they build on a stationary solve), then the stationary drivers, the
 /// minimization last (it claims every scene that names no residual or linear problem).
-const std::array<const ProblemDriver*, 7>& all_drivers() {
-  static const std::array<const ProblemDriver*, 7> drivers{&dynamics_driver(), &vesicle_driver(), &load_steps_driver(), &staggered_driver(),
-                                                           &residual_driver(), &linear_driver(),  &minimization_driver()};
+const std::array<const ProblemDriver*, 8>& all_drivers() {
+  static const std::array<const ProblemDriver*, 8> drivers{&dynamics_driver(), &vesicle_driver(),       &load_steps_driver(),
+                                                           &staggered_driver(), &residual_driver(),     &linear_driver(),
+                                                           &saddle_point_driver(), &minimization_driver()};
   return drivers;
 }
 
 /// The solves of the [model] outputs themselves.
-const std::array<const StationaryDriver*, 3>& basic_stationary_drivers() {
-  static const std::array<const StationaryDriver*, 3> drivers{&residual_driver(), &linear_driver(), &minimization_driver()};
+const std::array<const StationaryDriver*, 4>& basic_stationary_drivers() {
+  static const std::array<const StationaryDriver*, 4> drivers{&residual_driver(), &linear_driver(), &saddle_point_driver(),
+                                                              &minimization_driver()};
   return drivers;
 }
 

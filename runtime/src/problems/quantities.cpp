@@ -4,6 +4,7 @@
 
 #include "point_values.hpp"
 #include "problem_registry.hpp"
+#include "saddle_point.hpp"
 #include "stationary.hpp"
 
 namespace lmeform::problems {
@@ -75,8 +76,9 @@ void add_probe(const BoundQuantity& q, const BoundScene& b, ProblemSpace& space,
 
 QuantityValues evaluate_quantities(const BoundScene& b, ProblemSpace& space, Vec u, const ProblemResult& result) {
   QuantityValues out;
-  if (b.quantities.empty()) return out;
+  if (b.quantities.empty() && b.equipotentials.empty()) return out;
   const bool reactions =
+      !b.equipotentials.empty() ||
       std::any_of(b.quantities.begin(), b.quantities.end(), [](const BoundQuantity& q) { return q.scene.kind == SceneQuantity::Kind::reaction; });
   PetscVector residual;
   if (reactions) {
@@ -96,6 +98,7 @@ QuantityValues evaluate_quantities(const BoundScene& b, ProblemSpace& space, Vec
       case SceneQuantity::Kind::energy: out.emplace_back(q.scene.name, space.assemblers.at(q.integral->label)->value(u)); break;
     }
   }
+  add_equipotential_quantities(b, space, u, residual, out);
   return out;
 }
 

@@ -53,10 +53,14 @@ struct ProblemResult {
   std::map<std::string, double, std::less<>> values;
   double h_min = 0, h_mean = 0;
   double seconds_setup = 0, seconds_solve = 0;
-  double seconds_assembly = 0;               ///< linear problems: assembly of A and b (in seconds_solve)
+  double seconds_assembly = 0;               ///< linear problems: assembly of A and b; saddle points: gradients and Hessians (in seconds_solve)
+  double seconds_factorization = 0;          ///< saddle points: the LDLᵀ factorizations and solves (in seconds_solve)
   /// Linear problems with zero-mean unknowns: how the level was fixed ("constraint": a bordered
   /// system, "null space": the Krylov method's null space + the mean removed afterwards).
   std::string zero_mean_method;
+  /// Saddle points: negative eigenvalues of the last factored (reduced) Hessian, and how many a
+  /// saddle that is a minimum in the other unknowns and a maximum in the maximized ones has (-1: unknown).
+  long negative_eigenvalues = -1, expected_negative_eigenvalues = -1;
   /// The solve's discretization, for a later solve on the same nodes (ProblemInput::discretization).
   std::shared_ptr<Discretization> discretization;
 };

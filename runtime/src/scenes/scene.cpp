@@ -190,7 +190,7 @@ std::vector<SceneName> names_of(const Section& t, std::string_view key) {
 }
 
 void read_model(const Section& root, Scene& s) {
-  const Section t = root.table("model", {"forms", "energy", "residual", "bilinear", "linear", "zero_mean"});
+  const Section t = root.table("model", {"forms", "energy", "residual", "bilinear", "linear", "zero_mean", "maximize"});
   SceneModel& m = s.model;
   m.forms = names_of(t, "forms");
   for (auto& f : m.forms) {
@@ -214,9 +214,15 @@ void read_model(const Section& root, Scene& s) {
   } else if (energy) {
     m.energy = names_of(t, "energy");
   }
+  if (t.has("maximize")) {
+    if (residual || bilinear)
+      t.fail_key("maximize", "belongs to an energy problem (a saddle point of model.energy); a residual or linear problem has no energy to "
+                             "maximize");
+    m.maximize = names_of(t, "maximize");
+  }
   if (t.has("zero_mean")) {
-    if (!bilinear)
-      t.fail_key("zero_mean", "is supported for linear problems (model.bilinear + model.linear) only");
+    if (!bilinear && m.maximize.empty())
+      t.fail_key("zero_mean", "is supported for linear problems (model.bilinear + model.linear) and saddle points (model.maximize) only");
     m.zero_mean = names_of(t, "zero_mean");
   }
 }
@@ -277,12 +283,9 @@ void read_constraints(const Section& root, Scene& s) {
   }
 }
 
-void read_dirichlet(const Section& root, Scene& s) {
-  const toml::node* n = root.node("dirichlet");
-  if (n == nullptr) return;
-  const auto* a = n->as_array();
-  if (a == nullptr) root.wrong_type("dirichlet", *n, "an array of tables ([[dirichlet]])");
-  // A box's sides by axis; a polygon's or polyhedron's named parts.
+/// The boundary parts a [[dirichlet]] or [[equipotential]] entry may name: a box's sides by axis, a
+/// polygon's or polyhedron's named parts, "hull" (and "axis" of an axisymmetric box).
+std::vector<std::string> boundary_part_names(const Scene& s) {
   std::vector<std::string> sides = s.geometry.is_box() ? std::vector<std::string>{} : s.geometry.part_names();
   static const char* const cartesian[] = {"x", "y", "z"};
   for (int i = 0; i < s.dim() && s.geometry.is_box(); ++i) {
@@ -292,6 +295,32 @@ void read_dirichlet(const Section& root, Scene& s) {
   }
   sides.emplace_back("hull");
   if (s.axisymmetric() && s.geometry.is_box()) sides.emplace_back("axis");
+  return sides;
+}
+
+/// The key 'boundary' of an entry: parts of the scene's geometry, with a did-you-mean.
+std::vector<std::string> boundary_parts_of(const Section& t, const Scene& s, const std::vector<std::string>& sides) {
+  std::vector<std::string> out;
+  for (const auto& b : names_of(t, "boundary")) {
+    if (std::find(sides.begin(), sides.end(), b.name) == sides.end()) {
+      std::string list;
+      for (const auto& side : sides) list += (list.empty() ? "'" : ", '") + side + "'";
+      const std::string guess = closest_name(b.name, sides);
+      t.fail_key("boundary", "names '" + b.name + "', which is no boundary part of this " +
+                                 (s.axisymmetric() ? std::string("axisymmetric") : std::to_string(s.dim()) + "D") + " scene" +
+                                 (guess.empty() ? "" : "; did you mean '" + guess + "'?") + " (parts: " + list + ")");
+    }
+    out.push_back(b.name);
+  }
+  return out;
+}
+
+void read_dirichlet(const Section& root, Scene& s) {
+  const toml::node* n = root.node("dirichlet");
+  if (n == nullptr) return;
+  const auto* a = n->as_array();
+  if (a == nullptr) root.wrong_type("dirichlet", *n, "an array of tables ([[dirichlet]])");
+  const std::vector<std::string> sides = boundary_part_names(s);
   for (std::size_t i = 0; i < a->size(); ++i) {
     const std::string key = "dirichlet[" + std::to_string(i) + "]";
     const Section t = root.table_of(key, (*a)[i], {"boundary", "unknown", "components", "value"});
@@ -299,17 +328,7 @@ void read_dirichlet(const Section& root, Scene& s) {
     d.where = s.source;
     if (const auto line = (*a)[i].source().begin.line; line > 0) d.where += ":" + std::to_string(line);
     d.where += ": key '" + key + "'";
-    for (const auto& b : names_of(t, "boundary")) {
-      if (std::find(sides.begin(), sides.end(), b.name) == sides.end()) {
-        std::string list;
-        for (const auto& side : sides) list += (list.empty() ? "'" : ", '") + side + "'";
-        const std::string guess = closest_name(b.name, sides);
-        t.fail_key("boundary", "names '" + b.name + "', which is no boundary part of this " +
-                                   (s.axisymmetric() ? std::string("axisymmetric") : std::to_string(s.dim()) + "D") +
-                                   " scene" + (guess.empty() ? "" : "; did you mean '" + guess + "'?") + " (parts: " + list + ")");
-      }
-      d.boundary.push_back(b.name);
-    }
+    d.boundary = boundary_parts_of(t, s, sides);
     d.unknown = t.string("unknown");
     if (t.has("components")) {
       const toml::node& c = t.require("components");
@@ -323,6 +342,32 @@ void read_dirichlet(const Section& root, Scene& s) {
     }
     d.value = value_of(t, "value", t.require("value"));
     s.dirichlet.push_back(std::move(d));
+  }
+}
+
+/// [[equipotential]]: a scalar unknown constant on parts of the boundary, its value unknown.
+void read_equipotentials(const Section& root, Scene& s) {
+  const toml::node* n = root.node("equipotential");
+  if (n == nullptr) return;
+  const auto* a = n->as_array();
+  if (a == nullptr) root.wrong_type("equipotential", *n, "an array of tables ([[equipotential]])");
+  const std::vector<std::string> sides = boundary_part_names(s);
+  for (std::size_t i = 0; i < a->size(); ++i) {
+    const std::string key = "equipotential[" + std::to_string(i) + "]";
+    const Section t = root.table_of(key, (*a)[i], {"boundary", "unknown", "charge", "name"});
+    SceneEquipotential e;
+    e.where = s.source;
+    if (const auto line = (*a)[i].source().begin.line; line > 0) e.where += ":" + std::to_string(line);
+    e.where += ": key '" + key + "'";
+    e.boundary = boundary_parts_of(t, s, sides);
+    e.unknown = t.string("unknown");
+    e.charge = t.number("charge", 0.0);
+    e.name = t.optional_string("name").value_or(e.boundary.front());
+    for (const auto& other : s.equipotentials)
+      if (other.name == e.name)
+        t.fail_key("name", "'" + e.name + "' is already the name of another [[equipotential]] entry (" + other.where +
+                               "): give each a 'name' of its own");
+    s.equipotentials.push_back(std::move(e));
   }
 }
 
@@ -495,7 +540,7 @@ Scene parse_scene(std::string_view text, std::string source_name, std::span<cons
                      ": TOML syntax error: " + std::string(e.description()));
   }
   std::vector<std::string_view> tables{"scene", "domain", "nodes", "model", "constants", "parameters", "constraints", "dirichlet",
-                                       "initial", "coefficients", "qdata", "solver", "reference", "quantities", "bounds", "output"};
+                                       "equipotential", "initial", "coefficients", "qdata", "solver", "reference", "quantities", "bounds", "output"};
   tables.insert(tables.end(), extensions.begin(), extensions.end());
   // The initializer_list interface of SceneTable wants a list: check the top-level keys here.
   for (const auto& [key, node] : document->root) {
@@ -521,6 +566,7 @@ Scene parse_scene(std::string_view text, std::string source_name, std::span<cons
   read_parameters(root, s);
   read_constraints(root, s);
   read_dirichlet(root, s);
+  read_equipotentials(root, s);
   read_initial(root, s);
   read_coefficients(root, s);
   read_qdata(root, s);
