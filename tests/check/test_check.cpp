@@ -216,6 +216,9 @@ TEST(ModuleCheck, FractureFormsByName) {
         for (const int d : dims)
           EXPECT_NE(std::find(energy_dims.begin(), energy_dims.end(), d), energy_dims.end()) << name << ": no energy checked in " << d << "d";
       }
+    }
+  }
+}
 
 // The flexoelectric enthalpies (seed Eqs. 5.15 and 5.16) with every coupling switched on: a poled
 // piezoelectric tensor, a cubic flexoelectric tensor with a shear constant, rotated crystal axes.
