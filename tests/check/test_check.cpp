@@ -141,80 +141,66 @@ TEST_P(BuiltinModule, PassesWithTheSecondOrderBasis) {
 INSTANTIATE_TEST_SUITE_P(All, BuiltinModule, ::testing::ValuesIn(lmeform::builtin_form_names()),
                          [](const ::testing::TestParamInfo<std::string>& p) { return p.param; });
 
-// The solids forms (docs/solids.md), by name: gradients against differences of the energy,
-// Hessians against differences of the gradient, and the Taylor remainders at their orders (2 for
-// the gradient, 3 with the Hessian term, 2 for the Hessian; "exact" where the energy is a
-// polynomial along the direction), in every dimension each declares, on the graded check cells,
-// with both bases. The axisymmetric forms are checked in r-z coordinates with the mirrored basis.
-TEST(ModuleCheck, SolidsFormsByName) {
+/// Checks a form by name: every output passes; every energy's gradient and Hessian agree with
+/// differences (1e-5) and its Taylor remainders have their orders (2 for the gradient, 3 with the
+/// Hessian term, 2 for the Hessian; "exact" where the energy is a polynomial along the direction);
+/// an energy is checked in every dimension of `dims`. Returns the check for further assertions.
+fc::ModuleCheck expect_form_passes(const std::string& name, const std::vector<int>& dims, const fc::ModuleCheckOptions& options,
+                                   const std::string& label) {
   auto slope_ok = [](const fc::SlopeResult& s, double expected) {
     return s.kind == fc::SlopeResult::Kind::exact || (s.kind == fc::SlopeResult::Kind::fitted && std::abs(s.value - expected) < 0.3);
   };
+  const lmeform::FormModule& module = lmeform::load_form(name);
+  fc::ModuleCheck check = fc::check_module(module.name, module.source, module.kernels, options);
+  std::vector<int> energy_dims;
+  for (const fc::CheckRecord& r : check.records) {
+    const std::string what = name + "." + r.output + " " + std::to_string(r.dim) + "d (" + label + ", " + lmeform::to_string(options.basis) + " order)";
+    EXPECT_TRUE(r.passed) << what;
+    if (r.kind != "energy") continue;
+    energy_dims.push_back(r.dim);
+    EXPECT_LT(r.gradient_rel_error, 1e-5) << what;
+    EXPECT_LT(r.hessian_rel_error, 1e-5) << what;
+    EXPECT_TRUE(slope_ok(r.taylor_slope_gradient, 2.0)) << what << ": gradient remainder slope " << r.taylor_slope_gradient.text();
+    EXPECT_TRUE(slope_ok(r.taylor_slope_second_order, 3.0)) << what << ": second-order remainder slope " << r.taylor_slope_second_order.text();
+    EXPECT_TRUE(slope_ok(r.taylor_slope_hessian, 2.0)) << what << ": Hessian remainder slope " << r.taylor_slope_hessian.text();
+  }
+  for (const int d : dims)
+    EXPECT_NE(std::find(energy_dims.begin(), energy_dims.end(), d), energy_dims.end()) << name << ": no energy checked in " << d << "d";
+  return check;
+}
+
+// The solids forms (docs/solids.md), by name, in every dimension each declares, on the graded check
+// cells, with both bases. The axisymmetric forms are checked in r-z coordinates with the mirrored basis.
+TEST(ModuleCheck, SolidsFormsByName) {
   const std::map<std::string, std::vector<int>> forms = {
       {"elasticity", {2, 3}},       {"neo_hookean", {2, 3}},   {"elasticity_axisymmetric", {2}}, {"pressure_axisymmetric", {2}},
       {"traction", {2, 3}},         {"kirchhoff_plate", {2}},  {"kirchhoff_clamped", {2}}};
   for (const auto basis : {lmeform::LmeConsistency::first, lmeform::LmeConsistency::second}) {
     for (const auto& [name, dims] : forms) {
-      const lmeform::FormModule& module = lmeform::load_form(name);
       fc::ModuleCheckOptions options;
       options.basis = basis;
-      const fc::ModuleCheck check = fc::check_module(module.name, module.source, module.kernels, options);
+      const fc::ModuleCheck check = expect_form_passes(name, dims, options, "defaults");
       const bool axisymmetric = name.find("_axisymmetric") != std::string::npos;
       EXPECT_EQ(check.coordinates, axisymmetric ? fc::Coordinates::axisymmetric : fc::Coordinates::cartesian) << name;
-      std::vector<int> energy_dims;
-      for (const fc::CheckRecord& r : check.records) {
-        const std::string what = name + "." + r.output + " " + std::to_string(r.dim) + "d (" + lmeform::to_string(basis) + " order)";
-        EXPECT_TRUE(r.passed) << what;
-        if (r.kind != "energy") continue;
-        energy_dims.push_back(r.dim);
-        EXPECT_LT(r.gradient_rel_error, 1e-5) << what;
-        EXPECT_LT(r.hessian_rel_error, 1e-5) << what;
-        EXPECT_TRUE(slope_ok(r.taylor_slope_gradient, 2.0)) << what << ": gradient remainder slope " << r.taylor_slope_gradient.text();
-        EXPECT_TRUE(slope_ok(r.taylor_slope_second_order, 3.0)) << what << ": second-order remainder slope "
-                                                                << r.taylor_slope_second_order.text();
-        EXPECT_TRUE(slope_ok(r.taylor_slope_hessian, 2.0)) << what << ": Hessian remainder slope " << r.taylor_slope_hessian.text();
-      }
-      for (const int d : dims)
-        EXPECT_NE(std::find(energy_dims.begin(), energy_dims.end(), d), energy_dims.end()) << name << ": no energy checked in " << d << "d";
     }
   }
 }
 
+// Every fracture form in every dimension it declares, both bases, with and without the
+// volumetric-deviatoric split (max/min of tr eps: the branch taken is differentiated) and, for the
+// anisotropic surface energy, a rotated cubic tensor and an orthotropic gradient metric.
 TEST(ModuleCheck, FractureFormsByName) {
-  // Every fracture form in every dimension it declares, both bases, with and without the
-  // volumetric-deviatoric split (max/min of tr eps: the branch taken is differentiated) and, for the
-  // anisotropic surface energy, a rotated cubic tensor and an orthotropic gradient metric.
-  auto slope_ok = [](const fc::SlopeResult& s, double expected) {
-    return s.kind == fc::SlopeResult::Kind::exact || (s.kind == fc::SlopeResult::Kind::fitted && std::abs(s.value - expected) < 0.3);
-  };
   const std::map<std::string, std::vector<int>> forms = {
       {"fracture_at1", {1, 2, 3}}, {"fracture_at2", {1, 2, 3}}, {"fracture_fourth", {1, 2, 3}}, {"fracture_anisotropic", {2, 3}}};
   const std::vector<std::pair<std::string, double>> anisotropy = {{"theta0", 0.4}, {"a2", 1.6}, {"g1111", 1.2}, {"g1122", 0.3}, {"g1212", 0.7}};
   for (const auto basis : {lmeform::LmeConsistency::first, lmeform::LmeConsistency::second}) {
     for (const auto& [name, dims] : forms) {
       for (const double split : {0.0, 1.0}) {
-        const lmeform::FormModule& module = lmeform::load_form(name);
         fc::ModuleCheckOptions options;
         options.basis = basis;
         options.constants = {{"split", split}};
         if (name == "fracture_anisotropic") options.constants.insert(options.constants.end(), anisotropy.begin(), anisotropy.end());
-        const fc::ModuleCheck check = fc::check_module(module.name, module.source, module.kernels, options);
-        std::vector<int> energy_dims;
-        for (const fc::CheckRecord& r : check.records) {
-          const std::string what = name + "." + r.output + " " + std::to_string(r.dim) + "d split " + std::to_string(int(split)) + " (" +
-                                   lmeform::to_string(basis) + " order)";
-          EXPECT_TRUE(r.passed) << what;
-          if (r.kind != "energy") continue;
-          energy_dims.push_back(r.dim);
-          EXPECT_LT(r.gradient_rel_error, 1e-5) << what;
-          EXPECT_LT(r.hessian_rel_error, 1e-5) << what;
-          EXPECT_TRUE(slope_ok(r.taylor_slope_gradient, 2.0)) << what << ": gradient remainder slope " << r.taylor_slope_gradient.text();
-          EXPECT_TRUE(slope_ok(r.taylor_slope_second_order, 3.0)) << what << ": second-order remainder slope "
-                                                                  << r.taylor_slope_second_order.text();
-          EXPECT_TRUE(slope_ok(r.taylor_slope_hessian, 2.0)) << what << ": Hessian remainder slope " << r.taylor_slope_hessian.text();
-        }
-        for (const int d : dims)
-          EXPECT_NE(std::find(energy_dims.begin(), energy_dims.end(), d), energy_dims.end()) << name << ": no energy checked in " << d << "d";
+        (void)expect_form_passes(name, dims, options, "split " + std::to_string(int(split)));
       }
     }
   }
