@@ -68,7 +68,9 @@ KernelPlan plan_point(const CompiledForm& form, const OutputDecl& output, int di
   plan.dim = dim;
   plan.point = output.point.at(dim);
   field_offsets(form, ir::Role::Unknown, dim, &plan.row_dofs);
+  plan.reads_qdata = false;
   for (NodeId id : g.reachable(plan.point.components)) {
+    if (g.node(id).op == Op::Qdata) plan.reads_qdata = true;
     if (g.node(id).op != Op::Jet) continue;
     const auto v = g.jet_var(id);
     int& order = v.role == ir::Role::Coefficient ? plan.coefficient_order : plan.basis_order;
@@ -802,8 +804,9 @@ void ModuleWriter::descriptor(const EmittedKernel& k) {
     h_ << "  k.coefficients = " << d << "coefficients_" << dim << "d;\n  k.n_coefficients = "
        << form_.fields_of(ir::Role::Coefficient).size() << ";\n";
   h_ << "  k.coefficient_components_per_node = " << cdofs << ";\n  k.coefficient_basis_order = " << coefficient_order << ";\n";
-  if (!form_.qdata.empty()) h_ << "  k.qdata = " << d << "qdata_" << dim << "d;\n  k.n_qdata = " << form_.qdata.size() << ";\n";
-  h_ << "  k.qdata_per_point = " << form_.qdata_per_point(dim) << ";\n";
+  if (!form_.qdata.empty() && p.reads_qdata)
+    h_ << "  k.qdata = " << d << "qdata_" << dim << "d;\n  k.n_qdata = " << form_.qdata.size() << ";\n";
+  h_ << "  k.qdata_per_point = " << (p.reads_qdata ? form_.qdata_per_point(dim) : 0) << ";\n";
   if (!form_.constants.empty())
     h_ << "  k.constants = " << d << "constant_names;\n  k.n_constants = " << form_.constants.size() << ";\n"
        << "  k.constant_defaults = " << d << "constant_defaults;\n";

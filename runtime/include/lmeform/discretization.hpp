@@ -81,6 +81,11 @@ struct DiscretizationOptions {
   OffProcessMode off_process = OffProcessMode::ZeroCommunication;
   bool use_metis = true;           ///< false: contiguous blocks of the original numbering
   std::optional<CarriedQuadrature> carried;  ///< set: these cells and points, no triangulation
+  /// Background cells flatter than this (area over longest edge squared, DelaunayOptions) are
+  /// dropped. Nodes that moved off a straight boundary leave slivers along it whose quadrature
+  /// points lie on the hull to round-off, where the LME derivatives are undefined: a moving node
+  /// set drops them with a larger tolerance.
+  double flat_cell_tolerance = 1e-12;
   /// Boundary parts that forms integrate over (ds(part)): their quadrature, facet vertices in the
   /// original node numbering. Each becomes an integration domain of its own.
   std::vector<BoundaryQuadrature> boundary;

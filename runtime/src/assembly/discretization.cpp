@@ -196,7 +196,9 @@ Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, Discretizati
       quadrature_ = c.quadrature;
       cells_ = c.cells;
     } else {
-      const BackgroundCells original_cells = delaunay(nodes);
+      DelaunayOptions delaunay_options;
+      delaunay_options.flat_tolerance = options_.flat_cell_tolerance;
+      const BackgroundCells original_cells = delaunay(nodes, delaunay_options);
       quadrature_ = map_to_cells(original_cells, nodes, rule_);
       cells_ = original_cells;
     }

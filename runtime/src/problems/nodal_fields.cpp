@@ -141,12 +141,19 @@ std::vector<int> boundary_nodes(const Domain& geometry, const NodeSet& nodes, co
   return geometry.nodes_on(nodes, part);
 }
 
-std::vector<std::vector<int>> dirichlet_nodes(const BoundScene& b, const NodeSet& nodes) {
+std::vector<int> boundary_nodes(const Domain& geometry, const NodeSet& nodes, const std::string& part,
+                                const std::map<std::string, std::vector<int>, std::less<>>& part_nodes) {
+  if (const auto it = part_nodes.find(part); it != part_nodes.end()) return it->second;
+  return boundary_nodes(geometry, nodes, part);
+}
+
+std::vector<std::vector<int>> dirichlet_nodes(const BoundScene& b, const NodeSet& nodes,
+                                              const std::map<std::string, std::vector<int>, std::less<>>& part_nodes) {
   std::vector<std::vector<int>> out;
   for (const BoundDirichlet& d : b.dirichlet) {
     std::set<int> on;
     for (const auto& part : d.parts)
-      for (const int n : boundary_nodes(b.geometry, nodes, part)) on.insert(n);
+      for (const int n : boundary_nodes(b.geometry, nodes, part, part_nodes)) on.insert(n);
     if (on.empty()) throw SceneError(fmt::format("{}: no node lies on the boundary parts given in key 'boundary'", d.where));
     out.emplace_back(on.begin(), on.end());
   }

@@ -4,6 +4,7 @@
 #include <stdexcept>
 
 #include "dynamics.hpp"
+#include "flow_steps.hpp"
 #include "load_steps.hpp"
 #include "minimization.hpp"
 #include "saddle_point.hpp"
@@ -20,8 +21,8 @@ namespace {
 
 /// Drivers of a table first (they build on a stationary solve), then the stationary drivers, the
 /// minimization last (it claims every scene that names no residual or linear problem).
-const std::array<const ProblemDriver*, 8>& all_drivers() {
-  static const std::array<const ProblemDriver*, 8> drivers{&dynamics_driver(), &vesicle_driver(),       &load_steps_driver(),
+const std::array<const ProblemDriver*, 9>& all_drivers() {
+  static const std::array<const ProblemDriver*, 9> drivers{&dynamics_driver(), &vesicle_driver(),       &flow_steps_driver(), &load_steps_driver(),
                                                            &staggered_driver(), &residual_driver(),     &linear_driver(),
                                                            &saddle_point_driver(), &minimization_driver()};
   return drivers;

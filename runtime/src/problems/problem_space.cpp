@@ -30,6 +30,7 @@ std::shared_ptr<Discretization> discretization_of(MPI_Comm comm, const BoundScen
   options.quadrature_points = b.discretization.quadrature_points;
   options.basis_order = std::max(b.basis_order, 1);  // |∇u| at the nodes and H1 errors need gradients
   options.carried = input.carried;
+  options.flat_cell_tolerance = input.flat_cell_tolerance;
   // The facet rule is the boundary rule: hull facets then carry the points of ds, and a traction
   // balances the corrected gradients exactly.
   if (b.discretization.consistent_integration) options.consistent_integration = b.boundary_points;
@@ -205,7 +206,8 @@ void impose_dirichlet(const BoundScene& b, const ProblemInput& input, ProblemSpa
   if (state.size() != nodes.size() * std::size_t(bs))
     throw std::invalid_argument(fmt::format("build_problem_space: the initial state has {} values for {} nodes x {} dofs", state.size(),
                                             nodes.size(), bs));
-  space.dirichlet_nodes = input.dirichlet_nodes.empty() ? dirichlet_nodes(b, nodes) : input.dirichlet_nodes;
+  space.part_nodes = input.part_nodes;
+  space.dirichlet_nodes = input.dirichlet_nodes.empty() ? dirichlet_nodes(b, nodes, input.part_nodes) : input.dirichlet_nodes;
   if (space.dirichlet_nodes.size() != b.dirichlet.size())
     throw std::invalid_argument(fmt::format("build_problem_space: node sets for {} Dirichlet entries, the scene has {}",
                                             space.dirichlet_nodes.size(), b.dirichlet.size()));

@@ -44,6 +44,12 @@ struct ProblemInput {
   /// The nodes (original numbering) of each [[dirichlet]] entry, in scene order, in place of the
   /// nodes found on its boundary parts: a moving node set keeps its material boundary.
   std::vector<std::vector<int>> dirichlet_nodes;
+  /// The nodes (original numbering) of named boundary parts, in place of the nodes the geometry
+  /// finds on them: the parts of a node set that moves with the material (a free surface folding
+  /// onto a plate joins the plate's part). Dirichlet entries and reactions on these parts use them.
+  std::map<std::string, std::vector<int>, std::less<>> part_nodes;
+  /// DiscretizationOptions::flat_cell_tolerance (a moving node set raises it).
+  double flat_cell_tolerance = 1e-12;
   /// A discretization of these nodes built by an earlier solve of the same scene: reused, not
   /// rebuilt (a continuation stage that changes a constant only).
   std::shared_ptr<Discretization> discretization;
@@ -66,6 +72,7 @@ struct ProblemSpace {
   Assembler* linear = nullptr;
   Assembler* primary = nullptr;                          ///< owns the dof layout (first energy, residual, bilinear)
   std::vector<std::vector<int>> dirichlet_nodes;         ///< per [[dirichlet]] entry, original numbering
+  std::map<std::string, std::vector<int>, std::less<>> part_nodes;  ///< ProblemInput::part_nodes
   std::vector<std::pair<int, int>> fixed_pairs;          ///< (original node, dof within the node) with Dirichlet values
   std::vector<PetscInt> fixed;                           ///< the same as owned global dofs
   std::vector<double> state;                             ///< the start (original order), Dirichlet values imposed
@@ -96,11 +103,15 @@ struct ProblemSpace {
 
 /// The nodes (original numbering) on the boundary parts of each [[dirichlet]] entry, in scene
 /// order; throws SceneError for an entry whose parts hold no node.
-[[nodiscard]] std::vector<std::vector<int>> dirichlet_nodes(const BoundScene& b, const NodeSet& nodes);
+[[nodiscard]] std::vector<std::vector<int>> dirichlet_nodes(const BoundScene& b, const NodeSet& nodes,
+                                                          const std::map<std::string, std::vector<int>, std::less<>>& part_nodes = {});
 
 /// The original indices of the nodes on a named boundary part of the domain ("hull": the nodes on
 /// the convex hull of the node set).
 [[nodiscard]] std::vector<int> boundary_nodes(const Domain& geometry, const NodeSet& nodes, const std::string& part);
+/// The same, taken from `part_nodes` when the part is there (a part that follows its nodes).
+[[nodiscard]] std::vector<int> boundary_nodes(const Domain& geometry, const NodeSet& nodes, const std::string& part,
+                                              const std::map<std::string, std::vector<int>, std::less<>>& part_nodes);
 
 /// Values at the nodes (original order, dofs interleaved) of the scene's [initial] fields (unknowns
 /// without an entry start at 0).

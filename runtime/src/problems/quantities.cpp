@@ -18,7 +18,7 @@ std::string column(const BoundQuantity& q, int component, int components) {
 /// The residual summed over the part's nodes, per component of the field.
 void add_reaction(const BoundQuantity& q, const BoundScene& b, ProblemSpace& space, Vec residual, QuantityValues& out) {
   const Discretization& disc = *space.disc;
-  const std::vector<int> nodes = boundary_nodes(b.geometry, space.nodes, q.scene.part);
+  const std::vector<int> nodes = boundary_nodes(b.geometry, space.nodes, q.scene.part, space.part_nodes);
   const int bs = b.layout.dofs_per_node;
   std::vector<double> sums(std::size_t(q.field.components), 0.0);
   {

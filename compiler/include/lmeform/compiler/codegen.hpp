@@ -23,6 +23,9 @@ struct KernelPlan {
   int basis_order = 0;              ///< highest slot order of any nodal-field jet read or contracted
   int coefficient_order = 0;
   bool symmetric = false;           ///< energy/constraint Hessians
+  /// Whether the kernel reads quadrature-point data. A point output that reads none can be
+  /// evaluated anywhere (at a node, a probe), though its form declares data for its integrals.
+  bool reads_qdata = true;
 
   ir::NodeId value = -1;            ///< energy/constraint integrand
   struct VectorEntry { int row; int slot_index; ir::NodeId node; };

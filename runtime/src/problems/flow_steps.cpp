@@ -1,0 +1,644 @@
+#include "flow_steps.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <set>
+#include <sstream>
+
+#include <Eigen/Dense>
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "lmeform/convex_hull.hpp"
+#include "lmeform/delaunay.hpp"
+#include "lmeform/output.hpp"
+#include "lmeform/scene_table.hpp"
+#include "lmeform/stopwatch.hpp"
+#include "quantities.hpp"
+#include "stationary.hpp"
+#include "toolkit.hpp"
+
+namespace lmeform::problems {
+
+namespace fs = std::filesystem;
+
+FlowSettings read_flow(const Scene& scene) {
+  const auto t = extension_table(scene, kFlowTable,
+                                 {"velocity", "time_step", "count", "until", "checkpoint_every", "max_motion", "max_substeps",
+                                  "contact_tolerance", "plates", "integrator"});
+  FlowSettings s;
+  s.where = t->where("velocity");
+  s.velocity = t->string("velocity");
+  s.time_step = t->positive("time_step", t->number("time_step"));
+  s.count = t->at_least("count", t->integer_of("count", t->require("count")), 1);
+  if (s.count > 100000) t->fail_key("count", "= " + std::to_string(s.count) + " is more steps than a run can write (at most 100000)");
+  s.checkpoint_every = t->at_least("checkpoint_every", t->integer("checkpoint_every", s.checkpoint_every), 0);
+  s.until = t->at_least("until", t->integer("until", s.count), 0);
+  if (s.until > s.count) t->fail_key("until", "= " + std::to_string(s.until) + " exceeds count = " + std::to_string(s.count));
+  if (s.until < s.count && s.checkpoint_every == 0) t->fail_key("until", "stops before the last step: it needs checkpoints to continue from");
+  s.max_motion = t->positive("max_motion", t->number("max_motion", s.max_motion));
+  s.max_substeps = t->at_least("max_substeps", t->integer("max_substeps", s.max_substeps), 1);
+  s.contact_tolerance = t->non_negative("contact_tolerance", t->number("contact_tolerance", s.contact_tolerance));
+  if (const auto integrator = t->optional_string("integrator"))
+    s.midpoint = t->choice_of("integrator", *integrator, {"midpoint", "euler"}) == "midpoint";
+  if (const toml::node* n = t->node("plates")) {
+    const auto* a = n->as_array();
+    if (a == nullptr) t->wrong_type("plates", *n, "an array of tables { part = \"top\", axis = 1, side = \"upper\" }");
+    for (std::size_t i = 0; i < a->size(); ++i) {
+      const std::string key = "plates[" + std::to_string(i) + "]";
+      const SceneTable p = t->table_of(key, (*a)[i], {"part", "axis", "side"});
+      FlowPlate plate;
+      plate.where = p.where("part");
+      plate.part = p.string("part");
+      plate.axis = p.at_least("axis", p.integer_of("axis", p.require("axis")), 0);
+      if (plate.axis >= scene.domain.dim) p.fail_key("axis", fmt::format("= {} is no axis of a {}D domain (0 .. {})", plate.axis, scene.domain.dim, scene.domain.dim - 1));
+      plate.side = p.choice_of("side", p.string("side"), {"upper", "lower"}) == "upper" ? 1 : -1;
+      s.plates.push_back(std::move(plate));
+    }
+  }
+  return s;
+}
+
+namespace {
+
+/// Cells flatter than this (area / longest edge²) are dropped from the moved node set: a straight
+/// boundary whose nodes the motion left off the line by round-off (a free surface, a plate) would
+/// otherwise carry slivers whose quadrature points sit on the hull. A cell that flat carries no
+/// measurable area.
+constexpr double kSliverTolerance = 1e-6;
+
+/// One recorded step: the configuration and the flow solved on it.
+struct FlowStep {
+  int step = 0;
+  double time = 0;
+  std::vector<std::pair<std::string, double>> quantities;
+  int iterations = 0;
+  int substeps = 0;
+  double wall_s = 0;
+};
+
+/// Node-distribution quality of a node set: how far the motion took it from a regular one.
+struct NodeQuality {
+  double spacing_ratio = 1;  ///< largest / smallest nodal spacing
+  double anisotropy = 1;     ///< largest ratio of the principal spreads of an interior node's nearest neighbours
+};
+
+NodeQuality node_quality(const LmeBasis& basis) {
+  NodeQuality q;
+  const auto h = basis.spacing();
+  if (h.empty()) return q;
+  const auto [lo, hi] = std::minmax_element(h.begin(), h.end());
+  q.spacing_ratio = *hi / std::max(*lo, std::numeric_limits<double>::min());
+  const NodeSet& nodes = basis.nodes();
+  const int d = nodes.dim;
+  const std::size_t k = d == 2 ? 8 : 18;  // the first ring of a regular grid
+  // A node on the hull sees its neighbours on one side only: a spread that says nothing of the motion.
+  std::vector<char> on_hull(nodes.size(), 0);
+  for (const int a : hull_boundary_nodes(nodes, 1e-6)) on_hull[std::size_t(a)] = 1;
+  for (std::size_t a = 0; a < nodes.size(); ++a) {
+    if (on_hull[a] != 0) continue;
+    const auto x = nodes.point(a);
+    std::vector<std::pair<double, std::size_t>> near;
+    for (const int b : basis.neighbours(x)) {
+      if (std::size_t(b) == a || std::size_t(b) >= nodes.size()) continue;
+      double r2 = 0;
+      for (int i = 0; i < d; ++i) r2 += std::pow(nodes.point(std::size_t(b))[std::size_t(i)] - x[std::size_t(i)], 2);
+      near.emplace_back(r2, std::size_t(b));
+    }
+    if (near.size() < std::size_t(d) + 1) continue;
+    std::partial_sort(near.begin(), near.begin() + std::ptrdiff_t(std::min(k, near.size())), near.end());
+    near.resize(std::min(k, near.size()));
+    Eigen::MatrixXd spread = Eigen::MatrixXd::Zero(d, d);
+    for (const auto& [r2, b] : near)
+      for (int i = 0; i < d; ++i)
+        for (int j = 0; j < d; ++j)
+          spread(i, j) += (nodes.point(b)[std::size_t(i)] - x[std::size_t(i)]) * (nodes.point(b)[std::size_t(j)] - x[std::size_t(j)]);
+    const Eigen::VectorXd ev = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(spread).eigenvalues();
+    if (ev(0) > 0) q.anisotropy = std::max(q.anisotropy, std::sqrt(ev(d - 1) / ev(0)));
+  }
+  return q;
+}
+
+class FlowStepper {
+ public:
+  FlowStepper(const DriverContext& ctx, const FlowSettings& settings)
+      : ctx_(ctx), settings_(settings), bound_(bind_scene(*ctx.scene, ctx.comm, ctx.log)) {
+    MPI_Comm_rank(ctx.comm, &rank_);
+    const auto it = std::find_if(bound_.layout.fields.begin(), bound_.layout.fields.end(), [&](const auto& f) { return f.name == settings.velocity; });
+    if (it == bound_.layout.fields.end()) {
+      std::vector<std::string> names;
+      for (const auto& f : bound_.layout.fields) names.push_back(f.name);
+      throw SceneError(fmt::format("{}: key 'flow.velocity': '{}' is no unknown of the model{}", settings.where, settings.velocity,
+                                   did_you_mean(settings.velocity, names)));
+    }
+    if (it->components != bound_.dim)
+      throw SceneError(fmt::format("{}: key 'flow.velocity': '{}' has {} component(s); the nodes move with a vector unknown of {}", settings.where,
+                                   settings.velocity, it->components, bound_.dim));
+    velocity_offset_ = it->offset;
+    for (const FlowPlate& p : settings.plates) {
+      if (p.part != "hull" && !bound_.geometry.has_part(p.part))
+        throw SceneError(fmt::format("{}: plate part '{}' is no boundary part of the domain{}", p.where, p.part,
+                                     did_you_mean(p.part, bound_.geometry.part_names())));
+      const bool held = std::any_of(bound_.dirichlet.begin(), bound_.dirichlet.end(), [&](const BoundDirichlet& d) {
+        return d.field.name == settings.velocity && std::count(d.parts.begin(), d.parts.end(), p.part) > 0 &&
+               std::count(d.components.begin(), d.components.end(), p.axis) > 0;
+      });
+      if (!held)
+        throw SceneError(fmt::format("{}: plate '{}' moves with its prescribed velocity, but no [[dirichlet]] entry on '{}' prescribes "
+                                     "{}[{}] (the component along the plate's axis)",
+                                     p.where, p.part, p.part, settings.velocity, p.axis));
+    }
+  }
+
+  [[nodiscard]] const BoundScene& bound() const noexcept { return bound_; }
+  struct Run {
+    std::vector<FlowStep> history;
+    std::string failure;
+    double wall_s = 0;
+  };
+  Run run();
+  [[nodiscard]] ReportFields final_fields() const;
+
+ private:
+  void setup();
+  void check_stroke();
+  [[nodiscard]] bool solve_here(ProblemResult& result, std::string& failure);
+  [[nodiscard]] std::vector<double> nodal_velocities() const;
+  [[nodiscard]] double allowed_time(const std::vector<double>& velocity) const;
+  void move(const std::vector<double>& velocity, double dt);
+  [[nodiscard]] bool advance(int step);
+  void record(int step, const ProblemResult& result, int substeps);
+  void write_outputs(int step);
+  void write_history() const;
+  void resume();
+  [[nodiscard]] fs::path path(const std::string& suffix) const { return ctx_.output_directory / (ctx_.scene->name + suffix); }
+  [[nodiscard]] double plate_velocity(const FlowPlate& p) const;
+
+  const DriverContext& ctx_;
+  const FlowSettings& settings_;
+  BoundScene bound_;
+  int rank_ = 0;
+  int velocity_offset_ = 0;
+  Stopwatch clock_;
+  ProblemInput input_;
+  ProblemSpace space_;
+  PetscVector u_;
+  std::vector<double> state_;           ///< the converged state on input_.nodes (original order)
+  std::vector<double> plate_position_;  ///< per plate
+  double time_ = 0;
+  int first_step_ = 0;
+  long clamped_ = 0;                    ///< nodes put back onto a plate they crossed, in the whole run
+  double rebuild_s_ = 0, assembly_s_ = 0, solve_s_ = 0;  ///< of the current step
+  std::optional<TimeSeriesWriter> series_;
+  Run run_;
+};
+
+void FlowStepper::setup() {
+  input_.nodes = initial_nodes(*ctx_.scene, ctx_.log);
+  input_.log = nullptr;  // a rebuild per step: its lines would drown the step lines
+  input_.lme = bound_.lme(AxisParity::odd);  // a velocity is odd in r: no mirror across the axis
+  input_.flat_cell_tolerance = kSliverTolerance;
+  // Every part that a Dirichlet entry or a reaction names follows its nodes from now on.
+  std::set<std::string> parts;
+  for (const BoundDirichlet& d : bound_.dirichlet) parts.insert(d.parts.begin(), d.parts.end());
+  for (const BoundQuantity& q : bound_.quantities)
+    if (q.scene.kind == SceneQuantity::Kind::reaction) parts.insert(q.scene.part);
+  for (const FlowPlate& p : settings_.plates) parts.insert(p.part);
+  for (const std::string& part : parts) input_.part_nodes[part] = boundary_nodes(bound_.geometry, input_.nodes, part);
+  for (const FlowPlate& p : settings_.plates) {
+    const std::vector<int>& on = input_.part_nodes.at(p.part);
+    if (on.empty()) throw SceneError(fmt::format("{}: no node lies on plate part '{}'", p.where, p.part));
+    double x = 0;
+    for (const int n : on) x += input_.nodes.point(std::size_t(n))[std::size_t(p.axis)];
+    plate_position_.push_back(x / double(on.size()));
+  }
+  if (!ctx_.output_directory.empty()) series_.emplace(ctx_.output_directory, ctx_.scene->name);
+}
+
+double FlowStepper::plate_velocity(const FlowPlate& p) const {
+  const int bs = bound_.layout.dofs_per_node;
+  const int n = input_.part_nodes.at(p.part).front();
+  return space_.state[std::size_t(n) * std::size_t(bs) + std::size_t(velocity_offset_ + p.axis)];
+}
+
+/// A plate that would run through the whole body before the last step: refused before a solve.
+void FlowStepper::check_stroke() {
+  for (std::size_t i = 0; i < settings_.plates.size(); ++i) {
+    const FlowPlate& p = settings_.plates[i];
+    const double v = plate_velocity(p);
+    double far = plate_position_[i];
+    for (std::size_t a = 0; a < input_.nodes.size(); ++a) {
+      const double x = input_.nodes.point(a)[std::size_t(p.axis)];
+      far = p.side > 0 ? std::min(far, x) : std::max(far, x);
+    }
+    const double gap = std::abs(plate_position_[i] - far);
+    const double stroke = -p.side * v * settings_.time_step * (settings_.until - first_step_);
+    if (stroke >= gap)
+      throw SceneError(fmt::format("{}: plate '{}' moves at {} along axis {}: in {} steps of {} it travels {:.6g}, through the whole body "
+                                   "({:.6g} thick along that axis from the plate): fewer steps, a smaller time_step or a slower plate",
+                                   p.where, p.part, v, p.axis, settings_.until - first_step_, settings_.time_step, stroke, gap));
+  }
+}
+
+/// Builds the problem on the current nodes and solves it from the carried state.
+bool FlowStepper::solve_here(ProblemResult& result, std::string& failure) {
+  Stopwatch rebuild;
+  input_.initial = state_;
+  try {
+    space_ = build_problem_space(ctx_.comm, bound_, input_);
+  } catch (const LmeEvaluationError& e) {
+    failure = fmt::format("the LME basis cannot be evaluated on the moved nodes: {} (the node distribution degraded: a smaller "
+                          "time_step or max_motion, or more nodes)",
+                          e.what());
+    return false;
+  }
+  rebuild_s_ += rebuild.seconds();
+  u_ = space_.primary->create_vector();
+  set_from_original(*space_.disc, space_.state, bound_.layout.dofs_per_node, u_);
+  result = ProblemResult{};
+  Stopwatch solve;
+  bound_.solver->solve(ctx_.comm, bound_, space_, input_, u_, result);
+  double assembled = 0;
+  for (const auto& [label, a] : space_.assemblers) assembled += a->totals().vector + a->totals().matrix + a->totals().create_matrix;
+  assembly_s_ += assembled;
+  solve_s_ += std::max(0.0, solve.seconds() - assembled);
+  if (!result.converged) {
+    failure = "the flow solve did not converge: " + result.message;
+    return false;
+  }
+  state_ = to_original(*space_.disc, u_, bound_.layout.dofs_per_node);
+  return true;
+}
+
+/// The velocity field at each node (original order): Σ_b p_b(x_a) v_b inside, not the coefficient
+/// v_a (LME does not interpolate). On the hull of the nodes the basis is the face's lower-
+/// dimensional one in the limit of a Newton solve that does not converge there (its interior
+/// weights stay about 1e-8): the value would push the nodes of a straight boundary off their line
+/// by that much each step (slivers, then quadrature points on the hull). A hull node moves with its
+/// coefficient instead: the prescribed velocity on a Dirichlet part exactly, and on a free surface
+/// a value within O(h²) of the field's.
+std::vector<double> FlowStepper::nodal_velocities() const {
+  const Discretization& disc = *space_.disc;
+  const LmeBasis& basis = disc.basis();
+  const auto bs = std::size_t(bound_.layout.dofs_per_node);
+  const auto d = std::size_t(bound_.dim);
+  const NodeSet& nodes = input_.nodes;
+  std::vector<double> v(nodes.size() * d, 0.0);
+  const auto original = disc.original_index();
+  std::vector<char> on_hull(nodes.size(), 0);
+  for (const int a : hull_boundary_nodes(nodes, 1e-9)) on_hull[std::size_t(a)] = 1;
+  for (std::size_t a = 0; a < nodes.size(); ++a) {
+    const auto x = nodes.point(a);
+    for (std::size_t c = 0; c < d; ++c) v[a * d + c] = state_[a * bs + std::size_t(velocity_offset_) + c];
+    if (on_hull[a] != 0) continue;
+    try {
+      const std::vector<int> list = basis.neighbours(x);
+      const std::vector<double> p = basis.evaluate(x, list, 0);
+      for (std::size_t c = 0; c < d; ++c) {
+        double s = 0;
+        for (std::size_t m = 0; m < list.size(); ++m)
+          s += p[m] * state_[std::size_t(original[std::size_t(list[m])]) * bs + std::size_t(velocity_offset_) + c];
+        v[a * d + c] = s;
+      }
+    } catch (const LmeEvaluationError&) {
+      // an interior node the basis cannot evaluate (a degraded neighbourhood) keeps its coefficient
+    }
+  }
+  return v;
+}
+
+/// The longest time over which no node moves more than max_motion of its spacing.
+double FlowStepper::allowed_time(const std::vector<double>& velocity) const {
+  const auto spacing = space_.disc->basis().spacing();  // renumbered
+  const auto renumbered = space_.disc->renumbered_index();
+  const auto d = std::size_t(bound_.dim);
+  double t = std::numeric_limits<double>::infinity();
+  for (std::size_t a = 0; a < input_.nodes.size(); ++a) {
+    double s = 0;
+    for (std::size_t c = 0; c < d; ++c) s += velocity[a * d + c] * velocity[a * d + c];
+    if (s > 0) t = std::min(t, settings_.max_motion * spacing[std::size_t(renumbered[a])] / std::sqrt(s));
+  }
+  return t;
+}
+
+/// x_a += dt v_a; plates advance, capture the nodes that reach them and put back those that cross.
+void FlowStepper::move(const std::vector<double>& velocity, double dt) {
+  const auto d = std::size_t(bound_.dim);
+  const auto spacing = space_.disc->basis().spacing();
+  const auto renumbered = space_.disc->renumbered_index();
+  std::vector<double> h(input_.nodes.size());
+  for (std::size_t a = 0; a < h.size(); ++a) h[a] = spacing[std::size_t(renumbered[a])];
+  std::vector<double>& x = input_.nodes.coords;
+  for (std::size_t i = 0; i < x.size(); ++i) x[i] += dt * velocity[i];
+  for (std::size_t i = 0; i < settings_.plates.size(); ++i) {
+    const FlowPlate& p = settings_.plates[i];
+    plate_position_[i] += dt * plate_velocity(p);
+    std::vector<int>& on = input_.part_nodes.at(p.part);
+    std::set<int> held(on.begin(), on.end());
+    for (std::size_t a = 0; a < input_.nodes.size(); ++a) {
+      double& xa = x[a * d + std::size_t(p.axis)];
+      const double beyond = p.side * (xa - plate_position_[i]);  // > 0: through the plate
+      if (held.contains(int(a))) {
+        xa = plate_position_[i];
+      } else if (beyond > -settings_.contact_tolerance * h[a]) {
+        if (beyond > settings_.contact_tolerance * h[a]) ++clamped_;
+        xa = plate_position_[i];
+        held.insert(int(a));
+      }
+    }
+    on.assign(held.begin(), held.end());
+  }
+  // The Dirichlet entries on a plate's part hold the nodes it captured.
+  time_ += dt;
+}
+
+bool FlowStepper::advance(int step) {
+  rebuild_s_ = assembly_s_ = solve_s_ = 0;
+  ProblemResult result;
+  std::string failure;
+  int substeps = 0;
+  if (step == 0) {
+    if (!solve_here(result, failure)) {
+      run_.failure = "the start (step 0): " + failure;
+      return false;
+    }
+    check_stroke();
+  } else {
+    // The step is applied only whole: on failure the nodes, parts and state go back.
+    const NodeSet nodes = input_.nodes;
+    const auto parts = input_.part_nodes;
+    const std::vector<double> state = state_, plates = plate_position_;
+    const double time = time_;
+    const long clamped = clamped_;
+    const double target = step * settings_.time_step;
+    std::vector<double> velocity = nodal_velocities();
+    while (time_ < target - 1e-12 * settings_.time_step) {
+      if (++substeps > settings_.max_substeps) {
+        failure = fmt::format("more than {} sub-steps (max_substeps): the nodes move more than max_motion = {} of their spacing in "
+                              "{:.3g} of a step",
+                              settings_.max_substeps, settings_.max_motion, 1.0 / settings_.max_substeps);
+        break;
+      }
+      const double dt = std::min(target - time_, allowed_time(velocity));
+      if (settings_.midpoint) {
+        const NodeSet from = input_.nodes;
+        const auto from_parts = input_.part_nodes;
+        const std::vector<double> from_plates = plate_position_;
+        const double from_time = time_;
+        const long from_clamped = clamped_;
+        move(velocity, dt / 2);
+        if (!solve_here(result, failure)) break;
+        const std::vector<double> midpoint_velocity = nodal_velocities();
+        input_.nodes = from;
+        input_.part_nodes = from_parts;
+        plate_position_ = from_plates;
+        time_ = from_time;
+        clamped_ = from_clamped;
+        move(midpoint_velocity, dt);
+      } else {
+        move(velocity, dt);
+      }
+      if (!solve_here(result, failure)) break;
+      velocity = nodal_velocities();
+      failure.clear();
+    }
+    if (!failure.empty()) {
+      run_.failure = fmt::format("step {} (time {:.6g}): {}; the step is not applied, step {} is the last on disk", step, target, failure, step - 1);
+      input_.nodes = nodes;
+      input_.part_nodes = parts;
+      state_ = state;
+      plate_position_ = plates;
+      time_ = time;
+      clamped_ = clamped;
+      return false;
+    }
+  }
+  record(step, result, substeps);
+  return true;
+}
+
+void FlowStepper::record(int step, const ProblemResult& result, int substeps) {
+  FlowStep s;
+  s.step = step;
+  s.time = time_;
+  s.quantities = evaluate_quantities(bound_, space_, u_, result);
+  const NodeSet& nodes = input_.nodes;
+  for (int i = 0; i < nodes.dim; ++i) {
+    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    for (std::size_t a = 0; a < nodes.size(); ++a) lo = std::min(lo, nodes.point(a)[std::size_t(i)]), hi = std::max(hi, nodes.point(a)[std::size_t(i)]);
+    s.quantities.emplace_back(fmt::format("extent_min[{}]", i), lo);
+    s.quantities.emplace_back(fmt::format("extent_max[{}]", i), hi);
+  }
+  for (std::size_t i = 0; i < settings_.plates.size(); ++i) {
+    s.quantities.emplace_back(fmt::format("plate_{}", settings_.plates[i].part), plate_position_[i]);
+    s.quantities.emplace_back(fmt::format("contact_nodes_{}", settings_.plates[i].part), double(input_.part_nodes.at(settings_.plates[i].part).size()));
+  }
+  const NodeQuality q = node_quality(space_.disc->basis());
+  s.quantities.emplace_back("spacing_ratio", q.spacing_ratio);
+  s.quantities.emplace_back("anisotropy", q.anisotropy);
+  s.quantities.emplace_back("clamped_nodes", double(clamped_));
+  s.quantities.emplace_back("rebuild_s", rebuild_s_);
+  s.quantities.emplace_back("assembly_s", assembly_s_);
+  s.quantities.emplace_back("solve_s", solve_s_);
+  s.iterations = result.iterations;
+  s.substeps = substeps;
+  s.wall_s = clock_.seconds();
+  run_.history.push_back(s);
+  if (ctx_.log == nullptr) return;
+  std::string values;
+  for (const auto& [name, v] : s.quantities)
+    if (name.find("extent_min") == std::string::npos) values += fmt::format("  {} {:.6g}", name, v);
+  *ctx_.log << fmt::format("step {:4d}/{}  time {:.6g}{}  newton {}  substeps {}  {:.1f} s", step, settings_.count, s.time, values, s.iterations,
+                           substeps, s.wall_s)
+            << std::endl;
+}
+
+void FlowStepper::write_history() const {
+  std::ostringstream csv;
+  nlohmann::ordered_json js;
+  js["scene"] = ctx_.scene->name;
+  js["steps"] = nlohmann::ordered_json::array();
+  csv << "step,time";
+  for (const auto& [name, v] : run_.history.front().quantities) csv << "," << name;
+  csv << ",iterations,substeps,wall_s\n";
+  for (const FlowStep& s : run_.history) {
+    csv << s.step << "," << fmt::format("{:.17g}", s.time);
+    nlohmann::ordered_json row{{"step", s.step}, {"time", s.time}, {"iterations", s.iterations}, {"substeps", s.substeps}, {"wall_s", s.wall_s}};
+    for (const auto& [name, v] : s.quantities) csv << "," << fmt::format("{:.17g}", v), row["quantities"][name] = json_number(v);
+    csv << "," << s.iterations << "," << s.substeps << "," << fmt::format("{:.3f}", s.wall_s) << "\n";
+    js["steps"].push_back(row);
+  }
+  write_text_atomically(ctx_.output_directory / "history.csv", csv.str());
+  write_text_atomically(ctx_.output_directory / "history.json", js.dump(1) + "\n");
+}
+
+void FlowStepper::write_outputs(int step) {
+  if (ctx_.output_directory.empty()) return;
+  if (rank_ != 0) return;
+  const BackgroundCells cells = delaunay(input_.nodes);
+  std::vector<std::vector<double>> values;
+  values.reserve(bound_.layout.fields.size() + input_.part_nodes.size());  // the views below point into it
+  FieldViews fields;
+  for (const auto& f : bound_.layout.fields) {
+    values.push_back(bound_.layout.values(state_, f));
+    fields.emplace(f.name, FieldView{values.back(), f.components});
+  }
+  const OutputAttributes attributes{{"step", static_cast<std::int64_t>(step)}, {"time", time_}};
+  series_->write(time_, step, input_.nodes, cells, fields, attributes);
+  write_history();
+  if (settings_.checkpoint_every == 0 || (step % settings_.checkpoint_every != 0 && step != settings_.until)) return;
+  // The checkpoint: the moved nodes, the state, each followed part as a 0/1 field, the plates.
+  FieldViews checkpoint{{"state", FieldView{state_, bound_.layout.dofs_per_node}}};
+  for (const auto& [part, on] : input_.part_nodes) {
+    std::vector<double>& flag = values.emplace_back(input_.nodes.size(), 0.0);
+    for (const int n : on) flag[std::size_t(n)] = 1;
+    checkpoint.emplace("part_" + part, FieldView{flag, 1});
+  }
+  OutputAttributes cp = attributes;
+  for (std::size_t i = 0; i < settings_.plates.size(); ++i) cp.emplace("plate_" + settings_.plates[i].part, plate_position_[i]);
+  cp.emplace("clamped", static_cast<std::int64_t>(clamped_));
+  write_field_hdf5(path("_checkpoint.h5"), input_.nodes, cells, checkpoint, cp);
+}
+
+void FlowStepper::resume() {
+  const fs::path checkpoint = path("_checkpoint.h5"), history = ctx_.output_directory / "history.json";
+  if (!fs::exists(checkpoint) || !fs::exists(history))
+    throw std::runtime_error(fmt::format("--restart: no checkpoint in {} (expected {} and history.json)", ctx_.output_directory.string(),
+                                         checkpoint.filename().string()));
+  const FieldFile cp = read_field_hdf5(checkpoint);
+  if (cp.nodes.size() != input_.nodes.size() || cp.nodes.dim != input_.nodes.dim)
+    throw std::runtime_error(fmt::format("--restart: {} holds {} nodes, the scene has {}", checkpoint.string(), cp.nodes.size(), input_.nodes.size()));
+  const int step = static_cast<int>(std::get<std::int64_t>(cp.attributes.at("step")));
+  input_.nodes = cp.nodes;
+  state_ = cp.fields.at("state").values;
+  for (auto& [part, on] : input_.part_nodes) {
+    const auto it = cp.fields.find("part_" + part);
+    if (it == cp.fields.end()) throw std::runtime_error(fmt::format("--restart: {} has no nodes of part '{}'", checkpoint.string(), part));
+    on.clear();
+    for (std::size_t a = 0; a < it->second.values.size(); ++a)
+      if (it->second.values[a] > 0.5) on.push_back(int(a));
+  }
+  for (std::size_t i = 0; i < settings_.plates.size(); ++i) plate_position_[i] = std::get<double>(cp.attributes.at("plate_" + settings_.plates[i].part));
+  clamped_ = std::get<std::int64_t>(cp.attributes.at("clamped"));
+  time_ = std::get<double>(cp.attributes.at("time"));
+  std::ifstream in(history);
+  const nlohmann::ordered_json js = nlohmann::ordered_json::parse(in);
+  std::vector<TimeSeriesStep> series;
+  for (const auto& row : js.at("steps")) {
+    if (row.at("step").get<int>() > step) break;
+    FlowStep s;
+    s.step = row.at("step");
+    s.time = row.at("time");
+    s.iterations = row.at("iterations");
+    s.substeps = row.at("substeps");
+    s.wall_s = row.at("wall_s");
+    for (const auto& [name, v] : row.value("quantities", nlohmann::ordered_json::object()).items())
+      s.quantities.emplace_back(name, v.is_null() ? NAN : v.get<double>());
+    run_.history.push_back(s);
+    TimeSeriesStep entry{s.time, series_->file_of(s.step), bound_.dim, input_.nodes.size(), 0, {}};
+    for (const auto& f : bound_.layout.fields) entry.fields.emplace_back(f.name, f.components);
+    std::sort(entry.fields.begin(), entry.fields.end());
+    series.push_back(std::move(entry));
+  }
+  series_->restore(std::move(series));
+  first_step_ = step + 1;
+  if (ctx_.log != nullptr) *ctx_.log << fmt::format("resumed from {} at step {} (time {:.6g})\n", checkpoint.string(), step, time_);
+}
+
+FlowStepper::Run FlowStepper::run() {
+  setup();
+  const ScopedPetscOptions petsc_options(ctx_.scene->solver.petsc_options);
+  if (ctx_.restart) {
+    resume();
+    rebuild_s_ = assembly_s_ = solve_s_ = 0;
+    ProblemResult result;
+    std::string failure;
+    // The checkpoint's state solved the flow on its nodes: the re-solve converges at once, and
+    // rebuilds the space the next step moves from.
+    if (!solve_here(result, failure)) {
+      run_.failure = fmt::format("--restart at step {}: {}", first_step_ - 1, failure);
+      run_.wall_s = clock_.seconds();
+      return std::move(run_);
+    }
+    check_stroke();
+  }
+  for (int step = first_step_; step <= settings_.until; ++step) {
+    if (!advance(step)) break;
+    write_outputs(step);
+  }
+  run_.wall_s = clock_.seconds();
+  return std::move(run_);
+}
+
+ReportFields FlowStepper::final_fields() const {
+  ProblemResult r;
+  r.nodes = input_.nodes;
+  r.cells = delaunay(input_.nodes);
+  r.state = state_;
+  ReportFields f = state_fields(bound_.layout, bound_.axisymmetric, r);
+  f.attributes.emplace("time", time_);
+  return f;
+}
+
+class FlowStepsDriver final : public ProblemDriver {
+ public:
+  [[nodiscard]] std::string_view name() const override { return "flow steps"; }
+  [[nodiscard]] std::string_view table() const override { return kFlowTable; }
+  [[nodiscard]] bool claims(const Scene& scene) const override { return scene.has_extension(kFlowTable); }
+  [[nodiscard]] bool restartable() const override { return true; }
+  void check(const DriverContext& ctx) const override {
+    const FlowSettings settings = read_flow(*ctx.scene);
+    const FlowStepper stepper(ctx, settings);
+  }
+  [[nodiscard]] RunReport run(const DriverContext& ctx) const override {
+    const FlowSettings settings = read_flow(*ctx.scene);
+    FlowStepper stepper(ctx, settings);
+    const FlowStepper::Run run = stepper.run();
+    RunReport report;
+    report.problem = fmt::format("{} ({} on moving nodes)", name(), stepper.bound().solver->name());
+    report.success = run.failure.empty();
+    report.status = !run.failure.empty()              ? "STOPPED: " + run.failure
+                    : settings.until < settings.count ? fmt::format("stopped after step {} as asked (flow.until): --restart continues", settings.until)
+                                                      : std::string("every step converged");
+    if (run.history.empty()) throw std::runtime_error(report.status);
+    const FlowStep& last = run.history.back();
+    int substeps = 0, newton = 0;
+    double rebuild = 0, assembly = 0, solve = 0;
+    for (const FlowStep& s : run.history) {
+      substeps += s.substeps, newton += s.iterations;
+      for (const auto& [name, v] : s.quantities) {
+        if (name == "rebuild_s") rebuild += v;
+        if (name == "assembly_s") assembly += v;
+        if (name == "solve_s") solve += v;
+      }
+    }
+    report.row("steps", fmt::format("{} of {} (time {:.6g}), {} solves, {} Newton iterations", last.step, settings.count, last.time,
+                                    substeps + 1, newton));
+    report.row("time per step", fmt::format("rebuild {:.3f} s, assembly {:.3f} s, solve {:.3f} s (means)", rebuild / double(run.history.size()),
+                                            assembly / double(run.history.size()), solve / double(run.history.size())));
+    describe_quantities(last.quantities, report);
+    report.json["steps"] = nlohmann::json::array();
+    for (const FlowStep& s : run.history) {
+      nlohmann::json row{{"step", s.step}, {"time", s.time}, {"iterations", s.iterations}, {"substeps", s.substeps}};
+      for (const auto& [name, v] : s.quantities) row["quantities"][name] = json_number(v);
+      report.json["steps"].push_back(row);
+    }
+    report.fields = stepper.final_fields();
+    if (!ctx.output_directory.empty()) {
+      report.files.emplace_back("history", (ctx.output_directory / "history.csv").string() + " (+ history.json)");
+      report.files.emplace_back("series", (ctx.output_directory / (ctx.scene->name + ".xmf")).string() + " (ParaView)");
+    }
+    return report;
+  }
+};
+
+}  // namespace
+
+const ProblemDriver& flow_steps_driver() {
+  static const FlowStepsDriver driver;
+  return driver;
+}
+
+}  // namespace lmeform::problems
