@@ -27,7 +27,7 @@ namespace fs = std::filesystem;
 FlowSettings read_flow(const Scene& scene) {
   const auto t = extension_table(scene, kFlowTable,
                                  {"velocity", "time_step", "count", "until", "checkpoint_every", "max_motion", "max_substeps",
-                                  "contact_tolerance", "plates", "integrator"});
+                                  "contact_tolerance", "plates", "integrator", "continuation", "continuation_stages", "sliver_tolerance"});
   FlowSettings s;
   s.where = t->where("velocity");
   s.velocity = t->string("velocity");
@@ -43,6 +43,11 @@ FlowSettings read_flow(const Scene& scene) {
   s.contact_tolerance = t->non_negative("contact_tolerance", t->number("contact_tolerance", s.contact_tolerance));
   if (const auto integrator = t->optional_string("integrator"))
     s.midpoint = t->choice_of("integrator", *integrator, {"midpoint", "euler"}) == "midpoint";
+  if (const auto c = t->optional_any_table("continuation"))
+    for (const auto& [name, node] : scene_detail::in_file_order(c->entries())) s.continuation.emplace_back(name, c->number_of(name, *node));
+  s.sliver_tolerance = t->non_negative("sliver_tolerance", t->number("sliver_tolerance", s.sliver_tolerance));
+  if (s.sliver_tolerance >= 0.25) t->fail_key("sliver_tolerance", "must be below 0.25 (an equilateral triangle has 0.43): it drops flat cells only");
+  s.continuation_stages = t->at_least("continuation_stages", t->integer("continuation_stages", s.continuation_stages), 1);
   if (const toml::node* n = t->node("plates")) {
     const auto* a = n->as_array();
     if (a == nullptr) t->wrong_type("plates", *n, "an array of tables { part = \"top\", axis = 1, side = \"upper\" }");
@@ -63,11 +68,6 @@ FlowSettings read_flow(const Scene& scene) {
 
 namespace {
 
-/// Cells flatter than this (area / longest edge²) are dropped from the moved node set: a straight
-/// boundary whose nodes the motion left off the line by round-off (a free surface, a plate) would
-/// otherwise carry slivers whose quadrature points sit on the hull. A cell that flat carries no
-/// measurable area.
-constexpr double kSliverTolerance = 1e-6;
 
 /// One recorded step: the configuration and the flow solved on it.
 struct FlowStep {
@@ -137,6 +137,12 @@ class FlowStepper {
       throw SceneError(fmt::format("{}: key 'flow.velocity': '{}' has {} component(s); the nodes move with a vector unknown of {}", settings.where,
                                    settings.velocity, it->components, bound_.dim));
     velocity_offset_ = it->offset;
+    for (const auto& [name, value] : settings.continuation)
+      if (!bound_.constants.contains(name)) {
+        std::vector<std::string> names;
+        for (const auto& [n, v] : bound_.constants) names.push_back(n);
+        throw SceneError(fmt::format("{}: key 'flow.continuation': '{}' is no constant of the forms{}", settings.where, name, did_you_mean(name, names)));
+      }
     for (const FlowPlate& p : settings.plates) {
       if (p.part != "hull" && !bound_.geometry.has_part(p.part))
         throw SceneError(fmt::format("{}: plate part '{}' is no boundary part of the domain{}", p.where, p.part,
@@ -190,6 +196,7 @@ class FlowStepper {
   double time_ = 0;
   int first_step_ = 0;
   long clamped_ = 0;                    ///< nodes put back onto a plate they crossed, in the whole run
+  long continuations_ = 0;              ///< solves that needed the continuation, in the whole run
   double rebuild_s_ = 0, assembly_s_ = 0, solve_s_ = 0;  ///< of the current step
   std::optional<TimeSeriesWriter> series_;
   Run run_;
@@ -199,7 +206,7 @@ void FlowStepper::setup() {
   input_.nodes = initial_nodes(*ctx_.scene, ctx_.log);
   input_.log = nullptr;  // a rebuild per step: its lines would drown the step lines
   input_.lme = bound_.lme(AxisParity::odd);  // a velocity is odd in r: no mirror across the axis
-  input_.flat_cell_tolerance = kSliverTolerance;
+  input_.flat_cell_tolerance = settings_.sliver_tolerance;
   // Every part that a Dirichlet entry or a reaction names follows its nodes from now on.
   std::set<std::string> parts;
   for (const BoundDirichlet& d : bound_.dirichlet) parts.insert(d.parts.begin(), d.parts.end());
@@ -260,6 +267,24 @@ bool FlowStepper::solve_here(ProblemResult& result, std::string& failure) {
   result = ProblemResult{};
   Stopwatch solve;
   bound_.solver->solve(ctx_.comm, bound_, space_, input_, u_, result);
+  if (!result.converged && !settings_.continuation.empty()) {
+    // From the easy problem to the scene's, each stage from the last solution.
+    set_from_original(*space_.disc, space_.state, bound_.layout.dofs_per_node, u_);
+    int iterations = 0;
+    for (int stage = 0; stage <= settings_.continuation_stages; ++stage) {
+      const double f = double(stage) / settings_.continuation_stages;
+      for (const auto& [name, start] : settings_.continuation) space_.set_constant(name, start + f * (bound_.constants.at(name) - start));
+      result = ProblemResult{};
+      bound_.solver->solve(ctx_.comm, bound_, space_, input_, u_, result);
+      iterations += result.iterations;
+      if (!result.converged) {
+        result.message = fmt::format("continuation stage {} of {}: {}", stage, settings_.continuation_stages, result.message);
+        break;
+      }
+    }
+    result.iterations = iterations;
+    ++continuations_;
+  }
   double assembled = 0;
   for (const auto& [label, a] : space_.assemblers) assembled += a->totals().vector + a->totals().matrix + a->totals().create_matrix;
   assembly_s_ += assembled;
@@ -272,13 +297,14 @@ bool FlowStepper::solve_here(ProblemResult& result, std::string& failure) {
   return true;
 }
 
-/// The velocity field at each node (original order): Σ_b p_b(x_a) v_b inside, not the coefficient
-/// v_a (LME does not interpolate). On the hull of the nodes the basis is the face's lower-
-/// dimensional one in the limit of a Newton solve that does not converge there (its interior
-/// weights stay about 1e-8): the value would push the nodes of a straight boundary off their line
-/// by that much each step (slivers, then quadrature points on the hull). A hull node moves with its
-/// coefficient instead: the prescribed velocity on a Dirichlet part exactly, and on a free surface
-/// a value within O(h²) of the field's.
+/// The velocity field at each node (original order): Σ_b p_b(x_a) v_b, not the coefficient v_a.
+/// LME does not interpolate, and the coefficients carry modes that the basis averages away in the
+/// field: along a free surface they grow from round-off into a waviness of the surface when the
+/// nodes move with them (measured: 8e-5 of the radius after 98 steps of an upsetting, then Newton
+/// fails). A prescribed component (a plate, an axis, a symmetry plane) is its prescribed value, so
+/// that those nodes stay on their line exactly. On the hull the value is the limit of an LME solve
+/// that does not converge to round-off (interior weights about 1e-8): the slivers this leaves along
+/// a straight free surface are dropped with the cells (FlowSettings::sliver_tolerance).
 std::vector<double> FlowStepper::nodal_velocities() const {
   const Discretization& disc = *space_.disc;
   const LmeBasis& basis = disc.basis();
@@ -287,12 +313,9 @@ std::vector<double> FlowStepper::nodal_velocities() const {
   const NodeSet& nodes = input_.nodes;
   std::vector<double> v(nodes.size() * d, 0.0);
   const auto original = disc.original_index();
-  std::vector<char> on_hull(nodes.size(), 0);
-  for (const int a : hull_boundary_nodes(nodes, 1e-9)) on_hull[std::size_t(a)] = 1;
   for (std::size_t a = 0; a < nodes.size(); ++a) {
     const auto x = nodes.point(a);
     for (std::size_t c = 0; c < d; ++c) v[a * d + c] = state_[a * bs + std::size_t(velocity_offset_) + c];
-    if (on_hull[a] != 0) continue;
     try {
       const std::vector<int> list = basis.neighbours(x);
       const std::vector<double> p = basis.evaluate(x, list, 0);
@@ -303,9 +326,12 @@ std::vector<double> FlowStepper::nodal_velocities() const {
         v[a * d + c] = s;
       }
     } catch (const LmeEvaluationError&) {
-      // an interior node the basis cannot evaluate (a degraded neighbourhood) keeps its coefficient
+      // a corner of the hull, where the basis is the Kronecker delta in the limit: the coefficient
     }
   }
+  for (const auto& [node, dof] : space_.fixed_pairs)
+    if (dof >= velocity_offset_ && dof < velocity_offset_ + bound_.dim)
+      v[std::size_t(node) * d + std::size_t(dof - velocity_offset_)] = state_[std::size_t(node) * bs + std::size_t(dof)];
   return v;
 }
 
@@ -439,6 +465,7 @@ void FlowStepper::record(int step, const ProblemResult& result, int substeps) {
   s.quantities.emplace_back("spacing_ratio", q.spacing_ratio);
   s.quantities.emplace_back("anisotropy", q.anisotropy);
   s.quantities.emplace_back("clamped_nodes", double(clamped_));
+  if (!settings_.continuation.empty()) s.quantities.emplace_back("continuations", double(continuations_));
   s.quantities.emplace_back("rebuild_s", rebuild_s_);
   s.quantities.emplace_back("assembly_s", assembly_s_);
   s.quantities.emplace_back("solve_s", solve_s_);

@@ -11,6 +11,7 @@
 //   time_step = 0.005
 //   count = 100                  # steps; step k is at time k * time_step
 //   plates = [{ part = "top", axis = 1, side = "upper" }]
+//   continuation = { m = 1.0 }   # a failed solve is retried from m = 1 to the scene's m
 //
 // Node motion is the midpoint rule on the node positions (integrator = "midpoint", the default):
 // x* = x + dt/2 v_h(x), a solve on x*, then x += dt v_h*(x*); "euler" is x += dt v_h(x), one solve
@@ -50,8 +51,22 @@ struct FlowSettings {
   double max_motion = 0.5;       ///< largest node displacement per sub-step, in nodal spacings
   int max_substeps = 64;         ///< of one step, before the run stops
   double contact_tolerance = 0.05;  ///< a node within this many nodal spacings of a plate touches it
+  /// Background cells flatter than this (area / longest edge²) are dropped. A free surface does not
+  /// stay straight to round-off: its nodes move with velocities from a solve whose conditioning
+  /// amplifies round-off to about 1e-7 of a spacing, and a gently curved one (a barrel) has hull
+  /// cells of area / edge² about h / (8 R_curvature). Both put quadrature points within a
+  /// thousandth of a spacing of the hull, where the LME Jacobian is near-singular and the basis
+  /// gradients huge: measured, Newton fails at 2 % height reduction of a sticking upsetting with
+  /// 1e-6 or 1e-3, at 25 % with 1e-2. Cells inside a moved node set are not that flat (a grid
+  /// compressed 4:1 has 0.12); a dropped hull cell loses its flatness times its edge² of area.
+  double sliver_tolerance = 1e-2;
   bool midpoint = true;          ///< the midpoint rule for the node motion (two solves a step), else forward Euler
   std::vector<FlowPlate> plates;
+  /// A solve that fails is retried by continuation: these constants start from the given values
+  /// (where the problem is easy: a Newtonian m = 1) and reach the scene's in `continuation_stages`
+  /// solves, each from the last.
+  std::vector<std::pair<std::string, double>> continuation;
+  int continuation_stages = 4;
   std::string where;
 };
 

@@ -1,0 +1,249 @@
+#!/usr/bin/env python3
+"""Upsetting of a viscoplastic billet between two plates (seed Sec. 5.2): runs the scenes of this
+folder, checks them against the exact homogeneous compression (frictionless) and the slab-method
+estimate (sticking), measures pressure oscillations with and without stabilization, and writes
+build/bench/forming.json and the figures of docs/forming.md.
+
+  /usr/bin/python3 demos/forming/forming_study.py [--lmeform build/lmeform] [--quick]
+      [--json build/bench/forming.json] [--figures docs/figures]
+
+--quick runs the seed-size billet only (CI time); the default adds a finer node set.
+"""
+import argparse
+import csv
+import json
+import math
+import os
+import pathlib
+import re
+import subprocess
+import sys
+import time
+import tomllib
+
+HERE = pathlib.Path(__file__).resolve().parent
+ROOT = HERE.parent.parent
+
+
+def flow_stress(K, m, rate):
+    """Norton-Hoff flow stress sqrt(3) K (sqrt(3) rate)^m (viscoplastic.inc)."""
+    return math.sqrt(3.0) * K * (math.sqrt(3.0) * rate) ** m
+
+
+def variant(scene, name, out_dir, spacing=None, constants=None, count=None, dirichlet_top=None):
+    """A copy of a scene with another name, output folder, spacing or constants."""
+    text = (HERE / scene).read_text()
+    text = re.sub(r'^name = ".*"', f'name = "{name}"', text, count=1, flags=re.M)
+    text = re.sub(r'^directory = ".*"', f'directory = "{out_dir}"', text, count=1, flags=re.M)
+    if spacing is not None:
+        text = re.sub(r'^spacing = [0-9.e-]+', f'spacing = {spacing}', text, count=1, flags=re.M)
+    if count is not None:
+        text = re.sub(r'^count = [0-9]+', f'count = {count}', text, count=1, flags=re.M)
+        dt = 0.25 / count
+        text = re.sub(r'^time_step = [0-9.e-]+', f'time_step = {dt}', text, count=1, flags=re.M)
+    for key, value in (constants or {}).items():
+        text = re.sub(rf'^{key} = [0-9.e-]+', f'{key} = {value}', text, count=1, flags=re.M)
+    path = pathlib.Path(out_dir) / f"{name}.toml"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+    return path
+
+
+def run(lmeform, scene):
+    t0 = time.time()
+    proc = subprocess.run([lmeform, "run", str(scene)], capture_output=True, text=True)
+    wall = time.time() - t0
+    if proc.returncode not in (0, 1):
+        sys.stderr.write(proc.stdout[-3000:] + proc.stderr[-3000:])
+        raise SystemExit(f"lmeform failed on {scene}")
+    status = next((l for l in proc.stdout.splitlines() if l.startswith("status")), "status ?")
+    return wall, status.split(None, 1)[1].strip()
+
+
+def history(out_dir):
+    with open(pathlib.Path(out_dir) / "history.csv") as f:
+        return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(f)]
+
+
+def settings(scene):
+    s = tomllib.loads(pathlib.Path(scene).read_text())
+    c = s["constants"]
+    lower, upper = s["domain"]["lower"], s["domain"]["upper"]
+    return dict(K=c["K"], m=c["m"], R0=upper[0] - lower[0], h0=upper[1] - lower[1], V=1.0, dt=s["flow"]["time_step"],
+                count=s["flow"]["count"])
+
+
+def analyse(scene, rows, friction):
+    """Per-step errors of a run against the exact homogeneous compression / the slab estimate."""
+    p = settings(scene)
+    V0 = rows[0]["volume"]
+    out = []
+    for r in rows:
+        h = r["extent_max[1]"] - r["extent_min[1]"]
+        R = r["extent_max[0]"]
+        rate = p["V"] / h
+        sigma = flow_stress(p["K"], p["m"], rate)
+        force = -r["force"]
+        R_mean = math.sqrt(r["volume"] / (math.pi * h))  # the radius of a cylinder of the same volume
+        if friction == "frictionless":
+            R_exact = p["R0"] * math.sqrt(p["h0"] / h)
+            reference = math.pi * R ** 2 * sigma
+        else:
+            R_exact = float("nan")
+            reference = math.pi * R_mean ** 2 * sigma * (1 + 2 * 1.0 * R_mean / (3 * math.sqrt(3) * 2 * h))
+        out.append(dict(step=int(r["step"]), h=h, R=R, R_mean=R_mean, force=force, reference=reference,
+                        radius_error=abs(R / R_exact - 1) if friction == "frictionless" else float("nan"),
+                        volume_error=abs(r["volume"] / V0 - 1), force_error=abs(force / reference - 1),
+                        contact=r.get("contact_nodes_z_max", float("nan")), anisotropy=r.get("anisotropy", float("nan")),
+                        spacing_ratio=r.get("spacing_ratio", float("nan")), rebuild_s=r["rebuild_s"], assembly_s=r["assembly_s"],
+                        solve_s=r["solve_s"], iterations=r["iterations"], substeps=r["substeps"]))
+    return out
+
+
+def pressure_oscillation(h5_path):
+    """max over interior nodes |p_a - mean of its Delaunay neighbours| / mean |p|: zero for a smooth
+    (linear) pressure up to O(h^2), of order one for a checkerboard."""
+    import h5py
+    import numpy as np
+    with h5py.File(h5_path) as f:
+        x = f["nodes"][:]
+        cells = f["cells"][:]
+        p = f["fields/p"][:].ravel() if "fields" in f else f["p"][:].ravel()
+    nbrs = [set() for _ in range(len(x))]
+    for c in cells:
+        for i in c:
+            nbrs[i].update(int(j) for j in c if j != i)
+    # interior: not on the hull of the nodes (the hull nodes have one-sided neighbourhoods)
+    from matplotlib.path import Path  # noqa: F401  (matplotlib is installed with h5py)
+    edges = {}
+    for c in cells:
+        for a, b in ((c[0], c[1]), (c[1], c[2]), (c[2], c[0])):
+            key = (min(a, b), max(a, b))
+            edges[key] = edges.get(key, 0) + 1
+    boundary = {i for (a, b), n in edges.items() if n == 1 for i in (a, b)}
+    scale = float(np.mean(np.abs(p)))
+    worst = 0.0
+    for a in range(len(x)):
+        if a in boundary or not nbrs[a]:
+            continue
+        worst = max(worst, abs(p[a] - np.mean([p[b] for b in nbrs[a]])))
+    return worst / scale, float((p.max() - p.min()) / scale)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--lmeform", default=str(ROOT / "build" / "lmeform"))
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--json", default=str(ROOT / "build" / "bench" / "forming.json"))
+    ap.add_argument("--figures", default="")
+    ap.add_argument("--work", default=str(ROOT / "build" / "forming"))
+    args = ap.parse_args()
+    work = pathlib.Path(args.work)
+    cases = [("frictionless", "upsetting_frictionless.toml", 0.025, {}, "seed size"),
+             ("sticking", "upsetting_sticking.toml", 0.025, {}, "seed size"),
+             ("sticking", "upsetting_sticking.toml", 0.025, {"C": 0.0}, "unstabilized")]
+    if not args.quick:
+        cases += [("frictionless", "upsetting_frictionless.toml", 0.0125, {}, "fine"),
+                  ("sticking", "upsetting_sticking.toml", 0.0125, {}, "fine")]
+    records, runs = [], []
+    for friction, scene, spacing, constants, label in cases:
+        name = f"{friction}_{label.replace(' ', '_')}"
+        out = work / name
+        path = variant(scene, name, out, spacing=spacing, constants=constants)
+        wall, status = run(args.lmeform, path)
+        rows = history(out)
+        steps = analyse(path, rows, friction)
+        last = steps[-1]
+        p = settings(path)
+        osc, spread = pressure_oscillation(out / f"{name}.h5")
+        nodes = int(round((p["R0"] / spacing + 1) * (p["h0"] / spacing + 1)))
+        rec = dict(case="upsetting" if label != "unstabilized" else "upsetting_unstabilized", friction=friction, label=label,
+                   nodes=nodes, steps=last["step"], height_ratio=last["h"] / p["h0"],
+                   radius_error=max(s["radius_error"] for s in steps) if friction == "frictionless" else None,
+                   volume_error=max(s["volume_error"] for s in steps), force=last["force"], force_reference=last["reference"],
+                   force_error_max=max(s["force_error"] for s in steps), pressure_oscillation=osc, pressure_spread=spread,
+                   stabilization_C=constants.get("C", 0.1), status=status,
+                   rebuild_s_per_step=sum(s["rebuild_s"] for s in steps) / len(steps),
+                   assembly_s_per_step=sum(s["assembly_s"] for s in steps) / len(steps),
+                   solve_s_per_step=sum(s["solve_s"] for s in steps) / len(steps), wall_s=wall)
+        records.append(rec)
+        runs.append((rec, steps, out, name))
+        print(f"{name:32s} nodes {nodes:5d} steps {rec['steps']:3d} h/h0 {rec['height_ratio']:.3f} "
+              f"radius_err {rec['radius_error'] if rec['radius_error'] is not None else float('nan'):.2e} "
+              f"volume_err {rec['volume_error']:.2e} force {rec['force']:.4f} ref {rec['force_reference']:.4f} "
+              f"(max err {rec['force_error_max']:.2e}) p_osc {osc:.2e} spread {spread:.2e} "
+              f"per step: rebuild {rec['rebuild_s_per_step']:.3f} s assembly {rec['assembly_s_per_step']:.3f} s "
+              f"solve {rec['solve_s_per_step']:.3f} s  wall {wall:.1f} s  [{status}]", flush=True)
+    os.makedirs(os.path.dirname(args.json), exist_ok=True)
+    tmp = args.json + ".tmp"
+    with open(tmp, "w") as f:
+        json.dump({"benchmark": "forming", "records": records}, f, indent=1)
+    os.replace(tmp, args.json)
+    print(f"wrote {args.json}")
+    if args.figures:
+        figures(runs, pathlib.Path(args.figures))
+
+
+def figures(runs, folder):
+    import h5py
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import matplotlib.tri as mtri
+    folder.mkdir(parents=True, exist_ok=True)
+    fig, ax = plt.subplots(1, 2, figsize=(11, 4))
+    for rec, steps, out, name in runs:
+        red = [1 - s["h"] / steps[0]["h"] for s in steps]
+        ax[0].plot(red, [s["force"] for s in steps], label=f"{rec['friction']} ({rec['label']}, {rec['nodes']} nodes)")
+        if rec["label"] == "seed size":
+            ax[0].plot(red, [s["reference"] for s in steps], "k--" if rec["friction"] == "frictionless" else "k:", lw=1,
+                       label="pi R^2 sigma_bar (exact)" if rec["friction"] == "frictionless" else "slab estimate, m = 1")
+        ax[1].semilogy(red, [max(s["volume_error"], 1e-16) for s in steps], label=f"{name}")
+    ax[0].set_xlabel("height reduction 1 - h/h0")
+    ax[0].set_ylabel("plate force")
+    ax[0].legend(fontsize=7)
+    ax[1].set_xlabel("height reduction 1 - h/h0")
+    ax[1].set_ylabel("|V/V0 - 1|")
+    ax[1].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(folder / "forming_force.png", dpi=110)
+    plt.close(fig)
+    # Pressure at four stages of the sticking run and the unstabilized one (seed Fig. 5.3 b-e).
+    for tag in ("sticking_seed_size", "sticking_unstabilized"):
+        match = [r for r in runs if r[3] == tag]
+        if not match:
+            continue
+        rec, steps, out, name = match[0]
+        files = sorted(out.glob(f"{name}_*.h5"), key=lambda p: int(re.findall(r"_(\d+)\.h5$", p.name)[0]) if re.findall(r"_(\d+)\.h5$", p.name) else -1)
+        series = [p for p in files if re.findall(r"_(\d+)\.h5$", p.name)]
+        if not series:
+            continue
+        picks = [series[int(round(k * (len(series) - 1) / 3))] for k in range(4)]
+        fig, axes = plt.subplots(1, 5, figsize=(17, 3.6))
+        for ax_, path in zip(axes[:4], picks):
+            with h5py.File(path) as f:
+                x = f["nodes"][:]
+                cells = f["cells"][:]
+                p = f["fields/p"][:].ravel() if "fields" in f else f["p"][:].ravel()
+                step = int(f.attrs["step"])
+            tri = mtri.Triangulation(x[:, 0], x[:, 1], cells)
+            im = ax_.tripcolor(tri, p, shading="gouraud", cmap="viridis")
+            ax_.set_aspect("equal")
+            ax_.set_title(f"p, step {step}", fontsize=9)
+            fig.colorbar(im, ax=ax_, shrink=0.7)
+        with h5py.File(picks[-1]) as f:
+            x = f["nodes"][:]
+            cells = f["cells"][:]
+            v = f["fields/v"][:] if "fields" in f else f["v"][:]
+        tri = mtri.Triangulation(x[:, 0], x[:, 1], cells)
+        im = axes[4].tripcolor(tri, v.reshape(-1, 2)[:, 1], shading="gouraud", cmap="coolwarm")
+        axes[4].set_aspect("equal")
+        axes[4].set_title("v_z, last step", fontsize=9)
+        fig.colorbar(im, ax=axes[4], shrink=0.7)
+        fig.tight_layout()
+        fig.savefig(folder / f"forming_{tag}.png", dpi=110)
+        plt.close(fig)
+
+
+if __name__ == "__main__":
+    main()
