@@ -239,6 +239,35 @@ TEST(ModuleCheck, FlexoelectricFormsWithEveryCoupling) {
   }
 }
 
+// The Norton-Hoff flow forms (docs/forming.md): the residual's Jacobian against differences of the
+// residual, in every dimension each declares, both bases, from the Newtonian m = 1 to a nearly
+// rigid-plastic m = 0.05 with the rate floor active (a rate_floor comparable to the check's rates).
+TEST(ModuleCheck, ViscoplasticFormsByName) {
+  const std::map<std::string, std::vector<int>> forms = {{"viscoplastic", {2, 3}}, {"viscoplastic_axisymmetric", {2}}};
+  for (const auto basis : {lmeform::LmeConsistency::first, lmeform::LmeConsistency::second}) {
+    for (const auto& [name, dims] : forms) {
+      for (const auto& [m, floor] : std::vector<std::pair<double, double>>{{1.0, 1e-4}, {0.2, 1e-4}, {0.05, 1.0}}) {
+        fc::ModuleCheckOptions options;
+        options.basis = basis;
+        options.constants = {{"m", m}, {"rate_floor", floor}, {"K", 2.5}, {"C", 0.3}};
+        const std::string label = "m " + std::to_string(m) + ", rate_floor " + std::to_string(floor);
+        const fc::ModuleCheck check = expect_form_passes(name, {}, options, label);  // a residual: no energy
+        std::vector<int> residual_dims;
+        for (const fc::CheckRecord& r : check.records) {
+          if (r.kind != "residual") continue;
+          residual_dims.push_back(r.dim);
+          const std::string what = name + "." + r.output + " " + std::to_string(r.dim) + "d (" + label + ")";
+          EXPECT_LT(r.hessian_rel_error, 1e-5) << what;
+          EXPECT_TRUE(r.taylor_slope_hessian.kind == fc::SlopeResult::Kind::exact ||
+                      (r.taylor_slope_hessian.kind == fc::SlopeResult::Kind::fitted && std::abs(r.taylor_slope_hessian.value - 2.0) < 0.3))
+              << what << ": Jacobian remainder slope " << r.taylor_slope_hessian.text();
+        }
+        for (const int d : dims) EXPECT_NE(std::find(residual_dims.begin(), residual_dims.end(), d), residual_dims.end()) << name << " " << d << "d";
+      }
+    }
+  }
+}
+
 TEST(ModuleCheck, BuiltinsCoverBothDimensionsAndKinds) {
   // The built-in library must exercise 3D and the axisymmetric geometry, or the test above proves little.
   bool three_d = false, axisymmetric = false, constraint = false;

@@ -198,6 +198,8 @@ Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, Discretizati
     } else {
       DelaunayOptions delaunay_options;
       delaunay_options.flat_tolerance = options_.flat_cell_tolerance;
+      // A node whose only cells were dropped as flat still has its support: other cells' points.
+      delaunay_options.allow_unused_nodes = options_.flat_cell_tolerance > DelaunayOptions{}.flat_tolerance;
       const BackgroundCells original_cells = delaunay(nodes, delaunay_options);
       quadrature_ = map_to_cells(original_cells, nodes, rule_);
       cells_ = original_cells;

@@ -27,7 +27,7 @@ namespace fs = std::filesystem;
 FlowSettings read_flow(const Scene& scene) {
   const auto t = extension_table(scene, kFlowTable,
                                  {"velocity", "time_step", "count", "until", "checkpoint_every", "max_motion", "max_substeps",
-                                  "contact_tolerance", "plates", "integrator", "continuation", "continuation_stages", "sliver_tolerance"});
+                                  "contact_tolerance", "plates", "integrator", "continuation", "continuation_stages", "sliver_tolerance", "redistribute_anisotropy"});
   FlowSettings s;
   s.where = t->where("velocity");
   s.velocity = t->string("velocity");
@@ -47,6 +47,9 @@ FlowSettings read_flow(const Scene& scene) {
     for (const auto& [name, node] : scene_detail::in_file_order(c->entries())) s.continuation.emplace_back(name, c->number_of(name, *node));
   s.sliver_tolerance = t->non_negative("sliver_tolerance", t->number("sliver_tolerance", s.sliver_tolerance));
   if (s.sliver_tolerance >= 0.25) t->fail_key("sliver_tolerance", "must be below 0.25 (an equilateral triangle has 0.43): it drops flat cells only");
+  s.redistribute_anisotropy = t->non_negative("redistribute_anisotropy", t->number("redistribute_anisotropy", s.redistribute_anisotropy));
+  if (s.redistribute_anisotropy > 0 && s.redistribute_anisotropy < 1.5)
+    t->fail_key("redistribute_anisotropy", "must be 0 (never) or at least 1.5: a regular grid has about 1 (its boundary rows up to 1.4)");
   s.continuation_stages = t->at_least("continuation_stages", t->integer("continuation_stages", s.continuation_stages), 1);
   if (const toml::node* n = t->node("plates")) {
     const auto* a = n->as_array();
@@ -174,6 +177,7 @@ class FlowStepper {
   [[nodiscard]] std::vector<double> nodal_velocities() const;
   [[nodiscard]] double allowed_time(const std::vector<double>& velocity) const;
   void move(const std::vector<double>& velocity, double dt);
+  void redistribute();
   [[nodiscard]] bool advance(int step);
   void record(int step, const ProblemResult& result, int substeps);
   void write_outputs(int step);
@@ -197,6 +201,9 @@ class FlowStepper {
   int first_step_ = 0;
   long clamped_ = 0;                    ///< nodes put back onto a plate they crossed, in the whole run
   long continuations_ = 0;              ///< solves that needed the continuation, in the whole run
+  long redistributions_ = 0;            ///< interior node sets replaced, in the whole run
+  double initial_spacing_ = 0;          ///< median nodal spacing of the initial nodes
+  double anisotropy_ = 1;               ///< of the last solved node set
   double rebuild_s_ = 0, assembly_s_ = 0, solve_s_ = 0;  ///< of the current step
   std::optional<TimeSeriesWriter> series_;
   Run run_;
@@ -257,8 +264,11 @@ bool FlowStepper::solve_here(ProblemResult& result, std::string& failure) {
     space_ = build_problem_space(ctx_.comm, bound_, input_);
   } catch (const LmeEvaluationError& e) {
     failure = fmt::format("the LME basis cannot be evaluated on the moved nodes: {} (the node distribution degraded: a smaller "
-                          "time_step or max_motion, or more nodes)",
+                          "time_step or max_motion, a lower flow.redistribute_anisotropy, or more nodes)",
                           e.what());
+    return false;
+  } catch (const std::invalid_argument& e) {  // background cells of a degenerate node set
+    failure = fmt::format("the moved nodes cannot be discretized: {}", e.what());
     return false;
   }
   rebuild_s_ += rebuild.seconds();
@@ -297,14 +307,17 @@ bool FlowStepper::solve_here(ProblemResult& result, std::string& failure) {
   return true;
 }
 
-/// The velocity field at each node (original order): Σ_b p_b(x_a) v_b, not the coefficient v_a.
-/// LME does not interpolate, and the coefficients carry modes that the basis averages away in the
-/// field: along a free surface they grow from round-off into a waviness of the surface when the
-/// nodes move with them (measured: 8e-5 of the radius after 98 steps of an upsetting, then Newton
-/// fails). A prescribed component (a plate, an axis, a symmetry plane) is its prescribed value, so
-/// that those nodes stay on their line exactly. On the hull the value is the limit of an LME solve
-/// that does not converge to round-off (interior weights about 1e-8): the slivers this leaves along
-/// a straight free surface are dropped with the cells (FlowSettings::sliver_tolerance).
+/// The velocity field at each node (original order): the field's value v_h(x_a), not the
+/// coefficient v_a. LME does not interpolate, and the coefficients carry modes that the basis
+/// averages away inside: where a node moves with its coefficient, a free surface turns wavy within
+/// tens of steps and Newton fails (measured in the upsetting runs). On the hull of the nodes the
+/// basis tends to the Kronecker delta at a vertex (every node of a curved surface) and to the
+/// face's lower-dimensional basis on a face, whose solve does not converge to round-off: there the
+/// value is that coefficient again, or noisy. So a node on (or within 1e-3 of) the hull takes the
+/// field's first-order Taylor expansion from a quarter of its spacing inside, toward the centroid
+/// of its neighbours: v_h(x̃) + ∇v_h(x̃)·(x_a − x̃), exact for linear fields like the value. A
+/// prescribed component (a plate, an axis, a symmetry plane) is its prescribed value, so that those
+/// nodes stay on their line exactly.
 std::vector<double> FlowStepper::nodal_velocities() const {
   const Discretization& disc = *space_.disc;
   const LmeBasis& basis = disc.basis();
@@ -313,20 +326,42 @@ std::vector<double> FlowStepper::nodal_velocities() const {
   const NodeSet& nodes = input_.nodes;
   std::vector<double> v(nodes.size() * d, 0.0);
   const auto original = disc.original_index();
+  const auto renumbered = disc.renumbered_index();
+  std::vector<char> near_hull(nodes.size(), 0);
+  for (const int a : hull_boundary_nodes(nodes, 1e-3)) near_hull[std::size_t(a)] = 1;
+  std::vector<double> xe(d);
   for (std::size_t a = 0; a < nodes.size(); ++a) {
     const auto x = nodes.point(a);
     for (std::size_t c = 0; c < d; ++c) v[a * d + c] = state_[a * bs + std::size_t(velocity_offset_) + c];
+    std::copy(x.begin(), x.end(), xe.begin());
+    if (near_hull[a] != 0) {
+      std::vector<double> centroid(d, 0.0);
+      const std::vector<int> around = basis.neighbours(x);
+      for (const int b : around)
+        for (std::size_t c = 0; c < d; ++c) centroid[c] += basis.nodes().point(std::size_t(b))[c] / double(around.size());
+      double length = 0;
+      for (std::size_t c = 0; c < d; ++c) length += (centroid[c] - x[c]) * (centroid[c] - x[c]);
+      length = std::sqrt(length);
+      const double step = 0.25 * basis.spacing()[std::size_t(renumbered[a])];
+      if (length > 0)
+        for (std::size_t c = 0; c < d; ++c) xe[c] = x[c] + step * (centroid[c] - x[c]) / length;
+    }
     try {
-      const std::vector<int> list = basis.neighbours(x);
-      const std::vector<double> p = basis.evaluate(x, list, 0);
+      const std::vector<int> list = basis.neighbours(xe);
+      const std::vector<double> jet = basis.evaluate(xe, list, 1);
+      const std::size_t n = list.size();
       for (std::size_t c = 0; c < d; ++c) {
-        double s = 0;
-        for (std::size_t m = 0; m < list.size(); ++m)
-          s += p[m] * state_[std::size_t(original[std::size_t(list[m])]) * bs + std::size_t(velocity_offset_) + c];
-        v[a * d + c] = s;
+        double value = 0;
+        for (std::size_t m = 0; m < n; ++m) {
+          const double coefficient = state_[std::size_t(original[std::size_t(list[m])]) * bs + std::size_t(velocity_offset_) + c];
+          double slope = 0;
+          for (std::size_t i = 0; i < d; ++i) slope += jet[(1 + i) * n + m] * (x[i] - xe[i]);
+          value += (jet[m] + slope) * coefficient;
+        }
+        v[a * d + c] = value;
       }
     } catch (const LmeEvaluationError&) {
-      // a corner of the hull, where the basis is the Kronecker delta in the limit: the coefficient
+      // a point the basis cannot evaluate (a degraded neighbourhood): the coefficient
     }
   }
   for (const auto& [node, dof] : space_.fixed_pairs)
@@ -380,6 +415,74 @@ void FlowStepper::move(const std::vector<double>& velocity, double dt) {
   time_ += dt;
 }
 
+/// New interior nodes: the surface (hull) nodes stay with their parts; inside, a regular grid of
+/// the initial spacing, at least half a spacing from the hull; the state is the old field there.
+void FlowStepper::redistribute() {
+  const NodeSet& old = input_.nodes;
+  const auto d = std::size_t(old.dim);
+  const double h = initial_spacing_;
+  const ConvexHull hull = convex_hull(old);
+  const std::vector<int> surface = hull_boundary_nodes(old, hull, 1e-3);
+  std::vector<double> coords;
+  std::vector<int> new_index(old.size(), -1);
+  for (const int a : surface) {
+    new_index[std::size_t(a)] = int(coords.size() / d);
+    const auto x = old.point(std::size_t(a));
+    coords.insert(coords.end(), x.begin(), x.end());
+  }
+  const std::size_t kept = coords.size() / d;
+  std::vector<double> lo(d, std::numeric_limits<double>::infinity()), hi(d, -std::numeric_limits<double>::infinity());
+  for (std::size_t a = 0; a < old.size(); ++a)
+    for (std::size_t c = 0; c < d; ++c) lo[c] = std::min(lo[c], old.point(a)[c]), hi[c] = std::max(hi[c], old.point(a)[c]);
+  std::vector<int> counts(d);
+  std::size_t total = 1;
+  for (std::size_t c = 0; c < d; ++c) counts[c] = std::max(1, int(std::floor((hi[c] - lo[c]) / h)) + 1), total *= std::size_t(counts[c]);
+  std::vector<double> x(d);
+  for (std::size_t i = 0; i < total; ++i) {
+    std::size_t rest = i;
+    for (std::size_t c = 0; c < d; ++c) {
+      const double width = (counts[c] - 1) * h;
+      x[c] = 0.5 * (lo[c] + hi[c] - width) + double(rest % std::size_t(counts[c])) * h;  // centred in the box
+      rest /= std::size_t(counts[c]);
+    }
+    bool inside = true;
+    for (std::size_t f = 0; f < hull.offsets.size() && inside; ++f) {
+      double s = hull.offsets[f];
+      for (std::size_t c = 0; c < d; ++c) s += hull.normals[f * d + c] * x[c];
+      inside = s < -0.5 * h;
+    }
+    if (inside) coords.insert(coords.end(), x.begin(), x.end());
+  }
+  NodeSet nodes(old.dim, std::move(coords));
+  // The old field at the new interior nodes (a start for the next solve); surface nodes keep theirs.
+  const auto bs = std::size_t(bound_.layout.dofs_per_node);
+  std::vector<double> state(nodes.size() * bs, 0.0);
+  for (std::size_t a = 0; a < old.size(); ++a)
+    if (new_index[a] >= 0) std::copy_n(state_.begin() + std::ptrdiff_t(a * bs), bs, state.begin() + std::ptrdiff_t(std::size_t(new_index[a]) * bs));
+  const Discretization& disc = *space_.disc;
+  const auto original = disc.original_index();
+  for (std::size_t a = kept; a < nodes.size(); ++a) {
+    const auto xa = nodes.point(a);
+    const std::vector<int> list = disc.basis().neighbours(xa);
+    const std::vector<double> p = disc.basis().evaluate(xa, list, 0);
+    for (std::size_t m = 0; m < list.size(); ++m)
+      for (std::size_t k = 0; k < bs; ++k) state[a * bs + k] += p[m] * state_[std::size_t(original[std::size_t(list[m])]) * bs + k];
+  }
+  for (auto& [part, on] : input_.part_nodes) {
+    std::vector<int> renumbered;
+    for (const int n : on)
+      if (new_index[std::size_t(n)] >= 0) renumbered.push_back(new_index[std::size_t(n)]);
+    on = std::move(renumbered);
+  }
+  if (ctx_.log != nullptr)
+    *ctx_.log << fmt::format("  redistributed the nodes (anisotropy {:.3g} > {:.3g}): {} surface nodes kept, {} interior nodes on a grid of "
+                             "spacing {:.4g} (were {})\n",
+                             anisotropy_, settings_.redistribute_anisotropy, kept, nodes.size() - kept, h, old.size() - kept);
+  input_.nodes = std::move(nodes);
+  state_ = std::move(state);
+  ++redistributions_;
+}
+
 bool FlowStepper::advance(int step) {
   rebuild_s_ = assembly_s_ = solve_s_ = 0;
   ProblemResult result;
@@ -391,7 +494,18 @@ bool FlowStepper::advance(int step) {
       return false;
     }
     check_stroke();
+    const auto h = space_.disc->basis().spacing();
+    std::vector<double> sorted(h.begin(), h.end());
+    std::nth_element(sorted.begin(), sorted.begin() + std::ptrdiff_t(sorted.size() / 2), sorted.end());
+    initial_spacing_ = sorted[sorted.size() / 2];
   } else {
+    if (settings_.redistribute_anisotropy > 0 && anisotropy_ > settings_.redistribute_anisotropy) {
+      redistribute();
+      if (!solve_here(result, failure)) {
+        run_.failure = fmt::format("step {}: the solve on the redistributed nodes: {}", step, failure);
+        return false;
+      }
+    }
     // The step is applied only whole: on failure the nodes, parts and state go back.
     const NodeSet nodes = input_.nodes;
     const auto parts = input_.part_nodes;
@@ -462,10 +576,13 @@ void FlowStepper::record(int step, const ProblemResult& result, int substeps) {
     s.quantities.emplace_back(fmt::format("contact_nodes_{}", settings_.plates[i].part), double(input_.part_nodes.at(settings_.plates[i].part).size()));
   }
   const NodeQuality q = node_quality(space_.disc->basis());
+  anisotropy_ = q.anisotropy;
   s.quantities.emplace_back("spacing_ratio", q.spacing_ratio);
   s.quantities.emplace_back("anisotropy", q.anisotropy);
   s.quantities.emplace_back("clamped_nodes", double(clamped_));
   if (!settings_.continuation.empty()) s.quantities.emplace_back("continuations", double(continuations_));
+  s.quantities.emplace_back("redistributions", double(redistributions_));
+  s.quantities.emplace_back("nodes", double(input_.nodes.size()));
   s.quantities.emplace_back("rebuild_s", rebuild_s_);
   s.quantities.emplace_back("assembly_s", assembly_s_);
   s.quantities.emplace_back("solve_s", solve_s_);
@@ -526,6 +643,9 @@ void FlowStepper::write_outputs(int step) {
   OutputAttributes cp = attributes;
   for (std::size_t i = 0; i < settings_.plates.size(); ++i) cp.emplace("plate_" + settings_.plates[i].part, plate_position_[i]);
   cp.emplace("clamped", static_cast<std::int64_t>(clamped_));
+  cp.emplace("redistributions", static_cast<std::int64_t>(redistributions_));
+  cp.emplace("initial_spacing", initial_spacing_);
+  cp.emplace("anisotropy", anisotropy_);
   write_field_hdf5(path("_checkpoint.h5"), input_.nodes, cells, checkpoint, cp);
 }
 
@@ -535,8 +655,8 @@ void FlowStepper::resume() {
     throw std::runtime_error(fmt::format("--restart: no checkpoint in {} (expected {} and history.json)", ctx_.output_directory.string(),
                                          checkpoint.filename().string()));
   const FieldFile cp = read_field_hdf5(checkpoint);
-  if (cp.nodes.size() != input_.nodes.size() || cp.nodes.dim != input_.nodes.dim)
-    throw std::runtime_error(fmt::format("--restart: {} holds {} nodes, the scene has {}", checkpoint.string(), cp.nodes.size(), input_.nodes.size()));
+  if (cp.nodes.dim != input_.nodes.dim)
+    throw std::runtime_error(fmt::format("--restart: {} holds {}D nodes, the scene is {}D", checkpoint.string(), cp.nodes.dim, input_.nodes.dim));
   const int step = static_cast<int>(std::get<std::int64_t>(cp.attributes.at("step")));
   input_.nodes = cp.nodes;
   state_ = cp.fields.at("state").values;
@@ -549,6 +669,9 @@ void FlowStepper::resume() {
   }
   for (std::size_t i = 0; i < settings_.plates.size(); ++i) plate_position_[i] = std::get<double>(cp.attributes.at("plate_" + settings_.plates[i].part));
   clamped_ = std::get<std::int64_t>(cp.attributes.at("clamped"));
+  redistributions_ = std::get<std::int64_t>(cp.attributes.at("redistributions"));
+  initial_spacing_ = std::get<double>(cp.attributes.at("initial_spacing"));
+  anisotropy_ = std::get<double>(cp.attributes.at("anisotropy"));
   time_ = std::get<double>(cp.attributes.at("time"));
   std::ifstream in(history);
   const nlohmann::ordered_json js = nlohmann::ordered_json::parse(in);
@@ -561,10 +684,11 @@ void FlowStepper::resume() {
     s.iterations = row.at("iterations");
     s.substeps = row.at("substeps");
     s.wall_s = row.at("wall_s");
-    for (const auto& [name, v] : row.value("quantities", nlohmann::ordered_json::object()).items())
-      s.quantities.emplace_back(name, v.is_null() ? NAN : v.get<double>());
+    const nlohmann::ordered_json quantities = row.value("quantities", nlohmann::ordered_json::object());  // items() views it
+    for (const auto& [name, v] : quantities.items()) s.quantities.emplace_back(name, v.is_null() ? NAN : v.get<double>());
     run_.history.push_back(s);
-    TimeSeriesStep entry{s.time, series_->file_of(s.step), bound_.dim, input_.nodes.size(), 0, {}};
+    const FieldFile written = read_field_hdf5(ctx_.output_directory / series_->file_of(s.step));  // node sets change
+    TimeSeriesStep entry{s.time, series_->file_of(s.step), bound_.dim, written.nodes.size(), written.cells.size(), {}};
     for (const auto& f : bound_.layout.fields) entry.fields.emplace_back(f.name, f.components);
     std::sort(entry.fields.begin(), entry.fields.end());
     series.push_back(std::move(entry));

@@ -60,6 +60,12 @@ struct FlowSettings {
   /// 1e-6 or 1e-3, at 25 % with 1e-2. Cells inside a moved node set are not that flat (a grid
   /// compressed 4:1 has 0.12); a dropped hull cell loses its flatness times its edge² of area.
   double sliver_tolerance = 1e-2;
+  /// When a step leaves the nodes more anisotropic than this (NodeQuality::anisotropy: the principal
+  /// spreads of a node's nearest neighbours), the interior nodes are replaced by a regular grid of
+  /// the initial spacing inside the hull, the surface nodes kept with their parts, and the state
+  /// carried by evaluating the old field (the flow has no history: it is the next solve's start).
+  /// 0: never.
+  double redistribute_anisotropy = 3.0;
   bool midpoint = true;          ///< the midpoint rule for the node motion (two solves a step), else forward Euler
   std::vector<FlowPlate> plates;
   /// A solve that fails is retried by continuation: these constants start from the given values
