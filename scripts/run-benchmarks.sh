@@ -21,6 +21,11 @@ if [ -x "$lmeform_exe" ]; then
     echo "benchmark fracture gamma_convergence failed" >&2
     status=1
   fi
+  echo "== forming: upsetting of a viscoplastic billet (demos/forming/forming_study.py)"
+  if ! /usr/bin/python3 demos/forming/forming_study.py --lmeform "$lmeform_exe" --json "$out/forming.json" --work "$build/forming" --quick; then
+    echo "benchmark forming failed" >&2
+    status=1
+  fi
 fi
 echo "benchmark results in $out/:"
 ls -1 "$out"

@@ -89,8 +89,26 @@ def hull_volume(points):
     return 2 * math.pi * abs(moment) / 6
 
 
-def series_volumes(out_dir, name):
-    """The hull volume of every step written in the run's series, by step."""
+def hull_area(points):
+    """Area of the convex hull of 2D points (plane strain: the body's own area)."""
+    pts = sorted(set(map(tuple, points)))
+    def cross(o, a, b):
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+    lower, upper = [], []
+    for p in pts:
+        while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 0:
+            lower.pop()
+        lower.append(p)
+    for p in reversed(pts):
+        while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= 0:
+            upper.pop()
+        upper.append(p)
+    hull = lower[:-1] + upper[:-1]
+    return abs(sum(x0 * y1 - x1 * y0 for (x0, y0), (x1, y1) in zip(hull, hull[1:] + hull[:1]))) / 2
+
+
+def series_volumes(out_dir, name, plane=False):
+    """The hull volume (plane: area) of every step written in the run's series, by step."""
     import h5py
     volumes = {}
     for path in (pathlib.Path(out_dir) / "series").glob(f"{name}_*.h5"):
@@ -98,7 +116,8 @@ def series_volumes(out_dir, name):
         if not found or "checkpoint" in path.name:
             continue
         with h5py.File(path) as f:
-            volumes[int(f.attrs["step"])] = hull_volume(f["nodes"][:].tolist())
+            pts = f["nodes"][:].tolist()
+            volumes[int(f.attrs["step"])] = hull_area(pts) if plane else hull_volume(pts)
     return volumes
 
 
@@ -116,6 +135,8 @@ def analyse(scene, rows, friction, volumes=None):
     p = settings(scene)
     out = []
     for r in rows:
+        if "volume" not in r and "area" in r:
+            r = dict(r, volume=r["area"])
         if volumes and int(r["step"]) in volumes:
             r = dict(r, volume=volumes[int(r["step"])])
         if not out:
@@ -126,14 +147,17 @@ def analyse(scene, rows, friction, volumes=None):
         sigma = flow_stress(p["K"], p["m"], rate)
         force = -r["force"]
         R_mean = math.sqrt(r["volume"] / (math.pi * h))  # the radius of a cylinder of the same volume
-        if friction == "frictionless":
+        if friction == "plane_strain":  # frictionless, plane strain: per unit depth
+            R_exact = p["R0"] * p["h0"] / h
+            reference = R * 2 / math.sqrt(3) * flow_stress(p["K"], p["m"], 2 / math.sqrt(3) * rate)
+        elif friction == "frictionless":
             R_exact = p["R0"] * math.sqrt(p["h0"] / h)
             reference = math.pi * R ** 2 * sigma
         else:
             R_exact = float("nan")
             reference = math.pi * R_mean ** 2 * sigma * (1 + 2 * 1.0 * R_mean / (3 * math.sqrt(3) * 2 * h))
         out.append(dict(step=int(r["step"]), h=h, R=R, R_mean=R_mean, force=force, reference=reference,
-                        radius_error=abs(R / R_exact - 1) if friction == "frictionless" else float("nan"),
+                        radius_error=abs(R / R_exact - 1) if friction != "sticking" else float("nan"),
                         volume_error=abs(r["volume"] / V0 - 1), force_error=abs(force / reference - 1),
                         contact=r.get("contact_nodes_z_max", float("nan")), anisotropy=r.get("anisotropy", float("nan")),
                         spacing_ratio=r.get("spacing_ratio", float("nan")), rebuild_s=r["rebuild_s"], assembly_s=r["assembly_s"],
@@ -141,9 +165,11 @@ def analyse(scene, rows, friction, volumes=None):
     return out
 
 
-def pressure_oscillation(h5_path):
-    """max over interior nodes |p_a - mean of its Delaunay neighbours| / mean |p|: zero for a smooth
-    (linear) pressure up to O(h^2), of order one for a checkerboard."""
+def pressure_oscillation(h5_path, sigma):
+    """Node-to-node pressure oscillation: the RMS over interior nodes of p_a minus the mean of its
+    Delaunay neighbours, in units of the flow stress sigma. A smooth pressure gives O(h^2 |p''|);
+    the checkerboard modes of an unstable equal-order pair give O(|p|). Also the spread
+    (max - min) / sigma."""
     import h5py
     import numpy as np
     with h5py.File(h5_path) as f:
@@ -151,24 +177,16 @@ def pressure_oscillation(h5_path):
         cells = f["cells"][:]
         p = f["fields/p"][:].ravel() if "fields" in f else f["p"][:].ravel()
     nbrs = [set() for _ in range(len(x))]
+    edges = {}
     for c in cells:
         for i in c:
             nbrs[i].update(int(j) for j in c if j != i)
-    # interior: not on the hull of the nodes (the hull nodes have one-sided neighbourhoods)
-    from matplotlib.path import Path  # noqa: F401  (matplotlib is installed with h5py)
-    edges = {}
-    for c in cells:
         for a, b in ((c[0], c[1]), (c[1], c[2]), (c[2], c[0])):
             key = (min(a, b), max(a, b))
             edges[key] = edges.get(key, 0) + 1
     boundary = {i for (a, b), n in edges.items() if n == 1 for i in (a, b)}
-    scale = float(np.mean(np.abs(p)))
-    worst = 0.0
-    for a in range(len(x)):
-        if a in boundary or not nbrs[a]:
-            continue
-        worst = max(worst, abs(p[a] - np.mean([p[b] for b in nbrs[a]])))
-    return worst / scale, float((p.max() - p.min()) / scale)
+    d = [p[a] - np.mean([p[b] for b in nbrs[a]]) for a in range(len(x)) if a not in boundary and nbrs[a]]
+    return float(np.sqrt(np.mean(np.square(d))) / sigma), float((p.max() - p.min()) / sigma)
 
 
 def main():
@@ -178,31 +196,50 @@ def main():
     ap.add_argument("--json", default=str(ROOT / "build" / "bench" / "forming.json"))
     ap.add_argument("--figures", default="")
     ap.add_argument("--work", default=str(ROOT / "build" / "forming"))
+    ap.add_argument("--figures-only", action="store_true", help="redraw the figures from the runs of --work and --json")
     args = ap.parse_args()
     work = pathlib.Path(args.work)
-    cases = [("frictionless", "upsetting_frictionless.toml", 0.025, {}, "seed size"),
-             ("sticking", "upsetting_sticking.toml", 0.025, {}, "seed size"),
-             ("sticking", "upsetting_sticking.toml", 0.025, {"C": 0.0}, "unstabilized")]
+    if args.figures_only:
+        runs = []
+        for rec in json.load(open(args.json))["records"]:
+            friction = "plane_strain" if rec["case"] == "upsetting_plane_strain" else rec["friction"]
+            name = f"{rec['case']}_{friction}_{rec['label'].replace(' ', '_')}"
+            out = work / name
+            steps = analyse(out / f"{name}.toml", history(out), friction, series_volumes(out, name, plane=friction == "plane_strain"))
+            runs.append((rec, steps, out, name))
+        figures(runs, pathlib.Path(args.figures or "docs/figures"))
+        return
+    # (case, friction, scene, spacing, constants, label); "plane_strain" selects the plane-strain references
+    cases = [("upsetting", "frictionless", "upsetting_frictionless.toml", 0.025, {}, "seed size"),
+             ("upsetting_plane_strain", "plane_strain", "upsetting_plane_strain.toml", 0.025, {}, "seed size"),
+             ("upsetting", "sticking", "upsetting_sticking.toml", 0.025, {}, "seed size"),
+             ("upsetting_unstabilized", "sticking", "upsetting_sticking.toml", 0.025, {"C": 0.0}, "unstabilized")]
     if not args.quick:
-        cases += [("frictionless", "upsetting_frictionless.toml", 0.0125, {}, "fine"),
-                  ("sticking", "upsetting_sticking.toml", 0.0125, {}, "fine")]
+        cases += [("upsetting", "frictionless", "upsetting_frictionless.toml", 0.0125, {}, "fine"),
+                  ("upsetting", "sticking", "upsetting_sticking.toml", 0.0125, {}, "fine")]
     records, runs = [], []
-    for friction, scene, spacing, constants, label in cases:
-        name = f"{friction}_{label.replace(' ', '_')}"
+    for case, friction, scene, spacing, constants, label in cases:
+        name = f"{case}_{friction}_{label.replace(' ', '_')}"
         out = work / name
         path = variant(scene, name, out, spacing=spacing, constants=constants)
         wall, status = run(args.lmeform, path)
         rows = history(out)
-        steps = analyse(path, rows, friction, series_volumes(out, name))
+        steps = analyse(path, rows, friction, series_volumes(out, name, plane=friction == "plane_strain"))
         last = steps[-1]
         p = settings(path)
-        osc, spread = pressure_oscillation(out / f"{name}.h5")
+        sigma0 = flow_stress(p["K"], p["m"], p["V"] / p["h0"])
+        osc0, spread0 = pressure_oscillation(out / "series" / f"{name}_000000.h5", sigma0)
+        osc, spread = pressure_oscillation(out / f"{name}.h5", flow_stress(p["K"], p["m"], p["V"] / last["h"]))
         nodes = int(round((p["R0"] / spacing + 1) * (p["h0"] / spacing + 1)))
-        rec = dict(case="upsetting" if label != "unstabilized" else "upsetting_unstabilized", friction=friction, label=label,
+        rec = dict(case=case, friction="frictionless" if friction == "plane_strain" else friction, label=label,
                    nodes=nodes, steps=last["step"], height_ratio=last["h"] / p["h0"],
-                   radius_error=max(s["radius_error"] for s in steps) if friction == "frictionless" else None,
+                   radius_error=max(s["radius_error"] for s in steps) if friction != "sticking" else None,
                    volume_error=max(s["volume_error"] for s in steps), force=last["force"], force_reference=last["reference"],
-                   force_error_max=max(s["force_error"] for s in steps), pressure_oscillation=osc, pressure_spread=spread,
+                   force_error_max=max(s["force_error"] for s in steps), pressure_oscillation_start=osc0,
+                   pressure_spread_start=spread0, pressure_oscillation=osc, pressure_spread=spread,
+                   redistributions=int(rows[-1].get("redistributions", 0)), nodes_end=int(rows[-1].get("nodes", nodes)),
+                   contact_nodes_end=int(rows[-1].get("contact_nodes_z_max", rows[-1].get("contact_nodes_y_max", 0))),
+                   newton_mean=sum(s["iterations"] for s in steps) / len(steps),  # of the solve that closes each step
                    stabilization_C=constants.get("C", 0.1), status=status,
                    rebuild_s_per_step=sum(s["rebuild_s"] for s in steps) / len(steps),
                    assembly_s_per_step=sum(s["assembly_s"] for s in steps) / len(steps),
@@ -212,7 +249,7 @@ def main():
         print(f"{name:32s} nodes {nodes:5d} steps {rec['steps']:3d} h/h0 {rec['height_ratio']:.3f} "
               f"radius_err {rec['radius_error'] if rec['radius_error'] is not None else float('nan'):.2e} "
               f"volume_err {rec['volume_error']:.2e} force {rec['force']:.4f} ref {rec['force_reference']:.4f} "
-              f"(max err {rec['force_error_max']:.2e}) p_osc {osc:.2e} spread {spread:.2e} "
+              f"(max err {rec['force_error_max']:.2e}) p_osc start {osc0:.2e} end {osc:.2e} spread {spread0:.2e}/{spread:.2e} "
               f"per step: rebuild {rec['rebuild_s_per_step']:.3f} s assembly {rec['assembly_s_per_step']:.3f} s "
               f"solve {rec['solve_s_per_step']:.3f} s  wall {wall:.1f} s  [{status}]", flush=True)
     os.makedirs(os.path.dirname(args.json), exist_ok=True)
@@ -236,7 +273,7 @@ def figures(runs, folder):
     for rec, steps, out, name in runs:
         red = [1 - s["h"] / steps[0]["h"] for s in steps]
         ax[0].plot(red, [s["force"] for s in steps], label=f"{rec['friction']} ({rec['label']}, {rec['nodes']} nodes)")
-        if rec["label"] == "seed size":
+        if rec["label"] == "seed size" and rec["case"] == "upsetting":
             ax[0].plot(red, [s["reference"] for s in steps], "k--" if rec["friction"] == "frictionless" else "k:", lw=1,
                        label="pi R^2 sigma_bar (exact)" if rec["friction"] == "frictionless" else "slab estimate, m = 1")
         ax[1].semilogy(red, [max(s["volume_error"], 1e-16) for s in steps], label=f"{name}")
@@ -249,8 +286,36 @@ def figures(runs, folder):
     fig.tight_layout()
     fig.savefig(folder / "forming_force.png", dpi=110)
     plt.close(fig)
+    # The free surface (the hull of the nodes away from the axis) at five stages, frictionless and sticking.
+    fig, ax = plt.subplots(1, 1, figsize=(6, 4))
+    for tag, style in (("upsetting_frictionless_seed_size", "--"), ("upsetting_sticking_seed_size", "-")):
+        match = [r for r in runs if r[3] == tag]
+        if not match:
+            continue
+        rec, steps, out, name = match[0]
+        for k in (0, 25, 50, 75, 100):
+            path = out / "series" / f"{name}_{k:06d}.h5"
+            if not path.exists():
+                continue
+            with h5py.File(path) as f:
+                x = f["nodes"][:]
+            zs = sorted(set(round(z, 9) for z in x[:, 1]))
+            # the outermost node of each thin slab in z: the profile r(z)
+            bins = {}
+            for r, z in x:
+                key = round(z / 0.0125)
+                bins[key] = max(bins.get(key, (0, z)), (r, z))
+            prof = sorted((z, r) for r, z in bins.values())
+            ax.plot([r for z, r in prof], [z for z, r in prof], style, lw=1, label=f"{rec['friction']} step {k}")
+    ax.set_xlabel("r")
+    ax.set_ylabel("z (mid-plane z = 0)")
+    ax.set_aspect("equal")
+    ax.legend(fontsize=6, ncol=2)
+    fig.tight_layout()
+    fig.savefig(folder / "forming_profiles.png", dpi=110)
+    plt.close(fig)
     # Pressure at four stages of the sticking run and the unstabilized one (seed Fig. 5.3 b-e).
-    for tag in ("sticking_seed_size", "sticking_unstabilized"):
+    for tag in ("upsetting_sticking_seed_size", "upsetting_unstabilized_sticking_unstabilized"):
         match = [r for r in runs if r[3] == tag]
         if not match:
             continue
