@@ -3,7 +3,7 @@
 # compiled at run time, added through the scene alone), made smaller here (441 nodes, eps 0.08):
 #  * 1 and 2 MPI ranks give the same energy to 1e-9 (relative), and both converge;
 #  * the energy with adhesion is below that of the same scene without the adhesion term
-#    (model.energy = ["bending"] and no adhesion constants).
+#    (model.energy = ["bending"], neither the adhesion form nor its constants).
 #
 #   test_adhesion_ranks.sh LMEFORM OUT_DIR
 set -euo pipefail
@@ -22,9 +22,11 @@ fail() {
 small=(-e "s#\"adhesion_axisymmetric.form\"#\"$demo/adhesion_axisymmetric.form\"#"
        -e "s#^upper = .*#upper = [0.8, 0.8]#" -e "s#^spacing = [0-9.]*#spacing = 0.04#" -e "s#^eps = [0-9.]*#eps = 0.08#")
 sed -e 's#^name = .*#name = "adhered"#' "${small[@]}" "$demo/adhered_vesicle.toml" > "$out/adhered.toml"
-sed -e 's#^name = .*#name = "free"#' "${small[@]}" -e 's#^energy = \["bending", "adhesion"\].*#energy = ["bending"]#' \
+sed -e 's#^name = .*#name = "free"#' "${small[@]}" -e 's#, "[^"]*adhesion_axisymmetric.form"##' \
+  -e 's#^energy = \["bending", "adhesion"\].*#energy = ["bending"]#' \
   -e '/^omega =\|^z_wall =\|^delta_over_eps =\|^repulsion =/d' "$demo/adhered_vesicle.toml" > "$out/free.toml"
 grep -q '^energy = \["bending"\]$' "$out/free.toml" || fail "could not derive the scene without adhesion"
+grep -q '^forms = .*adhesion_axisymmetric' "$out/free.toml" && fail "could not drop the adhesion form from the scene without adhesion"
 
 "$lmeform" run "$out/adhered.toml" --json "$out/one.json" --output "$out/one" > "$out/one.log" 2>&1 ||
   { tail -20 "$out/one.log"; fail "1 rank: lmeform run failed (log: $out/one.log)"; }
