@@ -65,6 +65,23 @@ def history(out_dir):
         return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(f)]
 
 
+def hull_points(points):
+    """The convex hull of 2D points, counter-clockwise (monotone chain)."""
+    pts = sorted(set(map(tuple, points)))
+    def cross(o, a, b):
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+    lower, upper = [], []
+    for p in pts:
+        while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 0:
+            lower.pop()
+        lower.append(p)
+    for p in reversed(pts):
+        while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= 0:
+            upper.pop()
+        upper.append(p)
+    return lower[:-1] + upper[:-1]
+
+
 def hull_volume(points):
     """Volume of revolution (about r = 0) of the convex hull of (r, z) points: 2 pi times the
     hull's first moment of area (Pappus). The run's `volume` quantity integrates over its background
@@ -272,7 +289,7 @@ def figures(runs, folder):
     fig, ax = plt.subplots(1, 2, figsize=(11, 4))
     for rec, steps, out, name in runs:
         red = [1 - s["h"] / steps[0]["h"] for s in steps]
-        ax[0].plot(red, [s["force"] for s in steps], label=f"{rec['friction']} ({rec['label']}, {rec['nodes']} nodes)")
+        ax[0].plot(red, [s["force"] for s in steps], label=f"{rec['friction']}{' plane strain' if 'plane' in rec['case'] else ''} ({rec['label']}, {rec['nodes']} nodes)")
         if rec["label"] == "seed size" and rec["case"] == "upsetting":
             ax[0].plot(red, [s["reference"] for s in steps], "k--" if rec["friction"] == "frictionless" else "k:", lw=1,
                        label="pi R^2 sigma_bar (exact)" if rec["friction"] == "frictionless" else "slab estimate, m = 1")
@@ -299,16 +316,12 @@ def figures(runs, folder):
                 continue
             with h5py.File(path) as f:
                 x = f["nodes"][:]
-            zs = sorted(set(round(z, 9) for z in x[:, 1]))
-            # the outermost node of each thin slab in z: the profile r(z)
-            bins = {}
-            for r, z in x:
-                key = round(z / 0.0125)
-                bins[key] = max(bins.get(key, (0, z)), (r, z))
-            prof = sorted((z, r) for r, z in bins.values())
+            outline = hull_points(x.tolist())
+            prof = [(z, r) for r, z in outline + outline[:1]]
             ax.plot([r for z, r in prof], [z for z, r in prof], style, lw=1, label=f"{rec['friction']} step {k}")
     ax.set_xlabel("r")
     ax.set_ylabel("z (mid-plane z = 0)")
+    ax.set_title("outline of the half billet (the hull of its nodes)", fontsize=9)
     ax.set_aspect("equal")
     ax.legend(fontsize=6, ncol=2)
     fig.tight_layout()

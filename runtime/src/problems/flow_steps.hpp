@@ -56,7 +56,7 @@ struct FlowSettings {
   /// amplifies round-off to about 1e-7 of a spacing, and a gently curved one (a barrel) has hull
   /// cells of area / edge² about h / (8 R_curvature). Both put quadrature points within a
   /// thousandth of a spacing of the hull, where the LME Jacobian is near-singular and the basis
-  /// gradients huge: measured, Newton fails at 2 % height reduction of a sticking upsetting with
+  /// gradients huge: measured, Newton fails at 6 % height reduction of a sticking upsetting with
   /// 1e-6 or 1e-3, at 25 % with 1e-2. Cells inside a moved node set are not that flat (a grid
   /// compressed 4:1 has 0.12); a dropped hull cell loses its flatness times its edge² of area.
   double sliver_tolerance = 1e-2;

@@ -1,5 +1,7 @@
 #include "requirements.hpp"
 
+#include <set>
+
 #include <fmt/format.h>
 #include <fmt/ranges.h>
 
@@ -9,8 +11,13 @@ namespace lmeform::problems {
 
 void check_requirements(const BoundScene& b, const ProblemSpace& space) {
   std::vector<double> state;  // the start, renumbered for the basis
+  // A form listed in model.forms whose outputs the problem does not use binds no constants: its
+  // requirements are not the problem's.
+  std::set<std::string> used;
+  for (const BoundOutput* o : b.outputs()) used.insert(o->first().module);
   for (const FormModule* module : b.modules)
     for (const kernel::FormKernels* k : module->kernels) {
+      if (!used.contains(module->name)) continue;
       if (k->kind != kernel::FunctionalKind::Point || k->requirement == nullptr || k->dim != b.dim) continue;
       if (!PointEvaluator::can_evaluate(*k, b.layout))
         throw SceneError(fmt::format("{}: the requirement '{}' of form {} reads fields that are not unknowns of this problem", b.source,
