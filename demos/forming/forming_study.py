@@ -86,41 +86,14 @@ def hull_volume(points):
     """Volume of revolution (about r = 0) of the convex hull of (r, z) points: 2 pi times the
     hull's first moment of area (Pappus). The run's `volume` quantity integrates over its background
     cells, which drop the hull's slivers (flow.sliver_tolerance): this is the body's own."""
-    pts = sorted(set(map(tuple, points)))
-    def cross(o, a, b):
-        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
-    lower, upper = [], []
-    for p in pts:
-        while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 0:
-            lower.pop()
-        lower.append(p)
-    for p in reversed(pts):
-        while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= 0:
-            upper.pop()
-        upper.append(p)
-    hull = lower[:-1] + upper[:-1]
-    moment = 0.0
-    for (x0, y0), (x1, y1) in zip(hull, hull[1:] + hull[:1]):
-        c = x0 * y1 - x1 * y0
-        moment += (x0 + x1) * c
+    hull = hull_points(points)
+    moment = sum((x0 + x1) * (x0 * y1 - x1 * y0) for (x0, y0), (x1, y1) in zip(hull, hull[1:] + hull[:1]))
     return 2 * math.pi * abs(moment) / 6
 
 
 def hull_area(points):
     """Area of the convex hull of 2D points (plane strain: the body's own area)."""
-    pts = sorted(set(map(tuple, points)))
-    def cross(o, a, b):
-        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
-    lower, upper = [], []
-    for p in pts:
-        while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 0:
-            lower.pop()
-        lower.append(p)
-    for p in reversed(pts):
-        while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= 0:
-            upper.pop()
-        upper.append(p)
-    hull = lower[:-1] + upper[:-1]
+    hull = hull_points(points)
     return abs(sum(x0 * y1 - x1 * y0 for (x0, y0), (x1, y1) in zip(hull, hull[1:] + hull[:1]))) / 2
 
 

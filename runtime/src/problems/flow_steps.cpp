@@ -18,6 +18,7 @@
 #include "lmeform/stopwatch.hpp"
 #include "quantities.hpp"
 #include "stationary.hpp"
+#include "step_history.hpp"
 #include "toolkit.hpp"
 
 namespace lmeform::problems {
@@ -72,15 +73,7 @@ FlowSettings read_flow(const Scene& scene) {
 namespace {
 
 
-/// One recorded step: the configuration and the flow solved on it.
-struct FlowStep {
-  int step = 0;
-  double time = 0;
-  std::vector<std::pair<std::string, double>> quantities;
-  int iterations = 0;
-  int substeps = 0;
-  double wall_s = 0;
-};
+const StepHistoryFormat kHistoryFormat{"time", {"iterations", "substeps"}};
 
 /// Node-distribution quality of a node set: how far the motion took it from a regular one.
 struct NodeQuality {
@@ -163,7 +156,7 @@ class FlowStepper {
 
   [[nodiscard]] const BoundScene& bound() const noexcept { return bound_; }
   struct Run {
-    std::vector<FlowStep> history;
+    std::vector<StepRow> history;  ///< position: the time; counts: iterations, substeps
     std::string failure;
     double wall_s = 0;
   };
@@ -560,9 +553,9 @@ bool FlowStepper::advance(int step) {
 }
 
 void FlowStepper::record(int step, const ProblemResult& result, int substeps) {
-  FlowStep s;
+  StepRow s;
   s.step = step;
-  s.time = time_;
+  s.position = time_;
   s.quantities = evaluate_quantities(bound_, space_, u_, result);
   const NodeSet& nodes = input_.nodes;
   for (int i = 0; i < nodes.dim; ++i) {
@@ -586,36 +579,20 @@ void FlowStepper::record(int step, const ProblemResult& result, int substeps) {
   s.quantities.emplace_back("rebuild_s", rebuild_s_);
   s.quantities.emplace_back("assembly_s", assembly_s_);
   s.quantities.emplace_back("solve_s", solve_s_);
-  s.iterations = result.iterations;
-  s.substeps = substeps;
+  s.counts = {{"iterations", result.iterations}, {"substeps", substeps}};
   s.wall_s = clock_.seconds();
   run_.history.push_back(s);
   if (ctx_.log == nullptr) return;
   std::string values;
   for (const auto& [name, v] : s.quantities)
     if (name.find("extent_min") == std::string::npos) values += fmt::format("  {} {:.6g}", name, v);
-  *ctx_.log << fmt::format("step {:4d}/{}  time {:.6g}{}  newton {}  substeps {}  {:.1f} s", step, settings_.count, s.time, values, s.iterations,
-                           substeps, s.wall_s)
+  *ctx_.log << fmt::format("step {:4d}/{}  time {:.6g}{}  newton {}  substeps {}  {:.1f} s", step, settings_.count, s.position, values,
+                           result.iterations, substeps, s.wall_s)
             << std::endl;
 }
 
 void FlowStepper::write_history() const {
-  std::ostringstream csv;
-  nlohmann::ordered_json js;
-  js["scene"] = ctx_.scene->name;
-  js["steps"] = nlohmann::ordered_json::array();
-  csv << "step,time";
-  for (const auto& [name, v] : run_.history.front().quantities) csv << "," << name;
-  csv << ",iterations,substeps,wall_s\n";
-  for (const FlowStep& s : run_.history) {
-    csv << s.step << "," << fmt::format("{:.17g}", s.time);
-    nlohmann::ordered_json row{{"step", s.step}, {"time", s.time}, {"iterations", s.iterations}, {"substeps", s.substeps}, {"wall_s", s.wall_s}};
-    for (const auto& [name, v] : s.quantities) csv << "," << fmt::format("{:.17g}", v), row["quantities"][name] = json_number(v);
-    csv << "," << s.iterations << "," << s.substeps << "," << fmt::format("{:.3f}", s.wall_s) << "\n";
-    js["steps"].push_back(row);
-  }
-  write_text_atomically(ctx_.output_directory / "history.csv", csv.str());
-  write_text_atomically(ctx_.output_directory / "history.json", js.dump(1) + "\n");
+  write_step_history(ctx_.output_directory, ctx_.scene->name, kHistoryFormat, run_.history);
 }
 
 void FlowStepper::write_outputs(int step) {
@@ -673,27 +650,8 @@ void FlowStepper::resume() {
   initial_spacing_ = std::get<double>(cp.attributes.at("initial_spacing"));
   anisotropy_ = std::get<double>(cp.attributes.at("anisotropy"));
   time_ = std::get<double>(cp.attributes.at("time"));
-  std::ifstream in(history);
-  const nlohmann::ordered_json js = nlohmann::ordered_json::parse(in);
-  std::vector<TimeSeriesStep> series;
-  for (const auto& row : js.at("steps")) {
-    if (row.at("step").get<int>() > step) break;
-    FlowStep s;
-    s.step = row.at("step");
-    s.time = row.at("time");
-    s.iterations = row.at("iterations");
-    s.substeps = row.at("substeps");
-    s.wall_s = row.at("wall_s");
-    const nlohmann::ordered_json quantities = row.value("quantities", nlohmann::ordered_json::object());  // items() views it
-    for (const auto& [name, v] : quantities.items()) s.quantities.emplace_back(name, v.is_null() ? NAN : v.get<double>());
-    run_.history.push_back(s);
-    const FieldFile written = read_field_hdf5(ctx_.output_directory / series_->file_of(s.step));  // node sets change
-    TimeSeriesStep entry{s.time, series_->file_of(s.step), bound_.dim, written.nodes.size(), written.cells.size(), {}};
-    for (const auto& f : bound_.layout.fields) entry.fields.emplace_back(f.name, f.components);
-    std::sort(entry.fields.begin(), entry.fields.end());
-    series.push_back(std::move(entry));
-  }
-  series_->restore(std::move(series));
+  run_.history = read_step_history(ctx_.output_directory, kHistoryFormat, step);
+  series_->restore(restored_series(*series_, ctx_.output_directory, run_.history, bound_.layout, bound_.dim));
   first_step_ = step + 1;
   if (ctx_.log != nullptr) *ctx_.log << fmt::format("resumed from {} at step {} (time {:.6g})\n", checkpoint.string(), step, time_);
 }
@@ -754,25 +712,25 @@ class FlowStepsDriver final : public ProblemDriver {
                     : settings.until < settings.count ? fmt::format("stopped after step {} as asked (flow.until): --restart continues", settings.until)
                                                       : std::string("every step converged");
     if (run.history.empty()) throw std::runtime_error(report.status);
-    const FlowStep& last = run.history.back();
+    const StepRow& last = run.history.back();
     int substeps = 0, newton = 0;
     double rebuild = 0, assembly = 0, solve = 0;
-    for (const FlowStep& s : run.history) {
-      substeps += s.substeps, newton += s.iterations;
+    for (const StepRow& s : run.history) {
+      substeps += int(s.count("substeps")), newton += int(s.count("iterations"));
       for (const auto& [name, v] : s.quantities) {
         if (name == "rebuild_s") rebuild += v;
         if (name == "assembly_s") assembly += v;
         if (name == "solve_s") solve += v;
       }
     }
-    report.row("steps", fmt::format("{} of {} (time {:.6g}), {} solves, {} Newton iterations", last.step, settings.count, last.time,
+    report.row("steps", fmt::format("{} of {} (time {:.6g}), {} solves, {} Newton iterations", last.step, settings.count, last.position,
                                     substeps + 1, newton));
     report.row("time per step", fmt::format("rebuild {:.3f} s, assembly {:.3f} s, solve {:.3f} s (means)", rebuild / double(run.history.size()),
                                             assembly / double(run.history.size()), solve / double(run.history.size())));
     describe_quantities(last.quantities, report);
     report.json["steps"] = nlohmann::json::array();
-    for (const FlowStep& s : run.history) {
-      nlohmann::json row{{"step", s.step}, {"time", s.time}, {"iterations", s.iterations}, {"substeps", s.substeps}};
+    for (const StepRow& s : run.history) {
+      nlohmann::json row{{"step", s.step}, {"time", s.position}, {"iterations", s.count("iterations")}, {"substeps", s.count("substeps")}};
       for (const auto& [name, v] : s.quantities) row["quantities"][name] = json_number(v);
       report.json["steps"].push_back(row);
     }

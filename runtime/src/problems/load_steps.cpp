@@ -74,6 +74,8 @@ LoadStepSettings read_steps(const Scene& scene) {
 
 namespace {
 
+const StepHistoryFormat kHistoryFormat{"load", {"iterations", "cuts"}};
+
 /// The ramped constants are the driver's: no value needed in [constants].
 OutputRoles ramped(const LoadStepSettings& settings) {
   OutputRoles roles;
@@ -192,9 +194,9 @@ bool LoadStepper::advance(int step) {
 }
 
 void LoadStepper::record(int step, double lambda, const ProblemResult& result, int cuts) {
-  LoadStep s;
+  StepRow s;
   s.step = step;
-  s.lambda = lambda;
+  s.position = lambda;
   for (const SteppedConstant& c : settings_.constants) s.constants.emplace_back(c.name, c.at(lambda));
   s.quantities = evaluate_quantities(bound_, space_, u_, result);
   // A bounded problem's active set per step (a contact that closes, damage that saturates).
@@ -203,38 +205,19 @@ void LoadStepper::record(int step, double lambda, const ProblemResult& result, i
     s.quantities.emplace_back("active_upper", double(result.active_upper));
   }
   s.quantities.insert(s.quantities.end(), result.solver_figures.begin(), result.solver_figures.end());
-  s.iterations = result.iterations;
-  s.cuts = cuts;
+  s.counts = {{"iterations", result.iterations}, {"cuts", cuts}};
   s.wall_s = clock_.seconds();
   run_.history.push_back(s);
   if (ctx_.log == nullptr) return;
   std::string values;
   for (const auto& [name, v] : s.constants) values += fmt::format("  {} {:.6g}", name, v);
   for (const auto& [name, v] : s.quantities) values += fmt::format("  {} {:.6g}", name, v);
-  *ctx_.log << fmt::format("step {:4d}/{}{}  iterations {}  cuts {}  {:.1f} s", step, settings_.count, values, s.iterations, cuts, s.wall_s)
+  *ctx_.log << fmt::format("step {:4d}/{}{}  iterations {}  cuts {}  {:.1f} s", step, settings_.count, values, result.iterations, cuts, s.wall_s)
             << std::endl;
 }
 
 void LoadStepper::write_history() const {
-  std::ostringstream csv;
-  nlohmann::ordered_json js;
-  js["scene"] = ctx_.scene->name;
-  js["steps"] = nlohmann::ordered_json::array();
-  csv << "step,load";
-  const LoadStep& first = run_.history.front();
-  for (const auto& [name, v] : first.constants) csv << "," << name;
-  for (const auto& [name, v] : first.quantities) csv << "," << name;
-  csv << ",iterations,cuts,wall_s\n";
-  for (const LoadStep& s : run_.history) {
-    csv << s.step << "," << fmt::format("{:.17g}", s.lambda);
-    nlohmann::ordered_json row{{"step", s.step}, {"load", s.lambda}, {"iterations", s.iterations}, {"cuts", s.cuts}, {"wall_s", s.wall_s}};
-    for (const auto& [name, v] : s.constants) csv << "," << fmt::format("{:.17g}", v), row["constants"][name] = json_number(v);
-    for (const auto& [name, v] : s.quantities) csv << "," << fmt::format("{:.17g}", v), row["quantities"][name] = json_number(v);
-    csv << "," << s.iterations << "," << s.cuts << "," << fmt::format("{:.3f}", s.wall_s) << "\n";
-    js["steps"].push_back(row);
-  }
-  write_text_atomically(ctx_.output_directory / "history.csv", csv.str());
-  write_text_atomically(ctx_.output_directory / "history.json", js.dump(1) + "\n");
+  write_step_history(ctx_.output_directory, ctx_.scene->name, kHistoryFormat, run_.history);
 }
 
 void LoadStepper::write_outputs(int step) {
@@ -268,27 +251,8 @@ void LoadStepper::resume() {
   space_.update_previous_bounds(bound_, u_);  // irreversibility continues from the checkpoint, not from the start
   lambda_ = std::get<double>(cp.attributes.at("load"));
   set_load(lambda_);
-  std::ifstream in(history);
-  const nlohmann::ordered_json js = nlohmann::ordered_json::parse(in);
-  std::vector<TimeSeriesStep> series;
-  for (const auto& row : js.at("steps")) {
-    if (row.at("step").get<int>() > step) break;
-    LoadStep s;
-    s.step = row.at("step");
-    s.lambda = row.at("load");
-    s.iterations = row.at("iterations");
-    s.cuts = row.at("cuts");
-    s.wall_s = row.at("wall_s");
-    const nlohmann::ordered_json constants = row.value("constants", nlohmann::ordered_json::object()), quantities = row.value("quantities", nlohmann::ordered_json::object());
-    for (const auto& [name, v] : constants.items()) s.constants.emplace_back(name, v.is_null() ? NAN : v.get<double>());
-    for (const auto& [name, v] : quantities.items()) s.quantities.emplace_back(name, v.is_null() ? NAN : v.get<double>());
-    run_.history.push_back(s);
-    TimeSeriesStep entry{s.lambda, series_->file_of(s.step), bound_.dim, input_.nodes.size(), cells_.size(), {}};
-    for (const auto& f : bound_.layout.fields) entry.fields.emplace_back(f.name, f.components);
-    std::sort(entry.fields.begin(), entry.fields.end());
-    series.push_back(std::move(entry));
-  }
-  series_->restore(std::move(series));
+  run_.history = read_step_history(ctx_.output_directory, kHistoryFormat, step);
+  series_->restore(restored_series(*series_, ctx_.output_directory, run_.history, bound_.layout, bound_.dim));
   first_step_ = step + 1;
   if (ctx_.log != nullptr) *ctx_.log << fmt::format("resumed from {} at step {} (load {:.6g})\n", checkpoint.string(), step, lambda_);
 }
@@ -322,14 +286,14 @@ ReportFields LoadStepper::final_fields() const {
 }
 
 void describe_steps(const LoadStepSettings& settings, const LoadStepRun& run, RunReport& report) {
-  const LoadStep& last = run.history.back();
-  report.row("steps", fmt::format("{} of {} (load {:.6g}), {} increments cut", last.step, settings.count, last.lambda,
-                                  [&] { int c = 0; for (const auto& s : run.history) c += s.cuts; return c; }()));
+  const StepRow& last = run.history.back();
+  report.row("steps", fmt::format("{} of {} (load {:.6g}), {} increments cut", last.step, settings.count, last.position,
+                                  [&] { long c = 0; for (const auto& s : run.history) c += s.count("cuts"); return c; }()));
   for (const auto& [name, v] : last.constants) report.row(name, fmt::format("{:.10g}", v));
   describe_quantities(last.quantities, report);
   report.json["steps"] = nlohmann::json::array();
-  for (const LoadStep& s : run.history) {
-    nlohmann::json row{{"step", s.step}, {"load", s.lambda}, {"iterations", s.iterations}, {"cuts", s.cuts}};
+  for (const StepRow& s : run.history) {
+    nlohmann::json row{{"step", s.step}, {"load", s.position}, {"iterations", s.count("iterations")}, {"cuts", s.count("cuts")}};
     for (const auto& [name, v] : s.quantities) row["quantities"][name] = json_number(v);
     report.json["steps"].push_back(row);
   }

@@ -23,6 +23,7 @@
 
 #include "lmeform/scene.hpp"
 #include "problem_registry.hpp"
+#include "step_history.hpp"
 
 namespace lmeform::problems {
 
@@ -50,19 +51,8 @@ struct LoadStepSettings {
 /// Reads [steps]; throws SceneError naming the key.
 [[nodiscard]] LoadStepSettings read_steps(const Scene& scene);
 
-/// One converged step.
-struct LoadStep {
-  int step = 0;
-  double lambda = 0;            ///< the step's position in [0, count] (fractional after cuts)
-  std::vector<std::pair<std::string, double>> constants;
-  std::vector<std::pair<std::string, double>> quantities;
-  int iterations = 0;
-  int cuts = 0;                 ///< increments halved before it converged
-  double wall_s = 0;
-};
-
 struct LoadStepRun {
-  std::vector<LoadStep> history;
+  std::vector<StepRow> history;     ///< position: the load λ ∈ [0, count]; counts: iterations, cuts
   std::string failure;          ///< empty when every step converged
   double wall_s = 0;
 };

@@ -1,0 +1,90 @@
+#include "step_history.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "report.hpp"
+
+namespace lmeform::problems {
+
+namespace fs = std::filesystem;
+
+long StepRow::count(std::string_view name) const {
+  for (const auto& [n, v] : counts)
+    if (n == name) return v;
+  return 0;
+}
+
+void write_step_history(const fs::path& directory, const std::string& scene, const StepHistoryFormat& format, const std::vector<StepRow>& rows) {
+  if (rows.empty()) return;
+  std::ostringstream csv;
+  nlohmann::ordered_json js;
+  js["scene"] = scene;
+  js["steps"] = nlohmann::ordered_json::array();
+  csv << "step," << format.position;
+  for (const auto& [name, v] : rows.front().constants) csv << "," << name;
+  for (const auto& [name, v] : rows.front().quantities) csv << "," << name;
+  for (const std::string& name : format.counts) csv << "," << name;
+  csv << ",wall_s\n";
+  for (const StepRow& s : rows) {
+    csv << s.step << "," << fmt::format("{:.17g}", s.position);
+    nlohmann::ordered_json row{{"step", s.step}, {format.position, s.position}};
+    for (const std::string& name : format.counts) row[name] = s.count(name);
+    row["wall_s"] = s.wall_s;
+    for (const auto& [name, v] : s.constants) csv << "," << fmt::format("{:.17g}", v), row["constants"][name] = json_number(v);
+    for (const auto& [name, v] : s.quantities) csv << "," << fmt::format("{:.17g}", v), row["quantities"][name] = json_number(v);
+    for (const std::string& name : format.counts) csv << "," << s.count(name);
+    csv << "," << fmt::format("{:.3f}", s.wall_s) << "\n";
+    js["steps"].push_back(row);
+  }
+  write_text_atomically(directory / "history.csv", csv.str());
+  write_text_atomically(directory / "history.json", js.dump(1) + "\n");
+}
+
+std::vector<StepRow> read_step_history(const fs::path& directory, const StepHistoryFormat& format, int last_step) {
+  const fs::path path = directory / "history.json";
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error(fmt::format("cannot read {}", path.string()));
+  std::vector<StepRow> rows;
+  try {
+    const nlohmann::ordered_json js = nlohmann::ordered_json::parse(in);
+    for (const auto& row : js.at("steps")) {
+      if (row.at("step").get<int>() > last_step) break;
+      StepRow s;
+      s.step = row.at("step");
+      s.position = row.at(format.position);
+      for (const std::string& name : format.counts) s.counts.emplace_back(name, row.at(name).get<long>());
+      s.wall_s = row.at("wall_s");
+      // Named copies: items() views its object.
+      const nlohmann::ordered_json constants = row.value("constants", nlohmann::ordered_json::object());
+      const nlohmann::ordered_json quantities = row.value("quantities", nlohmann::ordered_json::object());
+      for (const auto& [name, v] : constants.items()) s.constants.emplace_back(name, v.is_null() ? NAN : v.get<double>());
+      for (const auto& [name, v] : quantities.items()) s.quantities.emplace_back(name, v.is_null() ? NAN : v.get<double>());
+      rows.push_back(std::move(s));
+    }
+  } catch (const nlohmann::json::exception& e) {
+    throw std::runtime_error(fmt::format("{}: not a step history: {}", path.string(), e.what()));
+  }
+  return rows;
+}
+
+std::vector<TimeSeriesStep> restored_series(const TimeSeriesWriter& series, const fs::path& directory, const std::vector<StepRow>& rows,
+                                            const StateLayout& layout, int dim) {
+  std::vector<TimeSeriesStep> out;
+  for (const StepRow& s : rows) {
+    const FieldFile written = read_field_hdf5(directory / series.file_of(s.step));
+    TimeSeriesStep entry{s.position, series.file_of(s.step), dim, written.nodes.size(), written.cells.size(), {}};
+    for (const auto& f : layout.fields) entry.fields.emplace_back(f.name, f.components);
+    std::sort(entry.fields.begin(), entry.fields.end());
+    out.push_back(std::move(entry));
+  }
+  return out;
+}
+
+}  // namespace lmeform::problems
