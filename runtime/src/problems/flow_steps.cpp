@@ -728,17 +728,8 @@ class FlowStepsDriver final : public ProblemDriver {
     report.row("time per step", fmt::format("rebuild {:.3f} s, assembly {:.3f} s, solve {:.3f} s (means)", rebuild / double(run.history.size()),
                                             assembly / double(run.history.size()), solve / double(run.history.size())));
     describe_quantities(last.quantities, report);
-    report.json["steps"] = nlohmann::json::array();
-    for (const StepRow& s : run.history) {
-      nlohmann::json row{{"step", s.step}, {"time", s.position}, {"iterations", s.count("iterations")}, {"substeps", s.count("substeps")}};
-      for (const auto& [name, v] : s.quantities) row["quantities"][name] = json_number(v);
-      report.json["steps"].push_back(row);
-    }
     report.fields = stepper.final_fields();
-    if (!ctx.output_directory.empty()) {
-      report.files.emplace_back("history", (ctx.output_directory / "history.csv").string() + " (+ history.json)");
-      report.files.emplace_back("series", (ctx.output_directory / (ctx.scene->name + ".xmf")).string() + " (ParaView)");
-    }
+    report_step_history(kHistoryFormat, run.history, ctx.output_directory, ctx.scene->name, report);
     return report;
   }
 };

@@ -291,12 +291,6 @@ void describe_steps(const LoadStepSettings& settings, const LoadStepRun& run, Ru
                                   [&] { long c = 0; for (const auto& s : run.history) c += s.count("cuts"); return c; }()));
   for (const auto& [name, v] : last.constants) report.row(name, fmt::format("{:.10g}", v));
   describe_quantities(last.quantities, report);
-  report.json["steps"] = nlohmann::json::array();
-  for (const StepRow& s : run.history) {
-    nlohmann::json row{{"step", s.step}, {"load", s.position}, {"iterations", s.count("iterations")}, {"cuts", s.count("cuts")}};
-    for (const auto& [name, v] : s.quantities) row["quantities"][name] = json_number(v);
-    report.json["steps"].push_back(row);
-  }
 }
 
 class LoadStepsDriver final : public ProblemDriver {
@@ -322,10 +316,7 @@ class LoadStepsDriver final : public ProblemDriver {
     if (run.history.empty()) throw std::runtime_error(report.status);
     describe_steps(settings, run, report);
     report.fields = stepper.final_fields();
-    if (!ctx.output_directory.empty()) {
-      report.files.emplace_back("history", (ctx.output_directory / "history.csv").string() + " (+ history.json)");
-      report.files.emplace_back("series", (ctx.output_directory / (ctx.scene->name + ".xmf")).string() + " (ParaView)");
-    }
+    report_step_history(kHistoryFormat, run.history, ctx.output_directory, ctx.scene->name, report);
     return report;
   }
 };

@@ -87,4 +87,18 @@ std::vector<TimeSeriesStep> restored_series(const TimeSeriesWriter& series, cons
   return out;
 }
 
+void report_step_history(const StepHistoryFormat& format, const std::vector<StepRow>& rows, const fs::path& output_directory,
+                         const std::string& scene, RunReport& report) {
+  report.json["steps"] = nlohmann::json::array();
+  for (const StepRow& s : rows) {
+    nlohmann::json row{{"step", s.step}, {format.position, s.position}};
+    for (const std::string& name : format.counts) row[name] = s.count(name);
+    for (const auto& [name, v] : s.quantities) row["quantities"][name] = json_number(v);
+    report.json["steps"].push_back(row);
+  }
+  if (output_directory.empty()) return;
+  report.files.emplace_back("history", (output_directory / "history.csv").string() + " (+ history.json)");
+  report.files.emplace_back("series", (output_directory / (scene + ".xmf")).string() + " (ParaView)");
+}
+
 }  // namespace lmeform::problems

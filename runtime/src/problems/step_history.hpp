@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "lmeform/output.hpp"
+#include "report.hpp"
 #include "toolkit.hpp"
 
 namespace lmeform::problems {
@@ -46,5 +47,10 @@ void write_step_history(const std::filesystem::path& directory, const std::strin
 /// counts read from it (a node set may change between steps), the fields of `layout`.
 [[nodiscard]] std::vector<TimeSeriesStep> restored_series(const TimeSeriesWriter& series, const std::filesystem::path& directory,
                                                           const std::vector<StepRow>& rows, const StateLayout& layout, int dim);
+
+/// The run report's JSON "steps" (step, position, counts, quantities per row) and, with an output
+/// folder, its history and series files in the closing table.
+void report_step_history(const StepHistoryFormat& format, const std::vector<StepRow>& rows, const std::filesystem::path& output_directory,
+                         const std::string& scene, RunReport& report);
 
 }  // namespace lmeform::problems
