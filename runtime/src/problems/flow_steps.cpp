@@ -75,10 +75,19 @@ namespace {
 
 const StepHistoryFormat kHistoryFormat{"time", {"iterations", "substeps"}};
 
+/// A node within this fraction of the bounding-box diagonal of a hull face is on the surface: a
+/// surface moved by a flow is never flat to round-off (measured: 1e-7 of a spacing per step on a
+/// straight free surface), so nodes a little inside it still see their neighbours on one side.
+constexpr double kSurfaceTolerance = 1e-3;
+
 /// Node-distribution quality of a node set: how far the motion took it from a regular one.
 struct NodeQuality {
   double spacing_ratio = 1;  ///< largest / smallest nodal spacing
   double anisotropy = 1;     ///< largest ratio of the principal spreads of an interior node's nearest neighbours
+  /// LME conditioning: the largest condition number, over interior nodes, of the basis' Jacobian
+  /// J = Σ_b p_b(x_a) (x_a − x_b)(x_a − x_b)ᵀ at the node (the covariance its Newton solve inverts;
+  /// a regular grid has about 1, a node set squeezed flat diverges).
+  double lme_condition = 1;
 };
 
 NodeQuality node_quality(const LmeBasis& basis) {
@@ -92,7 +101,7 @@ NodeQuality node_quality(const LmeBasis& basis) {
   const std::size_t k = d == 2 ? 8 : 18;  // the first ring of a regular grid
   // A node on the hull sees its neighbours on one side only: a spread that says nothing of the motion.
   std::vector<char> on_hull(nodes.size(), 0);
-  for (const int a : hull_boundary_nodes(nodes, 1e-6)) on_hull[std::size_t(a)] = 1;
+  for (const int a : hull_boundary_nodes(nodes, kSurfaceTolerance)) on_hull[std::size_t(a)] = 1;
   for (std::size_t a = 0; a < nodes.size(); ++a) {
     if (on_hull[a] != 0) continue;
     const auto x = nodes.point(a);
@@ -113,6 +122,21 @@ NodeQuality node_quality(const LmeBasis& basis) {
           spread(i, j) += (nodes.point(b)[std::size_t(i)] - x[std::size_t(i)]) * (nodes.point(b)[std::size_t(j)] - x[std::size_t(j)]);
     const Eigen::VectorXd ev = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(spread).eigenvalues();
     if (ev(0) > 0) q.anisotropy = std::max(q.anisotropy, std::sqrt(ev(d - 1) / ev(0)));
+    try {
+      const std::vector<int> list = basis.neighbours(x);
+      const std::vector<double> p = basis.evaluate(x, list, 0);
+      Eigen::MatrixXd J = Eigen::MatrixXd::Zero(d, d);
+      for (std::size_t m = 0; m < list.size(); ++m) {
+        if (std::size_t(list[m]) >= nodes.size()) continue;  // a mirror image (the flow's basis has none)
+        const auto xb = nodes.point(std::size_t(list[m]));
+        for (int i = 0; i < d; ++i)
+          for (int j = 0; j < d; ++j) J(i, j) += p[m] * (x[std::size_t(i)] - xb[std::size_t(i)]) * (x[std::size_t(j)] - xb[std::size_t(j)]);
+      }
+      const Eigen::VectorXd jv = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(J).eigenvalues();
+      q.lme_condition = std::max(q.lme_condition, jv(0) > 0 ? jv(d - 1) / jv(0) : std::numeric_limits<double>::infinity());
+    } catch (const LmeEvaluationError&) {
+      q.lme_condition = std::numeric_limits<double>::infinity();
+    }
   }
   return q;
 }
@@ -321,7 +345,7 @@ std::vector<double> FlowStepper::nodal_velocities() const {
   const auto original = disc.original_index();
   const auto renumbered = disc.renumbered_index();
   std::vector<char> near_hull(nodes.size(), 0);
-  for (const int a : hull_boundary_nodes(nodes, 1e-3)) near_hull[std::size_t(a)] = 1;
+  for (const int a : hull_boundary_nodes(nodes, kSurfaceTolerance)) near_hull[std::size_t(a)] = 1;
   std::vector<double> xe(d);
   for (std::size_t a = 0; a < nodes.size(); ++a) {
     const auto x = nodes.point(a);
@@ -415,7 +439,7 @@ void FlowStepper::redistribute() {
   const auto d = std::size_t(old.dim);
   const double h = initial_spacing_;
   const ConvexHull hull = convex_hull(old);
-  const std::vector<int> surface = hull_boundary_nodes(old, hull, 1e-3);
+  const std::vector<int> surface = hull_boundary_nodes(old, hull, kSurfaceTolerance);
   std::vector<double> coords;
   std::vector<int> new_index(old.size(), -1);
   for (const int a : surface) {
@@ -572,6 +596,7 @@ void FlowStepper::record(int step, const ProblemResult& result, int substeps) {
   anisotropy_ = q.anisotropy;
   s.quantities.emplace_back("spacing_ratio", q.spacing_ratio);
   s.quantities.emplace_back("anisotropy", q.anisotropy);
+  s.quantities.emplace_back("lme_condition", q.lme_condition);
   s.quantities.emplace_back("clamped_nodes", double(clamped_));
   if (!settings_.continuation.empty()) s.quantities.emplace_back("continuations", double(continuations_));
   s.quantities.emplace_back("redistributions", double(redistributions_));
