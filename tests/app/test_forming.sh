@@ -7,7 +7,9 @@
 #  2. a small frictionless billet (121 nodes, 10 steps to 25 % height reduction) keeps its volume
 #     to 0.1 %, its radius on R0 sqrt(h0/h) to 1 % and its plate force on pi R^2 sigma_bar to 1 %;
 #  3. the same run stopped after step 5 and continued with --restart ends equal to the
-#     uninterrupted one (plate force and radius to 1e-10);
+#     uninterrupted one (plate force and radius to 1e-10); a step that needs more sub-steps than
+#     allowed stops the run (exit code 2) with only the steps before it on disk, and --restart with
+#     a larger allowance continues;
 #  4. bad input gets its message before any solve: m <= 0, K <= 0, a plate that would run through
 #     the billet, a plate on no boundary part, a plate whose velocity no Dirichlet entry prescribes.
 #
@@ -87,6 +89,27 @@ for key in ("force", "extent_max[0]", "volume"):
     check(abs(a - b) <= 1e-10 * abs(a), f"restarted = uninterrupted at step 10: {key} {a:.15g} vs {b:.15g}")
 sys.exit(0 if ok else 1)
 PY
+
+# A step that cannot be taken (more sub-steps than allowed) stops the run with the last step on disk,
+# exit code 2, nothing of the failed step applied; --restart with a larger allowance continues.
+sed -e 's#^count = 10$#count = 4#' -e 's#^time_step = .*#time_step = 0.05#' -e 's#^plates = #max_substeps = 1\nplates = #' \
+  "$out/billet.toml" > "$out/cut.toml"
+grep -q '^max_substeps = 1$' "$out/cut.toml" || fail "could not make the sub-step scene"
+set +e
+"$lmeform" run "$out/cut.toml" --output "$out/cut" > "$out/cut1.log" 2>&1
+code=$?
+set -e
+[ "$code" = 2 ] || { tail -5 "$out/cut1.log"; fail "a failed step: exit code $code, expected 2"; }
+grep -q "step 1 (time 0.05): more than 1 sub-steps (max_substeps).*step 0 is the last on disk" "$out/cut1.log" ||
+  { grep status "$out/cut1.log"; fail "no message naming the failed step and the last one on disk"; }
+[ "$(grep -c '' "$out/cut/history.csv")" = 2 ] || fail "the history holds more than step 0 after the failed step 1"
+echo "ok   a step needing more sub-steps than allowed stops the run at step 0, exit code 2"
+sed -e 's#^max_substeps = 1$#max_substeps = 4#' "$out/cut.toml" > "$out/cut_more.toml"
+"$lmeform" run "$out/cut_more.toml" --output "$out/cut" --restart > "$out/cut2.log" 2>&1 || { tail -5 "$out/cut2.log"; fail "--restart after the failed step"; }
+grep -q "resumed from .* at step 0" "$out/cut2.log" || fail "the restart did not resume from step 0"
+[ "$(grep -c '' "$out/cut/history.csv")" = 6 ] || fail "the restarted run does not reach step 4 (history: header + steps 0..4)"
+grep -qE "^step    4/4 .* substeps [2-4] " "$out/cut2.log" || { grep "^step" "$out/cut2.log" | cut -c1-80; fail "the restarted steps were not cut"; }
+echo "ok   --restart with max_substeps = 4 continues to step 4, each step cut into sub-steps"
 
 # 4. Bad input.
 expect_error() {  # NAME MESSAGE ARGS...
