@@ -34,7 +34,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 OUT = os.path.join(ROOT, "build", "kinetics", "area_increase")
 GROWTH = 0.3            # A0 grows by 30 %
 T_END_FACTOR = 2.0      # relax for as long as the area grew
-PROMINENCE = 0.02       # a protrusion rises at least 2 % of R0 above its neighbouring dips
+PROMINENCE = 0.06       # a protrusion rises at least 6 % of R0 above its neighbouring dips (0.015 in 2D: the
+                        # piecewise-linear contour wiggles by about h/2 = 0.01 at the node scale)
 RUN_TIMEOUT_S = 14 * 60
 
 # name -> geometry and the time T (t*) over which A0 grows by GROWTH
@@ -173,6 +174,7 @@ t_end = {t_end}
 dt = {T / 200:.6g}
 dt_max = {T / 10:.6g}
 output_every = 10
+energy_decrement = 2.0
 min_jacobian = 0.05
 reset_distortion = 4.0
 max_steps = {g['max_steps']}
@@ -234,36 +236,44 @@ def contours(nodes, cells, phi, axisym):
     return paths
 
 
-def count_protrusions(path, R0):
-    """Local maxima of the distance from the centroid along a closed contour, counted when they
-    rise PROMINENCE * R0 above both neighbouring minima (cyclic)."""
+def count_protrusions(paths, R0):
+    """The protrusions of a membrane: the local maxima of its distance from the centroid as a
+    function of the polar angle (the largest distance in each of 180 angular bins, so that the
+    contour need not come in one ordered piece: tricontour splits it where the deformed cells
+    overlap), counted when they rise PROMINENCE * R0 above both neighbouring minima (cyclic)."""
     import numpy as np
-    centre = path.mean(axis=0)
-    d = np.linalg.norm(path - centre, axis=1)
-    n = len(d)
-    if n < 8:
+    points = np.vstack(paths)
+    centre = points.mean(axis=0)
+    rel = points - centre
+    angle = np.arctan2(rel[:, 1], rel[:, 0])
+    distance = np.linalg.norm(rel, axis=1)
+    bins = 180
+    index = ((angle + np.pi) / (2 * np.pi) * bins).astype(int) % bins
+    d = np.full(bins, np.nan)
+    for b, value in zip(index, distance):
+        d[b] = value if np.isnan(d[b]) else max(d[b], value)
+    filled = np.flatnonzero(~np.isnan(d))
+    if filled.size < 8:
         return 0
-    # smooth over a few points against node-scale wiggles
-    k = 3
+    grid = np.arange(bins)
+    d = np.interp(grid, filled, d[filled], period=bins)
+    k = 1   # smooth over three bins (6 degrees)
     d = np.convolve(np.concatenate([d[-k:], d, d[:k]]), np.ones(2 * k + 1) / (2 * k + 1), "valid")
+    n = bins
     count = 0
     for i in range(n):
         if d[i] >= d[(i - 1) % n] and d[i] > d[(i + 1) % n]:
-            left = d[i]
-            j = i
-            for _ in range(n):
-                j = (j - 1) % n
-                left = min(left, d[j])
-                if d[j] > d[i]:
-                    break
-            right = d[i]
-            j = i
-            for _ in range(n):
-                j = (j + 1) % n
-                right = min(right, d[j])
-                if d[j] > d[i]:
-                    break
-            if d[i] - max(left, right) > PROMINENCE * R0:
+            dips = []
+            for step in (-1, 1):
+                low = d[i]
+                j = i
+                for _ in range(n):
+                    j = (j + step) % n
+                    if d[j] > d[i]:
+                        break
+                    low = min(low, d[j])
+                dips.append(low)
+            if d[i] - max(dips) > PROMINENCE * R0:
                 count += 1
     return count
 
@@ -298,9 +308,8 @@ def analyse(name, case, record):
     for entry in h["series"]:
         nodes, cells, phi = load_snapshot(os.path.join(folder, entry["file"]))
         paths = contours(nodes, cells, phi, axisym)
-        main = max(paths, key=len) if paths else None
-        shapes.append(dict(time=entry["time"], file=entry["file"], curves=len(paths),
-                           protrusions=count_protrusions(main, g["R0"]) if main is not None else 0))
+        shapes.append(dict(time=entry["time"], file=entry["file"], contour_pieces=len(paths),
+                           protrusions=count_protrusions(paths, g["R0"]) if paths else 0))
     record["shapes"] = shapes
     for key, t in (("at_T", case["T"]), ("at_end", steps[-1]["t_star"])):
         best = min(shapes, key=lambda s: abs(s["time"] - t))
