@@ -391,6 +391,20 @@ def main():
                   f"end {r['protrusions_at_end']}, max {r['protrusions_max']}, {r['s_per_step']:.2f} s/step, "
                   f"wall {r['wall_s']:.0f} s", flush=True)
     figures(records, args.figures)
+    print_tables(records)
+
+
+def print_tables(records):
+    """The markdown rows of docs/kinetics.md, one per run."""
+    for name in CASES:
+        r = records.get(name, {})
+        if "steps" not in r:
+            continue
+        start = min(r["shapes"], key=lambda s: s["time"])["protrusions"]
+        at_T = r["energies"][min(range(len(r["times"])), key=lambda i: abs(r["times"][i] - r["T"]))]
+        print(f"| {name.split('_')[1]} | {r['T']} | {r['steps']} ({r['rejected']}) | {r['t_reached']:.4g} of {r['t_end']:.4g} | "
+              f"{r['energy_start']:.3f} → {at_T:.2f} ({r['energy_max']:.2f}) → {r['energy_end']:.2f} | "
+              f"{start} → {r['protrusions_at_T']} / {r['protrusions_at_end']} | {r['s_per_step']:.2f} | {r['wall_s']:.0f} s |")
 
 
 if __name__ == "__main__":
