@@ -372,7 +372,12 @@ def main():
     parser.add_argument("--plots-only", action="store_true")
     parser.add_argument("--wait-while", default=None, help="before each run, wait while this file exists")
     parser.add_argument("--figures", default=os.path.join(ROOT, "docs", "figures"))
+    parser.add_argument("--overfill", action="store_true",
+                        help="only measure and draw the run of demos/dynamics/area_overfill.toml")
     args = parser.parse_args()
+    if args.overfill:
+        overfill(args.figures)
+        return
     unknown = [n for n in args.only if n not in CASES]
     if unknown:
         sys.exit(f"area_increase.py: unknown case(s) {unknown}; known: {list(CASES)}")
@@ -392,6 +397,40 @@ def main():
                   f"wall {r['wall_s']:.0f} s", flush=True)
     figures(records, args.figures)
     print_tables(records)
+
+
+def overfill(figdir):
+    """Measures and draws the run of demos/dynamics/area_overfill.toml (the bad-input case of
+    docs/kinetics.md): per picked series file the energy, the area over its start value and the
+    length and number of pieces of the phi = 0 contour."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import matplotlib.tri as mtri
+    import numpy as np
+    folder = os.path.join(ROOT, "build", "kinetics", "area_overfill")
+    h = json.load(open(os.path.join(folder, "area_overfill_history.json")))
+    steps = h["steps"]
+    fig, axes = plt.subplots(1, 3, figsize=(12, 4.2))
+    picks = [h["series"][0], h["series"][len(h["series"]) // 2], h["series"][-1]]
+    for ax, entry in zip(axes, picks):
+        nodes, cells, phi = load_snapshot(os.path.join(folder, entry["file"]))
+        paths = contours(nodes, cells, phi, False)
+        length = sum(np.sum(np.linalg.norm(np.diff(q, axis=0), axis=1)) for q in paths)
+        step = min(steps, key=lambda s: abs(s["t_star"] - entry["time"]))
+        ratio = step["constraints"][0] / steps[0]["constraints"][0]
+        print(f"t* {entry['time']:.4g}: E {step['energy']:.1f}, A/A(0) {ratio:.3f}, phi = 0 contour {length:.3f} long "
+              f"in {len(paths)} piece(s)")
+        ax.tricontourf(mtri.Triangulation(nodes[:, 0], nodes[:, 1], cells), phi, levels=20, cmap="coolwarm")
+        for q in paths:
+            ax.plot(q[:, 0], q[:, 1], "k", lw=1)
+        ax.set_aspect("equal")
+        ax.set_title(f"t* = {entry['time']:.3g}, A/A(0) = {ratio:.2f}")
+    i = max(range(len(steps)), key=lambda i: steps[i]["energy"])
+    print(f"largest E {steps[i]['energy']:.1f} at t* {steps[i]['t_star']:.4g}, A/A(0) "
+          f"{steps[i]['constraints'][0] / steps[0]['constraints'][0]:.3f}")
+    fig.tight_layout()
+    fig.savefig(os.path.join(figdir, "kinetics_area_overfill.png"), dpi=100)
 
 
 def print_tables(records):
