@@ -374,7 +374,12 @@ def main():
     parser.add_argument("--figures", default=os.path.join(ROOT, "docs", "figures"))
     parser.add_argument("--overfill", action="store_true",
                         help="only measure and draw the run of demos/dynamics/area_overfill.toml")
+    parser.add_argument("--adhesion", nargs="?", const=os.path.join(ROOT, "build", "demo", "adhesion_dynamics"),
+                        metavar="RUN_FOLDER", help="only print the measures of the adhesion_dynamics run")
     args = parser.parse_args()
+    if args.adhesion:
+        adhesion(args.adhesion)
+        return
     if args.overfill:
         overfill(args.figures)
         return
@@ -431,6 +436,27 @@ def overfill(figdir):
           f"{steps[i]['constraints'][0] / steps[0]['constraints'][0]:.3f}")
     fig.tight_layout()
     fig.savefig(os.path.join(figdir, "kinetics_area_overfill.png"), dpi=100)
+
+
+def adhesion(folder):
+    """Measures of demos/adhesion/adhesion_dynamics.toml's run (docs/kinetics.md): per series file
+    (every other one, and the last) the energy, the lowest point of the phi = 0 contour above the
+    wall z = 0 (in eps = 0.05), the contact radius (the largest r of the contour within 0.005 of its
+    lowest z), the top of the contour and min det F at that step, as markdown rows."""
+    import numpy as np
+    h = json.load(open(os.path.join(folder, "adhesion_dynamics_history.json")))
+    steps = h["steps"]
+    print("| t* | step | E* (bending + adhesion) | lowest φ = 0 above the wall | contact radius | top z | min det F |")
+    print("|---|---|---|---|---|---|---|")
+    series = h["series"][::2] + ([h["series"][-1]] if (len(h["series"]) - 1) % 2 else [])
+    for entry in series:
+        nodes, cells, phi = load_snapshot(os.path.join(folder, entry["file"]))
+        points = np.vstack(contours(nodes, cells, phi, False))
+        lowest = points[:, 1].min()
+        contact = np.abs(points[points[:, 1] < lowest + 0.005][:, 0]).max()
+        step = min(steps, key=lambda s: abs(s["t_star"] - entry["time"]))
+        print(f"| {entry['time']:.3g} | {step['step']} | {step['energy']:.4f} | {lowest:.4f} ({lowest / 0.05:.2f} ε) | "
+              f"{contact:.3f} | {points[:, 1].max():.3f} | {step['min_jacobian']:.3f} |")
 
 
 def print_tables(records):
