@@ -109,4 +109,16 @@ set -e
 [ "$code" -eq 1 ] || fail "an unwritable output directory: exit code $code"
 grep -q "cannot be created or written" "$out/dir.err" || { cat "$out/dir.err"; fail "the output-directory message does not say why"; }
 echo "ok   unwritable output directory: $(cat "$out/dir.err")"
+# A vesicle's area target scheduled beyond what the box can hold (demos/dynamics/area_overfill.toml,
+# ten times the area of a circle at eps = 0.08): refused before the first time step.
+demos=$(cd "$(dirname "$0")/../../demos" && pwd)
+set +e
+"$lmeform" run "$demos/dynamics/area_overfill.toml" --output "$out/overfill" > "$out/overfill.out" 2> "$out/overfill.err"
+code=$?
+set -e
+[ "$code" -eq 1 ] || { tail -3 "$out/overfill.out"; fail "an over-filling area schedule: exit code $code, expected 1"; }
+grep -q "dynamics.schedule.A0': the schedule takes the area target to A0 = 15.6.*more membrane than the domain can hold" "$out/overfill.err" ||
+  { cat "$out/overfill.err"; fail "the over-filling schedule's message"; }
+[ ! -e "$out/overfill/history.json" ] || fail "the over-filling run wrote a history"
+echo "ok   over-filling area schedule: $(cat "$out/overfill.err")"
 echo "PASS"

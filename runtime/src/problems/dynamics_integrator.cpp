@@ -11,6 +11,7 @@
 #include "dynamics_reference.hpp"
 #include "lmeform/constrained_minimizer.hpp"
 #include "membrane_topology.hpp"
+#include "vesicle.hpp"
 #include "lmeform/delaunay.hpp"
 #include "lmeform/petsc.hpp"
 
@@ -154,6 +155,40 @@ std::vector<double> DynamicsIntegrator::constraint_values(Vec state) const { ret
 // A constant's value at t: the last jump at or before t (else its start value), plus the rates'
 // changes relative to the start value, each rate acting over its own interval. A constraint's
 // target constant moves the constraint's target.
+double DynamicsIntegrator::scheduled_value(const std::string& name, double base, double t) const {
+  double value = base, change = 0;
+  for (const auto& c : settings_.schedule) {
+    if (c.name != name) continue;
+    if (c.kind == ScheduledConstant::Kind::rate) {
+      if (t > c.from) change += base * c.rate * (std::min(t, c.until) - c.from);
+    } else if (t >= c.at) {
+      value = c.value;
+    }
+  }
+  return value + change;
+}
+
+// The phase-field vesicle's membrane (the constraint `area`, the width `eps`): a schedule of its
+// area target must stay within what the domain can hold (vesicle.hpp), checked at the start
+// (the target given "initial" is known only there) at every time where the schedule turns.
+void DynamicsIntegrator::check_scheduled_membrane_area() const {
+  const auto area = std::find_if(bound_.constraints.begin(), bound_.constraints.end(), [](const BoundConstraint& c) { return c.name == "area"; });
+  const auto eps = ref_->space.constants.find("eps");
+  if (area == bound_.constraints.end() || area->target_constant.empty() || eps == ref_->space.constants.end() || !(eps->second > 0)) return;
+  const double base = base_targets_[static_cast<std::size_t>(area - bound_.constraints.begin())];
+  std::vector<double> times{settings_.t_start, settings_.t_end};
+  for (const auto& c : settings_.schedule)
+    if (c.name == area->target_constant) times.insert(times.end(), {c.from, c.until, c.at});
+  for (const double t : times) {
+    if (t < settings_.t_start || t > settings_.t_end) continue;
+    const auto where = std::find_if(settings_.schedule.begin(), settings_.schedule.end(),
+                                    [&](const ScheduledConstant& c) { return c.name == area->target_constant; });
+    if (where == settings_.schedule.end()) return;
+    check_membrane_area_capacity(scheduled_value(area->target_constant, base, t), bound_.domain, scene_.axisymmetric(), eps->second,
+                                 where->where);
+  }
+}
+
 void DynamicsIntegrator::apply_schedule(double t) {
   std::set<std::string> done;
   for (const auto& first : settings_.schedule) {
@@ -162,16 +197,7 @@ void DynamicsIntegrator::apply_schedule(double t) {
                                         [&](const BoundConstraint& bc) { return bc.target_constant == first.name; });
     const auto ci = static_cast<std::size_t>(target_of - bound_.constraints.begin());
     const double base = target_of != bound_.constraints.end() ? base_targets_[ci] : ref_->space.constants.at(first.name);
-    double value = base, change = 0;
-    for (const auto& c : settings_.schedule) {
-      if (c.name != first.name) continue;
-      if (c.kind == ScheduledConstant::Kind::rate) {
-        if (t > c.from) change += base * c.rate * (std::min(t, c.until) - c.from);
-      } else if (t >= c.at) {
-        value = c.value;
-      }
-    }
-    value += change;
+    const double value = scheduled_value(first.name, base, t);
     if (target_of != bound_.constraints.end()) {
       targets_[ci] = value;
       ref_->minimizer->set_target(ci, value);
@@ -394,6 +420,7 @@ DynamicsRun DynamicsIntegrator::run() {
   // Scheduled constants start from their values at the start (a target given "initial" included).
   start_constraints_ = constraint_values(ref_->u);
   base_targets_ = targets_;
+  check_scheduled_membrane_area();
   nu_.assign(k_, 0.0);
   if (!settings_.start_multipliers.empty()) {
     if (settings_.start_multipliers.size() != k_) throw std::invalid_argument("run_dynamics: wrong number of starting multipliers");

@@ -330,6 +330,25 @@ void check_feasible(double A0, double V0, int dim) {
                                  volume, V0, vmax, volume, sphere, area, A0, V0 / vmax));
 }
 
+double membrane_area_capacity(const Box& domain, bool axisymmetric, double eps) {
+  double measure = 1;
+  if (axisymmetric) {
+    measure = std::numbers::pi * (domain.hi[0] * domain.hi[0] - domain.lo[0] * domain.lo[0]) * (domain.hi[1] - domain.lo[1]);
+  } else {
+    for (int i = 0; i < domain.dim; ++i) measure *= domain.hi[std::size_t(i)] - domain.lo[std::size_t(i)];
+  }
+  return measure / (2 * eps);
+}
+
+void check_membrane_area_capacity(double A0, const Box& domain, bool axisymmetric, double eps, const std::string& where) {
+  const double capacity = membrane_area_capacity(domain, axisymmetric, eps);
+  if (A0 > capacity)
+    throw SceneError(fmt::format("{}: the schedule takes the area target to A0 = {:.6g}, more membrane than the domain can hold at "
+                                 "eps = {:g}: at most about |domain| / (2 eps) = {:.6g} (interfaces stacked 2 eps apart); a smaller "
+                                 "increase, a larger domain or a thinner interface",
+                                 where, A0, eps, capacity));
+}
+
 double initial_profile(const VesicleModel& m, std::span<const double> x, int dim) {
   const auto d = std::size_t(dim);
   double inside = 0;

@@ -109,6 +109,16 @@ inline constexpr std::string_view kVesicleExtension = "vesicle";
 /// Throws SceneError unless 0 < V0 <= max_volume_for_area(A0, dim).
 void check_feasible(double A0, double V0, int dim = 3);
 
+/// The most membrane a phase field of width ε can hold in a box: its measure (area in 2D, volume in
+/// 3D, the volume of revolution of the (r, z) box when axisymmetric) over 2ε — interfaces stacked 2ε
+/// apart, an upper bound far above any vesicle's area (a sphere of radius R in a box of side 3R:
+/// 4πR² against 13.5 R³/ε). A target beyond it cannot be a membrane.
+[[nodiscard]] double membrane_area_capacity(const Box& domain, bool axisymmetric, double eps);
+
+/// Throws SceneError (naming `where`) when the area target A0 a schedule reaches exceeds the box's
+/// membrane_area_capacity.
+void check_membrane_area_capacity(double A0, const Box& domain, bool axisymmetric, double eps, const std::string& where);
+
 /// tanh(d / (√2 ε)) with d the signed distance to the model's initial shape (> 0 inside).
 /// (For a stomatocyte, d is exact: the distance to the cup's mid-surface, an arc in the meridian plane.)
 [[nodiscard]] double initial_profile(const VesicleModel& model, std::span<const double> x, int dim);
