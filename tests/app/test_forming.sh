@@ -9,7 +9,8 @@
 #  3. the same run stopped after step 5 and continued with --restart ends equal to the
 #     uninterrupted one (plate force and radius to 1e-10); a step that needs more sub-steps than
 #     allowed stops the run (exit code 2) with only the steps before it on disk, and --restart with
-#     a larger allowance continues;
+#     a larger allowance continues; a sticking run restarted from a checkpoint written after a
+#     redistribution of its nodes equals the whole run;
 #  4. bad input gets its message before any solve: m <= 0, K <= 0, a plate that would run through
 #     the billet, a plate on no boundary part, a plate whose velocity no Dirichlet entry prescribes.
 #
@@ -110,6 +111,27 @@ grep -q "resumed from .* at step 0" "$out/cut2.log" || fail "the restart did not
 [ "$(grep -c '' "$out/cut/history.csv")" = 6 ] || fail "the restarted run does not reach step 4 (history: header + steps 0..4)"
 grep -qE "^step    4/4 .* substeps [2-4] " "$out/cut2.log" || { grep "^step" "$out/cut2.log" | cut -c1-80; fail "the restarted steps were not cut"; }
 echo "ok   --restart with max_substeps = 4 continues to step 4, each step cut into sub-steps"
+
+# A sticking billet whose nodes are redistributed (threshold lowered to 1.5: at steps 7 and 9), stopped
+# after step 8 and restarted from a checkpoint on the redistributed nodes, ends equal to the whole run.
+sed -e 's#^spacing = .*#spacing = 0.05#' -e 's#^count = .*#count = 10#' -e 's#^time_step = .*#time_step = 0.0125#' \
+  -e 's#^plates = #redistribute_anisotropy = 1.5\nplates = #' "$demos/forming/upsetting_sticking.toml" > "$out/sticking.toml"
+"$lmeform" run "$out/sticking.toml" --output "$out/sticking_whole" > "$out/sticking_whole.log" 2>&1 ||
+  { tail -5 "$out/sticking_whole.log"; fail "the small sticking billet failed"; }
+grep -q "redistributed the nodes" "$out/sticking_whole.log" || fail "the small sticking billet was not redistributed"
+sed -e 's#^count = 10$#count = 10\nuntil = 8#' "$out/sticking.toml" > "$out/sticking_part.toml"
+"$lmeform" run "$out/sticking_part.toml" --output "$out/sticking_parts" > "$out/sticking_part1.log" 2>&1 || fail "sticking to step 8"
+"$lmeform" run "$out/sticking.toml" --output "$out/sticking_parts" --restart > "$out/sticking_part2.log" 2>&1 || fail "sticking --restart"
+/usr/bin/python3 - "$out" <<'PY' || fail "restarted after a redistribution differs from the whole run"
+import csv, sys
+out = sys.argv[1]
+whole = list(csv.DictReader(open(f"{out}/sticking_whole/history.csv")))[-1]
+parts = list(csv.DictReader(open(f"{out}/sticking_parts/history.csv")))[-1]
+differ = [k for k in whole if not k.endswith("_s") and whole[k] != parts[k]]  # clocks aside
+print("      differing columns:", differ or "none")
+sys.exit(1 if differ or whole["redistributions"] != "2" else 0)
+PY
+echo "ok   a sticking run restarted after a redistribution ends equal to the whole run (every column but the clocks)"
 
 # 4. Bad input.
 expect_error() {  # NAME MESSAGE ARGS...
