@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <set>
 
 #include <fmt/format.h>
@@ -168,25 +169,25 @@ double DynamicsIntegrator::scheduled_value(const std::string& name, double base,
   return value + change;
 }
 
-// The phase-field vesicle's membrane (the constraint `area`, the width `eps`): a schedule of its
-// area target must stay within what the domain can hold (vesicle.hpp), checked at the start
-// (the target given "initial" is known only there) at every time where the schedule turns.
-void DynamicsIntegrator::check_scheduled_membrane_area() const {
-  const auto area = std::find_if(bound_.constraints.begin(), bound_.constraints.end(), [](const BoundConstraint& c) { return c.name == "area"; });
-  const auto eps = ref_->space.constants.find("eps");
-  if (area == bound_.constraints.end() || area->target_constant.empty() || eps == ref_->space.constants.end() || !(eps->second > 0)) return;
-  const double base = base_targets_[static_cast<std::size_t>(area - bound_.constraints.begin())];
-  std::vector<double> times{settings_.t_start, settings_.t_end};
-  for (const auto& c : settings_.schedule)
-    if (c.name == area->target_constant) times.insert(times.end(), {c.from, c.until, c.at});
-  for (const double t : times) {
-    if (t < settings_.t_start || t > settings_.t_end) continue;
-    const auto where = std::find_if(settings_.schedule.begin(), settings_.schedule.end(),
-                                    [&](const ScheduledConstant& c) { return c.name == area->target_constant; });
-    if (where == settings_.schedule.end()) return;
-    check_membrane_area_capacity(scheduled_value(area->target_constant, base, t), bound_.domain, scene_.axisymmetric(), eps->second,
-                                 where->where);
+// The largest value each scheduled constraint target reaches (at a time where its schedule turns),
+// checked by the model's rules for targets (vesicle.hpp) when the run starts: a target given
+// "initial" is known only then.
+void DynamicsIntegrator::check_scheduled_targets() const {
+  std::vector<ScheduledTarget> peaks;
+  for (std::size_t ci = 0; ci < bound_.constraints.size(); ++ci) {
+    const BoundConstraint& c = bound_.constraints[ci];
+    const auto first = std::find_if(settings_.schedule.begin(), settings_.schedule.end(),
+                                    [&](const ScheduledConstant& s) { return !c.target_constant.empty() && s.name == c.target_constant; });
+    if (first == settings_.schedule.end()) continue;
+    std::vector<double> times{settings_.t_start, settings_.t_end};
+    for (const auto& s : settings_.schedule)
+      if (s.name == c.target_constant) times.insert(times.end(), {s.from, s.until, s.at});
+    double peak = -std::numeric_limits<double>::infinity();
+    for (const double t : times)
+      if (t >= settings_.t_start && t <= settings_.t_end) peak = std::max(peak, scheduled_value(c.target_constant, base_targets_[ci], t));
+    peaks.push_back({c.name, peak, first->where});
   }
+  check_vesicle_targets(bound_, ref_->space.constants, peaks);
 }
 
 void DynamicsIntegrator::apply_schedule(double t) {
@@ -420,7 +421,7 @@ DynamicsRun DynamicsIntegrator::run() {
   // Scheduled constants start from their values at the start (a target given "initial" included).
   start_constraints_ = constraint_values(ref_->u);
   base_targets_ = targets_;
-  check_scheduled_membrane_area();
+  check_scheduled_targets();
   nu_.assign(k_, 0.0);
   if (!settings_.start_multipliers.empty()) {
     if (settings_.start_multipliers.size() != k_) throw std::invalid_argument("run_dynamics: wrong number of starting multipliers");

@@ -68,7 +68,7 @@ class DynamicsIntegrator {
   void apply_schedule(double t);
   /// A scheduled constant's value at t from its start value `base`.
   [[nodiscard]] double scheduled_value(const std::string& name, double base, double t) const;
-  void check_scheduled_membrane_area() const;
+  void check_scheduled_targets() const;
   void assemble_dissipation(Vec state);
   [[nodiscard]] DeformationMeasures measures_of(Vec state) const;
   [[nodiscard]] std::map<std::string, std::vector<double>, std::less<>> material_fields() const;

@@ -340,13 +340,19 @@ double membrane_area_capacity(const Box& domain, bool axisymmetric, double eps) 
   return measure / (2 * eps);
 }
 
-void check_membrane_area_capacity(double A0, const Box& domain, bool axisymmetric, double eps, const std::string& where) {
-  const double capacity = membrane_area_capacity(domain, axisymmetric, eps);
-  if (A0 > capacity)
-    throw SceneError(fmt::format("{}: the schedule takes the area target to A0 = {:.6g}, more membrane than the domain can hold at "
-                                 "eps = {:g}: at most about |domain| / (2 eps) = {:.6g} (interfaces stacked 2 eps apart); a smaller "
-                                 "increase, a larger domain or a thinner interface",
-                                 where, A0, eps, capacity));
+void check_vesicle_targets(const BoundScene& b, const std::map<std::string, double, std::less<>>& constants,
+                           std::span<const ScheduledTarget> targets) {
+  const auto eps = constants.find("eps");
+  if (eps == constants.end() || !(eps->second > 0)) return;
+  for (const ScheduledTarget& t : targets) {
+    if (t.constraint != "area") continue;
+    const double capacity = membrane_area_capacity(b.domain, b.axisymmetric, eps->second);
+    if (t.peak > capacity)
+      throw SceneError(fmt::format("{}: the schedule takes the area target to A0 = {:.6g}, more membrane than the domain can hold at "
+                                   "eps = {:g}: at most about |domain| / (2 eps) = {:.6g} (interfaces stacked 2 eps apart); a smaller "
+                                   "increase, a larger domain or a thinner interface",
+                                   t.where, t.peak, eps->second, capacity));
+  }
 }
 
 double initial_profile(const VesicleModel& m, std::span<const double> x, int dim) {

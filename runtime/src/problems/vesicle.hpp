@@ -12,6 +12,7 @@
 #pragma once
 
 #include <array>
+#include <map>
 #include <optional>
 #include <ostream>
 #include <span>
@@ -115,9 +116,18 @@ void check_feasible(double A0, double V0, int dim = 3);
 /// 4πR² against 13.5 R³/ε). A target beyond it cannot be a membrane.
 [[nodiscard]] double membrane_area_capacity(const Box& domain, bool axisymmetric, double eps);
 
-/// Throws SceneError (naming `where`) when the area target A0 a schedule reaches exceeds the box's
-/// membrane_area_capacity.
-void check_membrane_area_capacity(double A0, const Box& domain, bool axisymmetric, double eps, const std::string& where);
+/// The largest value a scheduled constraint target reaches in a run, and the schedule's key.
+struct ScheduledTarget {
+  std::string constraint;
+  double peak = 0;
+  std::string where;
+};
+
+/// The phase-field vesicle's rules for scheduled targets: the membrane's area (the constraint
+/// `area`, interface width `eps`) must stay within membrane_area_capacity. Throws SceneError naming
+/// the schedule's key; a scene without them is not a vesicle and passes.
+void check_vesicle_targets(const BoundScene& b, const std::map<std::string, double, std::less<>>& constants,
+                           std::span<const ScheduledTarget> targets);
 
 /// tanh(d / (√2 ε)) with d the signed distance to the model's initial shape (> 0 inside).
 /// (For a stomatocyte, d is exact: the distance to the cup's mid-surface, an arc in the meridian plane.)
