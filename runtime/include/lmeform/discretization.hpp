@@ -13,9 +13,11 @@
 // evaluate every point against its own primal list, so they assemble the same operator and a
 // comparison between them measures the algorithm alone.
 //
-// Geometry (nodes, cells, quadrature points, neighbour search) is replicated on every rank:
-// fine up to a few hundred thousand nodes in 2D. Basis evaluation, pattern and assembly are
-// distributed: a rank works only on the elements that touch its rows.
+// Replicated on every rank: the nodes (coordinates, spacing, β, support radii, kd-tree), the
+// background cells and the quadrature points with their weights, a few numbers per node or point.
+// Distributed: the primal lists (a rank searches the neighbours of the points of the cells that can
+// reach one of its nodes only: tens of indices per point), elements, pattern, basis storage and
+// assembly. A rank works only on the elements that touch its rows.
 #pragma once
 
 #include <mpi.h>
@@ -79,7 +81,9 @@ struct DiscretizationOptions {
   NeighbourhoodStrategy strategy = NeighbourhoodStrategy::CellBased;
   BasisStorage storage = BasisStorage::Full;
   OffProcessMode off_process = OffProcessMode::ZeroCommunication;
-  bool use_metis = true;           ///< false: contiguous blocks of the original numbering
+  /// How the nodes are split among ranks (partition.hpp). METIS needs every node's list on every
+  /// rank first; the Hilbert curve needs the coordinates only.
+  PartitionMethod partition = PartitionMethod::Metis;
   std::optional<CarriedQuadrature> carried;  ///< set: these cells and points, no triangulation
   /// Background cells flatter than this (area over longest edge squared, DelaunayOptions) are
   /// dropped. Nodes that moved off a straight boundary leave slivers along it whose quadrature
@@ -215,6 +219,8 @@ class Discretization {
   [[nodiscard]] const BackgroundCells& cells() const noexcept { return cells_; }
   [[nodiscard]] const QuadratureRule& rule() const noexcept { return rule_; }
   [[nodiscard]] const CellQuadrature& quadrature() const noexcept { return quadrature_; }
+  /// Primal list of every quadrature point (renumbered nodes) whose cell can reach one of this
+  /// rank's nodes; the lists of the other points are empty (on one rank, none is).
   [[nodiscard]] const CsrLists& point_lists() const noexcept { return point_lists_; }
   /// Carried quadrature: points the map moved out of their cells, whose lists were given the
   /// vertices of a Delaunay cell of the current nodes holding them.
@@ -251,16 +257,28 @@ class Discretization {
 
   /// Doubles held by the basis storage of this rank (every domain).
   [[nodiscard]] std::size_t basis_storage_doubles() const noexcept;
-  /// Mean number of nodes per quadrature point's list.
-  [[nodiscard]] double mean_point_neighbours() const noexcept { return point_lists_.mean_size(); }
+  /// Mean number of nodes per list of the quadrature points this rank searched.
+  [[nodiscard]] double mean_point_neighbours() const noexcept;
 
   [[nodiscard]] const StageTimes& times() const noexcept { return times_; }
+
+  /// Bytes this rank holds, by kind: what every rank holds whatever the number of ranks (nodes,
+  /// cells, quadrature points, list offsets, partition), and what falls with the ranks (primal lists
+  /// of this rank's points, elements, pattern, basis storage).
+  struct MemoryReport {
+    double replicated_bytes = 0;
+    double local_bytes = 0;
+  };
+  [[nodiscard]] MemoryReport memory_report() const noexcept;
+  /// Cells whose points this rank searched the neighbours of (all of them on one rank).
+  [[nodiscard]] std::size_t cells_searched() const noexcept { return cells_searched_; }
 
   /// Original index of each renumbered node, and the reverse.
   [[nodiscard]] std::span<const int> original_index() const noexcept { return partition_.old_index; }
   [[nodiscard]] std::span<const int> renumbered_index() const noexcept { return partition_.new_index; }
 
  private:
+  [[nodiscard]] std::vector<char> cells_reaching_owned_nodes() const;
   void build_cell_domain();
   void build_boundary_domain(const BoundaryQuadrature& q);
   void build_gradient_correction();
@@ -278,6 +296,7 @@ class Discretization {
   CellQuadrature quadrature_;
   CsrLists point_lists_;
   std::size_t points_outside_carried_cells_ = 0;
+  std::size_t cells_searched_ = 0;
   std::vector<CsrLists> boundary_point_lists_;  // per options_.boundary entry
   std::shared_ptr<const detail::CellFacets> facets_;  // consistent integration only
   CsrLists facet_point_lists_;

@@ -3,9 +3,20 @@
 #pragma once
 
 #include <span>
+#include <string_view>
 #include <vector>
 
 namespace lmeform {
+
+/// How the nodes are split among ranks.
+enum class PartitionMethod {
+  Metis,    ///< METIS on the graph of overlapping supports (smallest cut; needs every node's list)
+  Hilbert,  ///< consecutive runs along a Hilbert curve (no graph)
+  Block,    ///< contiguous blocks of the input order (a baseline)
+};
+[[nodiscard]] const char* to_string(PartitionMethod m) noexcept;
+/// "metis", "hilbert" or "block"; anything else throws std::invalid_argument naming the choices.
+[[nodiscard]] PartitionMethod parse_partition_method(std::string_view name);
 
 struct NodePartition {
   int n_parts = 1;
@@ -23,6 +34,12 @@ struct NodePartition {
 /// and renumbers the nodes part by part, keeping their original order inside a part.
 /// n_parts == 1 gives the identity (METIS itself crashes on one part).
 NodePartition partition_nodes(std::span<const int> adjacency_offsets, std::span<const int> adjacency, int n_parts);
+
+/// Parts of consecutive nodes along a Hilbert space-filling curve through the nodes' bounding box
+/// (coords point-major, `dim` per node), of nearly equal size. Needs no graph: every rank can
+/// compute it from the coordinates alone, in O(n log n), where METIS needs every node's
+/// neighbour list first. Parts are compact but their boundaries are longer than METIS's.
+NodePartition hilbert_partition(std::span<const double> coords, int dim, int n_parts);
 
 /// The identity partition into contiguous blocks of nearly equal size (no graph needed);
 /// useful as a baseline against METIS.

@@ -27,6 +27,7 @@
 
 #include "lmeform/domain.hpp"
 #include "lmeform/lme_basis.hpp"
+#include "lmeform/partition.hpp"
 #include "lmeform/node_sets.hpp"
 
 namespace lmeform {
@@ -74,6 +75,9 @@ struct SceneNodes {
   /// basis = "first" (LME, affine reproduction) or "second" (second-order max-ent: quadratics are
   /// in the span, Hessians converge; gamma <= lme_second_order_max_gamma).
   LmeConsistency basis = LmeConsistency::first;
+  /// partition = "metis" (the smallest cut), "hilbert" (a space-filling curve: no node lists are
+  /// needed to split the nodes) or "block": how the nodes are split among MPI ranks.
+  PartitionMethod partition = PartitionMethod::Metis;
 };
 
 /// A name as written in the scene, with where it was written (for messages about it).

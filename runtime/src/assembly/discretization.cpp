@@ -4,6 +4,7 @@
 #include "lmeform/stopwatch.hpp"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
@@ -142,7 +143,116 @@ std::size_t add_enclosing_cells(CsrLists& lists, const CellQuadrature& quadratur
   return added;
 }
 
+// The primal lists of the points of the cells marked in `searched` (all cells when it is empty),
+// each with its cell's vertices; the other points get empty lists. The neighbour search is the
+// costliest part of the setup and the lists the largest per-point array: a rank builds them only
+// where its elements can be.
+CsrLists point_lists_of_cells(const LmeBasis& basis, const CellQuadrature& quadrature, const BackgroundCells& cells,
+                              std::span<const char> searched) {
+  const auto per_cell = static_cast<std::size_t>(quadrature.points_per_cell);
+  if (searched.empty()) return with_cell_vertices(basis.neighbour_lists(quadrature.points), cells, quadrature.points_per_cell);
+  const auto d = static_cast<std::size_t>(quadrature.dim);
+  std::vector<double> points;
+  for (std::size_t c = 0; c < cells.size(); ++c)
+    if (searched[c]) points.insert(points.end(), quadrature.points.begin() + std::ptrdiff_t(c * per_cell * d),
+                                   quadrature.points.begin() + std::ptrdiff_t((c + 1) * per_cell * d));
+  const CsrLists found = basis.neighbour_lists(points);
+  CsrLists out;
+  out.offsets.assign(quadrature.size() + 1, 0);
+  out.indices.reserve(found.indices.size() + found.size() * (d + 1));
+  std::vector<int> row;
+  std::size_t k = 0;
+  for (std::size_t c = 0; c < cells.size(); ++c) {
+    for (std::size_t g = 0; g < per_cell; ++g) {
+      const std::size_t q = c * per_cell + g;
+      if (searched[c]) {
+        const auto list = found[k++];
+        row.assign(list.begin(), list.end());
+        for (const int v : cells.cell(c)) row.push_back(v);
+        std::sort(row.begin(), row.end());
+        row.erase(std::unique(row.begin(), row.end()), row.end());
+        out.indices.insert(out.indices.end(), row.begin(), row.end());
+      }
+      out.offsets[q + 1] = static_cast<int>(out.indices.size());
+    }
+  }
+  return out;
+}
+
 }  // namespace
+
+std::vector<char> Discretization::cells_reaching_owned_nodes() const {
+  // A point x lists node a when |x - x_a| <= r_a (or its mirror image does). A cell's points lie
+  // within R_c of its centroid (R_c: the centroid's largest vertex distance), so a cell none of
+  // whose points lists an owned node has no owned node a with |centroid - x_a| <= r_a + R_c: the
+  // test below keeps every cell with an element on this rank, and a few more.
+  const int begin = owned_begin(), end = owned_end();
+  const auto d = static_cast<std::size_t>(dim());
+  std::vector<char> searched(cells_.size(), 0);
+  if (begin == end) return searched;
+  std::vector<double> owned(nodes_.coords.begin() + std::ptrdiff_t(std::size_t(begin) * d),
+                            nodes_.coords.begin() + std::ptrdiff_t(std::size_t(end) * d));
+  const KdTree tree(NodeSet(dim(), std::move(owned)));
+  const auto radius = basis_->support_radii();
+  const double largest = *std::max_element(radius.begin() + begin, radius.begin() + end);
+  const int mirror = options_.lme.mirror_axis;
+  std::vector<int> near;
+  std::array<double, 3> centroid{}, image{};
+  for (std::size_t c = 0; c < cells_.size(); ++c) {
+    const auto vertices = cells_.cell(c);
+    centroid.fill(0);
+    for (const int v : vertices)
+      for (std::size_t i = 0; i < d; ++i) centroid[i] += nodes_.coords[std::size_t(v) * d + i] / double(vertices.size());
+    double extent = 0;
+    for (const int v : vertices) {
+      double r2 = 0;
+      for (std::size_t i = 0; i < d; ++i) r2 += std::pow(nodes_.coords[std::size_t(v) * d + i] - centroid[i], 2);
+      extent = std::max(extent, std::sqrt(r2));
+    }
+    const auto reaches = [&](const std::array<double, 3>& x) {
+      tree.radius_search(std::span<const double>(x.data(), d), largest + extent, near);
+      for (const int k : near) {
+        const auto a = std::size_t(begin + k);
+        double r2 = 0;
+        for (std::size_t i = 0; i < d; ++i) r2 += std::pow(nodes_.coords[a * d + i] - x[i], 2);
+        if (std::sqrt(r2) <= radius[a] + extent) return true;
+      }
+      return false;
+    };
+    bool hit = reaches(centroid);
+    if (!hit && mirror >= 0) {
+      image = centroid;
+      image[std::size_t(mirror)] = 2 * options_.lme.mirror_position - centroid[std::size_t(mirror)];
+      hit = reaches(image);
+    }
+    searched[c] = hit ? 1 : 0;
+  }
+  return searched;
+}
+
+double Discretization::mean_point_neighbours() const noexcept {
+  std::size_t searched = 0;
+  for (std::size_t q = 0; q < point_lists_.size(); ++q) searched += point_lists_.offsets[q + 1] > point_lists_.offsets[q] ? 1 : 0;
+  return searched == 0 ? 0.0 : static_cast<double>(point_lists_.total()) / static_cast<double>(searched);
+}
+
+Discretization::MemoryReport Discretization::memory_report() const noexcept {
+  constexpr double kDouble = sizeof(double), kInt = sizeof(int);
+  MemoryReport m;
+  const double n = n_nodes(), d = dim();
+  // Coordinates (the node set, the basis' copy, the kd-tree's copy), gamma, spacing, beta, radius,
+  // the partition's three maps.
+  m.replicated_bytes = n * (3 * d + 4) * kDouble + n * 3 * kInt;
+  m.replicated_bytes += double(cells_.connectivity.size()) * kInt;
+  m.replicated_bytes += double(quadrature_.points.size() + quadrature_.weights.size()) * kDouble;
+  m.replicated_bytes += double(point_lists_.offsets.size()) * kInt;
+  m.local_bytes = double(point_lists_.indices.size()) * kInt + double(basis_storage_doubles()) * kDouble;
+  for (const ElementSet& e : domains_)
+    m.local_bytes += double(e.element_lists().indices.size() * 2 + e.element_lists().offsets.size() * 2) * kInt +
+                     double(e.n_elements()) * (3 * kInt + 1);
+  m.local_bytes += double(pattern_.nonzeros()) * kInt + double(ghosts_.size()) * kInt;
+  return m;
+}
 
 Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, DiscretizationOptions options)
     : comm_(comm), options_(std::move(options)) {
@@ -169,11 +279,13 @@ Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, Discretizati
     StageClock clock(times_.neighbour_search);
     LmeBasis original(nodes, gamma, options_.lme);
     spacing.assign(original.spacing().begin(), original.spacing().end());
-    if (size_ > 1 && options_.use_metis) {
+    if (size_ > 1 && options_.partition == PartitionMethod::Metis) {
       // Nodes couple when their supports overlap a common point; the node-to-node lists of the
       // supports are the graph the matrix will have, up to the quadrature points.
       const CsrLists node_lists = original.neighbour_lists(nodes.coords);
       partition_ = partition_nodes(node_lists.offsets, node_lists.indices, size_);
+    } else if (size_ > 1 && options_.partition == PartitionMethod::Hilbert) {
+      partition_ = hilbert_partition(nodes.coords, nodes.dim, size_);
     } else {
       partition_ = block_partition(n, size_);
     }
@@ -223,8 +335,11 @@ Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, Discretizati
     }
     nodes_ = NodeSet(nodes.dim, std::move(coords));
     if (!basis_) basis_.emplace(nodes_, renumbered_gamma, std::move(renumbered_spacing), options_.lme);
-    point_lists_ = with_cell_vertices(basis_->neighbour_lists(quadrature_.points), cells_,
-                                      quadrature_.points_per_cell);
+    // A carried point can take the vertices of a cell other than its own (add_enclosing_cells):
+    // its cell is searched on every rank.
+    const std::vector<char> searched = size_ > 1 && !options_.carried ? cells_reaching_owned_nodes() : std::vector<char>();
+    point_lists_ = point_lists_of_cells(*basis_, quadrature_, cells_, searched);
+    cells_searched_ = searched.empty() ? cells_.size() : static_cast<std::size_t>(std::count(searched.begin(), searched.end(), 1));
     if (options_.carried)
       points_outside_carried_cells_ =
           add_enclosing_cells(point_lists_, quadrature_, cells_, nodes_, nodes, partition_.new_index);

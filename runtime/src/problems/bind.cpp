@@ -656,7 +656,7 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
   b.geometry = scene.geometry;
   b.boundary_points = scene.nodes.boundary_points;
   b.discretization = {scene.nodes.gamma, scene.nodes.quadrature_points, scene.nodes.spacing_smoothing, scene.nodes.consistent_integration,
-                      scene.nodes.basis};
+                      scene.nodes.basis, scene.nodes.partition};
   b.solver = &solver;
   OutputRoles roles = solver.roles(scene);
   roles.auxiliary.insert(roles.auxiliary.end(), extra.auxiliary.begin(), extra.auxiliary.end());

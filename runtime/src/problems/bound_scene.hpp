@@ -141,6 +141,7 @@ struct DiscretizationSettings {
   int spacing_smoothing = 5;
   bool consistent_integration = false;  ///< gradients corrected cell by cell (DiscretizationOptions)
   LmeConsistency basis = LmeConsistency::first;  ///< first- or second-order max-ent basis
+  PartitionMethod partition = PartitionMethod::Metis;  ///< how the nodes are split among ranks
 };
 
 /// A scene with its forms loaded and every name checked against them.

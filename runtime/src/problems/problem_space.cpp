@@ -28,6 +28,7 @@ std::shared_ptr<Discretization> discretization_of(MPI_Comm comm, const BoundScen
   options.gamma = {b.discretization.gamma};
   options.lme = input.lme;
   options.quadrature_points = b.discretization.quadrature_points;
+  options.partition = b.discretization.partition;
   options.basis_order = std::max(b.basis_order, 1);  // |∇u| at the nodes and H1 errors need gradients
   options.carried = input.carried;
   options.flat_cell_tolerance = input.flat_cell_tolerance;

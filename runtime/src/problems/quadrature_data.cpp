@@ -73,14 +73,21 @@ std::vector<double> support_size_qdata(const Discretization& disc, const Element
   // far, barely contributing nodes as much as the nearest ones, and jump as nodes enter it).
   const auto& lists = domain.point_lists();
   const auto h = disc.basis().spacing();
-  std::vector<double> out(domain.n_points());
-  for (std::size_t q = 0; q < domain.n_points(); ++q) {
-    const auto list = lists[q];
-    const auto p = disc.basis().evaluate(domain.point(q), list, 0);
-    double s = 0;
-    for (std::size_t m = 0; m < list.size(); ++m) s += p[m] * h[static_cast<std::size_t>(list[m])];
-    out[q] = s;
+  // Each rank has the lists of its elements' points only: it computes the points of the elements
+  // it owns, and the sum over the ranks has every point once.
+  std::vector<double> out(domain.n_points(), 0.0);
+  for (int e = 0; e < domain.n_elements(); ++e) {
+    if (!domain.element_owned(e)) continue;
+    for (int k = 0; k < domain.element_point_count(e); ++k) {
+      const auto q = static_cast<std::size_t>(domain.element_first_point(e) + k);
+      const auto list = lists[q];
+      const auto p = disc.basis().evaluate(domain.point(q), list, 0);
+      double s = 0;
+      for (std::size_t m = 0; m < list.size(); ++m) s += p[m] * h[static_cast<std::size_t>(list[m])];
+      out[q] = s;
+    }
   }
+  MPI_Allreduce(MPI_IN_PLACE, out.data(), static_cast<int>(out.size()), MPI_DOUBLE, MPI_SUM, disc.comm());
   return out;
 }
 

@@ -44,7 +44,7 @@ void read_scene_section(const Section& root, Scene& s) {
 
 void read_nodes(const Section& root, const std::filesystem::path& folder, Scene& s) {
   const Section t = root.table("nodes", {"spacing", "counts", "count", "lloyd_iterations", "file", "gamma", "spacing_smoothing",
-                                         "quadrature_points", "refine", "boundary_points", "integration", "basis"});
+                                         "quadrature_points", "refine", "boundary_points", "integration", "basis", "partition"});
   SceneNodes& n = s.nodes;
   const char* const kinds[] = {"spacing", "counts", "count", "file"};
   std::vector<std::string> present;
@@ -137,6 +137,8 @@ void read_nodes(const Section& root, const std::filesystem::path& folder, Scene&
     t.fail_key("gamma", "= " + format_number(n.gamma) + " is too large for nodes.basis = \"second\": its nodal gap h^2 / (2 gamma) must be " +
                             "wider than the holes between nodes; give at most " + format_number(lme_second_order_max_gamma) +
                             " (0.5 to 0.8 are usual), or the first-order basis");
+  const std::string partition = t.choice_of("partition", t.optional_string("partition").value_or("metis"), {"metis", "hilbert", "block"});
+  n.partition = partition == "hilbert" ? PartitionMethod::Hilbert : partition == "block" ? PartitionMethod::Block : PartitionMethod::Metis;
   n.spacing_smoothing = t.at_least("spacing_smoothing", t.integer("spacing_smoothing", n.spacing_smoothing), 0);
   // Default: a positive rule of degree 4 in 2D (6 points), degree 5 in 3D (14 points).
   // 1D: Gauss-Legendre points per segment between nodes (4: exact to degree 7).

@@ -1,0 +1,147 @@
+#!/usr/bin/env python3
+"""The scaling study of docs/scaling.md: setup, assembly, solve and memory per rank against ranks.
+
+    scripts/scaling_study.py [--build build] [--quick] [--figures docs/figures]
+
+Runs `bench_scaling` (the heat problem on a jittered grid, tests/bench/bench_scaling.cpp) with
+mpirun on 1, 2, 4 and 8 ranks (oversubscribed beyond the machine's cores: per-rank work and memory
+are still what one rank of a cluster would hold; wall times are not), for both partitions at the
+largest size, and writes build/bench/scaling.json: the records, the 1/p memory check, and the
+extrapolation of the measured per-node costs to 10^7 nodes.
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+
+RANKS = [1, 2, 4, 8]
+
+
+def run(bench, ranks, args, record):
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1", OMPI_MCA_rmaps_base_oversubscribe="1")
+    cmd = ["mpirun", "--oversubscribe", "-n", str(ranks), bench, *args, "--record", record]
+    start = time.time()
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    if done.returncode != 0:
+        sys.stderr.write(done.stdout + done.stderr)
+        raise SystemExit(f"scaling_study: {' '.join(cmd)} failed with exit code {done.returncode}")
+    with open(record) as f:
+        last = json.loads(f.readlines()[-1])
+    print(f"  {last['case']:>8} {last['nodes']:>8} nodes {ranks} ranks {last['partition']:>7}: setup {last['setup_s']:.2f} s, "
+          f"assembly {last['assembly_s']:.2f} s, solve {last['solve_s']:.2f} s, work RSS {last['work_rss_mb_per_rank']:.0f} MB/rank "
+          f"({time.time() - start:.0f} s)", flush=True)
+    return last
+
+
+def memory_check(records):
+    """Work memory per rank against the 1-rank figure over p: the issue's 1/p within 20 %."""
+    out = []
+    one = next(r for r in records if r["ranks"] == 1)
+    for r in records:
+        ideal = one["work_rss_mb_per_rank"] / r["ranks"]
+        out.append({"ranks": r["ranks"], "work_rss_mb_per_rank": r["work_rss_mb_per_rank"], "ideal_mb": ideal,
+                    "ratio_to_ideal": r["work_rss_mb_per_rank"] / ideal,
+                    "local_mb_ratio_to_ideal": r["local_mb_per_rank"] / (one["local_mb_per_rank"] / r["ranks"])})
+    return out
+
+
+def extrapolate(records, nodes_target=1e7, rank_counts=(64, 256, 1024)):
+    """Per-node costs of the largest run on the most ranks, scaled to nodes_target on a cluster."""
+    best = max(records, key=lambda r: (r["nodes"], r["ranks"]))
+    one = next(r for r in records if r["ranks"] == 1 and r["nodes"] == best["nodes"])
+    n, p = best["nodes"], best["ranks"]
+    replicated_per_node = best["replicated_mb"] / n  # MB per node, on every rank
+    local_per_node = one["local_mb_per_rank"] / n    # MB per node, shared by the ranks
+    work_per_node = one["work_rss_mb_per_rank"] / n
+    setup_per_node = one["setup_s"] / n               # s per node on one rank
+    assembly_per_node = one["assembly_s"] / n
+    rows = []
+    for ranks in rank_counts:
+        rows.append({
+            "nodes": nodes_target, "ranks": ranks,
+            "replicated_mb_per_rank": replicated_per_node * nodes_target,
+            "local_mb_per_rank": local_per_node * nodes_target / ranks,
+            "work_mb_per_rank_if_all_local": work_per_node * nodes_target / ranks,
+            "setup_s": setup_per_node * nodes_target / ranks,
+            "assembly_s": assembly_per_node * nodes_target / ranks,
+        })
+    return {"from_case": best["case"], "from_nodes": n, "from_ranks": p, "replicated_mb_per_node": replicated_per_node,
+            "local_mb_per_node": local_per_node, "setup_s_per_node": setup_per_node, "rows": rows}
+
+
+def figures(doc, out_dir):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for case in sorted({r["case"] for r in doc["records"]}):
+        recs = sorted((r for r in doc["records"] if r["case"] == case and r["partition"] == "hilbert"), key=lambda r: r["ranks"])
+        if not recs:
+            continue
+        p = [r["ranks"] for r in recs]
+        label = f"{case}, {recs[0]['nodes']} nodes"
+        axes[0].loglog(p, [r["work_rss_mb_per_rank"] for r in recs], "o-", label=label + " (work RSS)")
+        axes[0].loglog(p, [r["local_mb_per_rank"] for r in recs], "s--", label=label + " (distributed arrays)")
+        axes[1].loglog(p, [r["setup_s"] * r["ranks"] for r in recs], "o-", label=label + " setup x p")
+        axes[1].loglog(p, [r["assembly_s"] * r["ranks"] for r in recs], "s--", label=label + " assembly x p")
+    p = RANKS
+    first = doc["records"][0]
+    axes[0].loglog(p, [first["work_rss_mb_per_rank"] / q for q in p], "k:", label="1/p")
+    axes[0].set_xlabel("ranks")
+    axes[0].set_ylabel("MB per rank")
+    axes[0].legend(fontsize=7)
+    axes[1].set_xlabel("ranks (2 cores: beyond 2 oversubscribed)")
+    axes[1].set_ylabel("rank-seconds (flat = perfect scaling of the work)")
+    axes[1].legend(fontsize=7)
+    fig.tight_layout()
+    path = os.path.join(out_dir, "scaling_memory_setup.png")
+    fig.savefig(path, dpi=120)
+    print("wrote", path)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--build", default="build")
+    ap.add_argument("--quick", action="store_true", help="2D 1e5 and 3D 2e4 nodes (make bench)")
+    ap.add_argument("--figures", help="write the PNG into this directory")
+    ap.add_argument("--from-json", help="only redraw the figures from this scaling.json")
+    args = ap.parse_args()
+    if args.from_json:
+        with open(args.from_json) as f:
+            figures(json.load(f), args.figures or "docs/figures")
+        return
+    bench = os.path.join(args.build, "tests", "assembly_bench", "bench_scaling")
+    out_dir = os.path.join(args.build, "bench")
+    os.makedirs(out_dir, exist_ok=True)
+    record = os.path.join(out_dir, "scaling_runs.jsonl")
+    if os.path.exists(record):
+        os.remove(record)
+    sizes = [("heat_2d", 2, 100000), ("heat_3d", 3, 20000 if args.quick else 100000)]
+    records = []
+    for case, dim, nodes in sizes:
+        for ranks in RANKS:
+            records.append(run(bench, ranks, ["--case", case, "--dim", str(dim), "--nodes", str(nodes), "--partition", "hilbert"], record))
+        for ranks in (2, 4):
+            records.append(run(bench, ranks, ["--case", case, "--dim", str(dim), "--nodes", str(nodes), "--partition", "metis"], record))
+    doc = {"records": records, "memory_check": {}, "extrapolation": {}}
+    for case, _, _ in sizes:
+        hil = [r for r in records if r["case"] == case and r["partition"] == "hilbert"]
+        doc["memory_check"][case] = memory_check(hil)
+        doc["extrapolation"][case] = extrapolate(hil)
+    path = os.path.join(out_dir, "scaling.json")
+    with open(path + ".tmp", "w") as f:
+        json.dump(doc, f, indent=1)
+    os.replace(path + ".tmp", path)
+    print("wrote", path)
+    for case in doc["memory_check"]:
+        for m in doc["memory_check"][case]:
+            print(f"  {case} {m['ranks']} ranks: work RSS {m['work_rss_mb_per_rank']:.0f} MB = {m['ratio_to_ideal']:.2f} x (1-rank / p); "
+                  f"distributed arrays {m['local_mb_ratio_to_ideal']:.2f} x")
+    if args.figures:
+        figures(doc, args.figures)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,142 @@
+// Run with 3 ranks: the distributed setup (each rank searches the neighbours of the points of the
+// cells that can reach its nodes only) gives every element the basis the serial setup gives it,
+// to 1e-12 at every point, for every partition method, both neighbourhood strategies, the
+// second-order basis and a mirrored (axisymmetric) basis; and the per-point lists really are split.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <map>
+
+#include "assembly_fixtures.hpp"
+#include "lmeform/kernel.hpp"
+#include "lmeform/node_sets.hpp"
+
+namespace lmeform {
+namespace {
+
+NodeSet graded_nodes() {
+  // Strongly graded (h from 0.01 to 0.08): supports of very different sizes meet at the parts'
+  // borders, where a too-small search radius would miss a cell.
+  GradedGridOptions g;
+  g.h_min = 0.01;
+  g.h_max = 0.08;
+  g.transition = 0.1;
+  return graded_grid_2d(g);
+}
+
+struct Setting {
+  const char* name;
+  PartitionMethod partition;
+  NeighbourhoodStrategy strategy;
+  LmeConsistency consistency;
+  bool mirrored;
+};
+
+DiscretizationOptions options_of(const Setting& s) {
+  DiscretizationOptions o;
+  o.gamma = {s.consistency == LmeConsistency::second ? 0.5 : 1.6};
+  o.quadrature_points = 3;
+  o.basis_order = 2;
+  o.strategy = s.strategy;
+  o.partition = s.partition;
+  o.lme.consistency = s.consistency;
+  if (s.mirrored) o.lme.mirror_axis = 0;
+  return o;
+}
+
+// Element e's jet per original node: (point, original node) -> jet entries.
+std::map<std::pair<int, int>, std::vector<double>> jets_of(const Discretization& disc, const ElementSet& domain, int e) {
+  const auto nodes = domain.element_nodes(e);
+  const int points = domain.element_point_count(e);
+  const auto J = static_cast<std::size_t>(kernel::jet_size(disc.dim(), 2));
+  const bool per_point = disc.options().strategy == NeighbourhoodStrategy::PerPoint;
+  const auto first = domain.element_first_point(e);
+  // Per-point elements are tabulated against the point's own list.
+  const auto columns = per_point ? domain.point_lists()[static_cast<std::size_t>(first)] : nodes;
+  std::vector<double> tab(static_cast<std::size_t>(points) * J * columns.size());
+  LmeWorkspace ws;
+  domain.tabulate(e, 2, tab, ws);
+  std::map<std::pair<int, int>, std::vector<double>> out;
+  for (int k = 0; k < points; ++k)
+    for (std::size_t a = 0; a < columns.size(); ++a) {
+      std::vector<double> jet(J);
+      for (std::size_t s = 0; s < J; ++s) jet[s] = tab[(static_cast<std::size_t>(k) * J + s) * columns.size() + a];
+      out[{first + k, disc.original_index()[static_cast<std::size_t>(columns[a])]}] = std::move(jet);
+    }
+  return out;
+}
+
+TEST(DistributedSetup, RunsOnThreeRanks) { EXPECT_EQ(PetscSession::size(), 3); }
+
+TEST(DistributedSetup, EveryElementHasTheSerialBasis) {
+  const NodeSet nodes = graded_nodes();
+  const Setting settings[] = {
+      {"metis, cells", PartitionMethod::Metis, NeighbourhoodStrategy::CellBased, LmeConsistency::first, false},
+      {"hilbert, cells", PartitionMethod::Hilbert, NeighbourhoodStrategy::CellBased, LmeConsistency::first, false},
+      {"block, per point", PartitionMethod::Block, NeighbourhoodStrategy::PerPoint, LmeConsistency::first, false},
+      {"hilbert, second order", PartitionMethod::Hilbert, NeighbourhoodStrategy::CellBased, LmeConsistency::second, false},
+      {"metis, mirrored", PartitionMethod::Metis, NeighbourhoodStrategy::CellBased, LmeConsistency::first, true},
+  };
+  for (const Setting& s : settings) {
+    const DiscretizationOptions o = options_of(s);
+    const Discretization serial(PETSC_COMM_SELF, nodes, o);
+    const Discretization parallel(PETSC_COMM_WORLD, nodes, o);
+    const ElementSet& sd = serial.cells_domain();
+    const ElementSet& pd = parallel.cells_domain();
+    // The serial run has every element, in point order: the element of point q is found by q.
+    std::map<int, int> serial_element_of_point;
+    for (int e = 0; e < sd.n_elements(); ++e) serial_element_of_point[sd.element_first_point(e)] = e;
+    double worst = 0, largest = 0;
+    long long owned = 0;
+    for (int e = 0; e < pd.n_elements(); ++e) {
+      owned += pd.element_owned(e) ? 1 : 0;
+      const auto it = serial_element_of_point.find(pd.element_first_point(e));
+      ASSERT_NE(it, serial_element_of_point.end()) << s.name << ": element of point " << pd.element_first_point(e);
+      // The same node list, in original numbering.
+      std::vector<int> mine, theirs;
+      for (const int v : pd.element_nodes(e)) mine.push_back(parallel.original_index()[static_cast<std::size_t>(v)]);
+      for (const int v : sd.element_nodes(it->second)) theirs.push_back(serial.original_index()[static_cast<std::size_t>(v)]);
+      std::sort(mine.begin(), mine.end());
+      std::sort(theirs.begin(), theirs.end());
+      ASSERT_EQ(mine, theirs) << s.name << ": element of point " << pd.element_first_point(e);
+      const auto a = jets_of(parallel, pd, e), b = jets_of(serial, sd, it->second);
+      ASSERT_EQ(a.size(), b.size()) << s.name;
+      for (const auto& [key, jet] : a) {
+        const auto& ref = b.at(key);
+        for (std::size_t k = 0; k < jet.size(); ++k) {
+          worst = std::max(worst, std::abs(jet[k] - ref[k]));
+          largest = std::max(largest, std::abs(ref[k]));
+        }
+      }
+    }
+    EXPECT_LE(worst, 1e-12 * largest) << s.name;
+    // Every element of the serial setup is owned by exactly one rank.
+    long long total = owned;
+    MPI_Allreduce(MPI_IN_PLACE, &total, 1, MPI_LONG_LONG, MPI_SUM, PETSC_COMM_WORLD);
+    EXPECT_EQ(total, sd.n_elements()) << s.name;
+  }
+}
+
+TEST(DistributedSetup, NoRankHoldsEveryPointsList) {
+  // The per-point lists are the largest per-point array of the setup: on 3 ranks each holds the
+  // lists of its own cells and a halo one support wide, well under the serial total.
+  const Box box = Box::unit(2);
+  const NodeSet nodes = jitter_interior(uniform_grid(box, {61, 61, 1}), box, 0.2 / 60, 3);
+  for (const PartitionMethod partition : {PartitionMethod::Metis, PartitionMethod::Hilbert}) {
+    DiscretizationOptions o;
+    o.gamma = {1.6};
+    o.partition = partition;
+    const Discretization serial(PETSC_COMM_SELF, nodes, o);
+    const Discretization parallel(PETSC_COMM_WORLD, nodes, o);
+    const double share = double(parallel.point_lists().total()) / double(serial.point_lists().total());
+    const double cells = double(parallel.cells_searched()) / double(serial.cells().size());
+    EXPECT_LT(share, 0.5) << to_string(partition) << ": this rank holds " << share << " of the lists";
+    EXPECT_LT(cells, 0.5) << to_string(partition);
+    EXPECT_EQ(serial.cells_searched(), serial.cells().size());
+    const auto memory = parallel.memory_report(), whole = serial.memory_report();
+    EXPECT_LT(memory.local_bytes, 0.5 * whole.local_bytes) << to_string(partition);
+  }
+}
+
+}  // namespace
+}  // namespace lmeform
