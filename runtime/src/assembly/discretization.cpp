@@ -263,6 +263,9 @@ Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, Discretizati
                                 std::to_string(options_.basis_order));
   }
   const int n = static_cast<int>(nodes.size());
+  if (size_ > n)
+    throw std::invalid_argument("Discretization: " + std::to_string(size_) + " MPI ranks for " + std::to_string(n) +
+                                " nodes; every rank needs at least one node: run on at most " + std::to_string(n) + " ranks");
   const std::vector<double> gamma = expand_gamma(options_.gamma, nodes.size());
   if (options_.consistent_integration != 0) {
     if (options_.consistent_integration < 0) throw std::invalid_argument("Discretization: consistent_integration must be >= 0");

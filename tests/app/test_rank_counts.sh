@@ -1,0 +1,102 @@
+#!/usr/bin/env bash
+# One scene, any number of ranks: a statics run (two stages of the tiny vesicle) on 1, 2, 4 and 8
+# ranks (METIS and Hilbert partitions; 4 and 8 oversubscribe two cores) and a dynamics run on 1 and
+# 4 ranks reach the same energies to 1e-10 (relative); a dynamics run checkpointed on 2 ranks and
+# resumed on 1 ends where the uninterrupted 1-rank run ends; more ranks than nodes is refused with
+# a message.
+#
+#   test_rank_counts.sh LMEFORM OUT_DIR
+set -euo pipefail
+lmeform=$1
+out=$2
+here=$(cd "$(dirname "$0")" && pwd)
+demos=$(cd "$here/../../demos" && pwd)
+rm -rf "$out"
+mkdir -p "$out"
+fail() {
+  echo "FAIL: $*"
+  exit 1
+}
+export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
+
+# Statics.
+cat "$here/tiny_scene.toml" - > "$out/statics.toml" <<TOML
+[vesicle.adaptivity]
+stages = [ { eps = 0.12, f = 10.0 } ]
+TOML
+sed 's/^spacing = 0.06$/spacing = 0.06\npartition = "hilbert"/' "$out/statics.toml" > "$out/statics_hilbert.toml"
+grep -q '^partition = "hilbert"' "$out/statics_hilbert.toml" || fail "could not make the Hilbert scene"
+"$lmeform" run "$out/statics.toml" --json "$out/statics_1.json" --output "$out/s1" > "$out/statics_1.log" 2>&1 ||
+  { tail -20 "$out/statics_1.log"; fail "statics on 1 rank"; }
+for run in "2 statics_hilbert" "4 statics" "8 statics_hilbert"; do
+  set -- $run
+  mpirun -n "$1" "$lmeform" run "$out/$2.toml" --json "$out/statics_$1.json" --output "$out/s$1" > "$out/statics_$1.log" 2>&1 ||
+    { tail -20 "$out/statics_$1.log"; fail "statics on $1 ranks"; }
+done
+
+# Dynamics: the oblate relaxation on a coarse box, 10 steps.
+sed -e 's/^upper = \[1.0, 1.6\]/upper = [1.0, 1.5]/' -e 's/^spacing = 0.025/spacing = 0.0625/' -e 's/^eps = 0.05/eps = 0.125/' \
+    -e 's/0\.8)/0.75)/g' -e 's/^t_end = .*/t_end = 0.01/' -e 's/^dt = .*/dt = 1e-3/' -e 's/^dt_max = .*/dt_max = 1e-3/' \
+    -e 's/^output_every = .*/output_every = 5\ncheckpoint_every = 5/' \
+    "$demos/dynamics/oblate_relaxation.toml" > "$out/dynamics.toml"
+grep -q '^spacing = 0.0625$' "$out/dynamics.toml" || fail "could not make the smaller dynamics scene"
+sed 's/^t_end = .*/t_end = 0.005/' "$out/dynamics.toml" > "$out/dynamics_half.toml"
+"$lmeform" run "$out/dynamics.toml" --json "$out/dynamics_1.json" --output "$out/d1" > "$out/dynamics_1.log" 2>&1 ||
+  { tail -20 "$out/dynamics_1.log"; fail "dynamics on 1 rank"; }
+mpirun -n 4 "$lmeform" run "$out/dynamics.toml" --json "$out/dynamics_4.json" --output "$out/d4" > "$out/dynamics_4.log" 2>&1 ||
+  { tail -20 "$out/dynamics_4.log"; fail "dynamics on 4 ranks"; }
+# Half the run on 2 ranks, the rest on 1 from its checkpoint.
+mpirun -n 2 "$lmeform" run "$out/dynamics_half.toml" --output "$out/resumed" > "$out/half_2.log" 2>&1 ||
+  { tail -20 "$out/half_2.log"; fail "the first half on 2 ranks"; }
+"$lmeform" run "$out/dynamics.toml" --output "$out/resumed" --restart --json "$out/resumed.json" > "$out/resumed_1.log" 2>&1 ||
+  { tail -20 "$out/resumed_1.log"; fail "the 1-rank restart of a 2-rank checkpoint"; }
+
+# More ranks than nodes.
+cat > "$out/few.toml" <<TOML
+[scene]
+name = "few"
+coordinates = "cartesian"
+[domain]
+lower = [0.0, 0.0]
+upper = [1.0, 1.0]
+[nodes]
+counts = [3, 3]
+[model]
+forms = ["$here/../../forms/poisson.form"]
+energy = "heat"
+[[dirichlet]]
+boundary = ["hull"]
+unknown = "T"
+value = 0.0
+TOML
+if mpirun -n 12 "$lmeform" run "$out/few.toml" --output "$out/few" > "$out/few.log" 2>&1; then fail "12 ranks for 9 nodes ran"; fi
+grep -q "12 MPI ranks for 9 nodes; every rank needs at least one node: run on at most 9 ranks" "$out/few.log" ||
+  { cat "$out/few.log"; fail "no message for more ranks than nodes"; }
+[ -e "$out/few/few.h5" ] && fail "a refused run wrote its fields"
+
+/usr/bin/python3 - "$out" <<'PY'
+import json, sys
+out = sys.argv[1]
+ok = True
+def close(a, b, what):
+    global ok
+    d = abs(a - b) / abs(b)
+    print(f"{what}: {a:.14f} against {b:.14f}, relative difference {d:.1e}")
+    if d > 1e-10:
+        print(f"FAIL: {what} differs"); ok = False
+one = json.load(open(f"{out}/statics_1.json"))
+assert one["converged"] and len(one["stages"]) == 2
+for p in (2, 4, 8):
+    other = json.load(open(f"{out}/statics_{p}.json"))
+    if not other["converged"]:
+        print(f"FAIL: statics on {p} ranks did not converge"); ok = False
+    for a, b in zip(other["stages"], one["stages"]):
+        close(a["energy"], b["energy"], f"statics stage {b['stage']}, {p} ranks")
+d1, d4, resumed = (json.load(open(f"{out}/{n}.json")) for n in ("dynamics_1", "dynamics_4", "resumed"))
+if d1["steps"] != d4["steps"] or d1["steps"] != resumed["steps"]:
+    print(f"FAIL: steps 1 rank {d1['steps']}, 4 ranks {d4['steps']}, resumed {resumed['steps']}"); ok = False
+close(d4["energy"], d1["energy"], "dynamics, 4 ranks")
+close(resumed["energy"], d1["energy"], "dynamics, 2 ranks then 1 from the checkpoint")
+sys.exit(0 if ok else 1)
+PY
+echo "PASS"
