@@ -81,6 +81,13 @@ TEST(DistributedSetup, EveryElementHasTheSerialBasis) {
     const DiscretizationOptions o = options_of(s);
     const Discretization serial(PETSC_COMM_SELF, nodes, o);
     const Discretization parallel(PETSC_COMM_WORLD, nodes, o);
+    // Every rank holds the same partition (one rank computes it and sends it).
+    long long hash = 0;
+    for (std::size_t a = 0; a < parallel.partition().part_of.size(); ++a) hash = (hash * 31 + parallel.partition().part_of[a] + 1) % 1000000007;
+    long long lowest = hash, highest = hash;
+    MPI_Allreduce(MPI_IN_PLACE, &lowest, 1, MPI_LONG_LONG, MPI_MIN, PETSC_COMM_WORLD);
+    MPI_Allreduce(MPI_IN_PLACE, &highest, 1, MPI_LONG_LONG, MPI_MAX, PETSC_COMM_WORLD);
+    EXPECT_EQ(lowest, highest) << s.name << ": the ranks disagree on the partition";
     const ElementSet& sd = serial.cells_domain();
     const ElementSet& pd = parallel.cells_domain();
     // The serial run has every element, in point order: the element of point q is found by q.

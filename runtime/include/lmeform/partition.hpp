@@ -41,6 +41,9 @@ NodePartition partition_nodes(std::span<const int> adjacency_offsets, std::span<
 /// neighbour list first. Parts are compact but their boundaries are longer than METIS's.
 NodePartition hilbert_partition(std::span<const double> coords, int dim, int n_parts);
 
+/// The partition with these parts (one per node, in [0, n_parts)), renumbered part by part.
+NodePartition partition_from_parts(std::vector<int> part_of, int n_parts);
+
 /// The identity partition into contiguous blocks of nearly equal size (no graph needed);
 /// useful as a baseline against METIS.
 NodePartition block_partition(int n_nodes, int n_parts);

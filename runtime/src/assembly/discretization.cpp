@@ -284,9 +284,29 @@ Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, Discretizati
     spacing.assign(original.spacing().begin(), original.spacing().end());
     if (size_ > 1 && options_.partition == PartitionMethod::Metis) {
       // Nodes couple when their supports overlap a common point; the node-to-node lists of the
-      // supports are the graph the matrix will have, up to the quadrature points.
-      const CsrLists node_lists = original.neighbour_lists(nodes.coords);
-      partition_ = partition_nodes(node_lists.offsets, node_lists.indices, size_);
+      // supports are the graph the matrix will have, up to the quadrature points. Rank 0
+      // partitions and sends the parts: ranks that each ran METIS on the same graph were measured
+      // to disagree (3D, 8 parts: two ranks owned the same rows and the ghosted vector failed).
+      std::vector<int> parts(static_cast<std::size_t>(n));
+      std::string failure;
+      if (rank_ == 0) {
+        try {
+          const CsrLists node_lists = original.neighbour_lists(nodes.coords);
+          parts = partition_nodes(node_lists.offsets, node_lists.indices, size_).part_of;
+        } catch (const std::exception& e) {
+          failure = e.what();
+        }
+      }
+      // Every rank learns of a failure (and throws with its message), none waits for parts forever.
+      int length = static_cast<int>(failure.size());
+      MPI_Bcast(&length, 1, MPI_INT, 0, comm_);
+      if (length > 0) {
+        failure.resize(static_cast<std::size_t>(length));
+        MPI_Bcast(failure.data(), length, MPI_CHAR, 0, comm_);
+        throw std::runtime_error("Discretization: partitioning the nodes: " + failure);
+      }
+      MPI_Bcast(parts.data(), n, MPI_INT, 0, comm_);
+      partition_ = partition_from_parts(std::move(parts), size_);
     } else if (size_ > 1 && options_.partition == PartitionMethod::Hilbert) {
       partition_ = hilbert_partition(nodes.coords, nodes.dim, size_);
     } else {

@@ -132,6 +132,16 @@ int NodePartition::edge_cut(std::span<const int> adjacency_offsets, std::span<co
   return cut;
 }
 
+NodePartition partition_from_parts(std::vector<int> part_of, int n_parts) {
+  for (const int q : part_of)
+    if (q < 0 || q >= n_parts) throw std::invalid_argument("partition_from_parts: part " + std::to_string(q) + " of " + std::to_string(n_parts));
+  NodePartition p;
+  p.n_parts = n_parts;
+  p.part_of = std::move(part_of);
+  renumber_by_part(p);
+  return p;
+}
+
 NodePartition block_partition(int n_nodes, int n_parts) {
   if (n_parts < 1) throw std::invalid_argument("block_partition: need at least one part, got " + std::to_string(n_parts));
   NodePartition p;
