@@ -27,6 +27,14 @@ if [ -x "$lmeform_exe" ]; then
     status=1
   fi
 fi
+# The scaling study: 1, 2, 4 and 8 ranks (oversubscribed beyond the cores), quick sizes.
+if [ -x "$build/tests/assembly_bench/bench_scaling" ]; then
+  echo "== scaling: memory and setup per rank (scripts/scaling_study.py)"
+  if ! /usr/bin/python3 scripts/scaling_study.py --build "$build" --quick; then
+    echo "benchmark scaling failed" >&2
+    status=1
+  fi
+fi
 echo "benchmark results in $out/:"
 ls -1 "$out"
 exit $status

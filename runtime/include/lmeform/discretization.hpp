@@ -1,9 +1,9 @@
 // A meshfree discretization distributed over MPI ranks: the pipeline every assembly runs on.
 //
 //   nodes ─► LME basis (spacing h_a, β_a = γ_a/h_a², kd-tree, support radii)
-//         ─► METIS partition of the node adjacency graph, renumbering to contiguous row ranges
+//         ─► partition (METIS on rank 0, or a Hilbert curve), renumbering to contiguous row ranges
 //         ─► Delaunay background cells + Gauss rule per cell
-//         ─► primal lists of the quadrature points ─► elements (cells or single points)
+//         ─► primal lists of the points of the cells near this rank's nodes ─► elements
 //         ─► this rank's elements, ghost nodes, sparsity pattern of its rows
 //         ─► basis storage (full or compressed) for the points of this rank's elements
 //
