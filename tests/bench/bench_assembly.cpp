@@ -28,6 +28,7 @@
 
 #include "bench_common.hpp"
 #include "bench_mpi.hpp"
+#include "cg_gamg_solve.hpp"
 #include "helfrich_kernels.hpp"
 #include "lmeform/assembler.hpp"
 #include "lmeform/convex_hull.hpp"
@@ -96,29 +97,11 @@ void solve_heat(const Discretization& disc, Assembler& heat, Mat K, StrategyRun&
   apply_dirichlet(K, b, zero, dofs);
   run.dirichlet = max_over_ranks(clock.seconds());
 
-  clock.restart();
-  PetscLinearSolver ksp;
-  LMEFORM_PETSC_CHECK(KSPCreate(disc.comm(), ksp.out()));
-  LMEFORM_PETSC_CHECK(KSPSetOperators(ksp, K, K));
-  LMEFORM_PETSC_CHECK(KSPSetType(ksp, KSPCG));
-  PC pc = nullptr;
-  LMEFORM_PETSC_CHECK(KSPGetPC(ksp, &pc));
-  LMEFORM_PETSC_CHECK(PCSetType(pc, PCGAMG));
-  LMEFORM_PETSC_CHECK(KSPSetTolerances(ksp, 1e-10, PETSC_DEFAULT, PETSC_DEFAULT, 1000));
-  LMEFORM_PETSC_CHECK(KSPSetFromOptions(ksp));
-  LMEFORM_PETSC_CHECK(KSPSolve(ksp, b, T));
-  run.solve = max_over_ranks(clock.seconds());
-  KSPConvergedReason reason{};
-  LMEFORM_PETSC_CHECK(KSPGetConvergedReason(ksp, &reason));
-  if (reason < 0) throw std::runtime_error("heat solve diverged: KSPConvergedReason " + std::to_string(reason));
-  PetscInt its = 0;
-  LMEFORM_PETSC_CHECK(KSPGetIterationNumber(ksp, &its));
-  run.iterations = static_cast<int>(its);
-  KSPType kt = nullptr;
-  PCType pt = nullptr;
-  LMEFORM_PETSC_CHECK(KSPGetType(ksp, &kt));
-  LMEFORM_PETSC_CHECK(PCGetType(pc, &pt));
-  run.solver = std::string(kt) + "+" + pt;
+  const KrylovSolve solve = solve_cg_gamg(disc.comm(), K, b, T, 1e-10, 1000);
+  run.solve = solve.seconds;
+  if (solve.reason < 0) throw std::runtime_error("heat solve diverged: KSPConvergedReason " + std::to_string(solve.reason));
+  run.iterations = solve.iterations;
+  run.solver = solve.solver;
   PetscReal t_max = 0;
   LMEFORM_PETSC_CHECK(VecMax(T, nullptr, &t_max));
   run.t_max = t_max;

@@ -24,6 +24,7 @@
 
 #include "bench_common.hpp"
 #include "bench_mpi.hpp"
+#include "cg_gamg_solve.hpp"
 #include "lmeform/assembler.hpp"
 #include "lmeform/convex_hull.hpp"
 #include "lmeform/discretization.hpp"
@@ -132,22 +133,10 @@ int run(int argc, char** argv) {
   for (std::size_t i = 0; i < boundary.size(); ++i) original[i] = disc.original_index()[static_cast<std::size_t>(boundary[i])];
   apply_dirichlet(K, b, zero, owned_dofs_of_nodes(disc, original, 1));
 
-  clock.restart();
-  PetscLinearSolver ksp;
-  LMEFORM_PETSC_CHECK(KSPCreate(disc.comm(), ksp.out()));
-  LMEFORM_PETSC_CHECK(KSPSetOperators(ksp, K, K));
-  LMEFORM_PETSC_CHECK(KSPSetType(ksp, KSPCG));
-  PC pc = nullptr;
-  LMEFORM_PETSC_CHECK(KSPGetPC(ksp, &pc));
-  LMEFORM_PETSC_CHECK(PCSetType(pc, PCGAMG));
-  LMEFORM_PETSC_CHECK(KSPSetTolerances(ksp, 1e-8, PETSC_DEFAULT, PETSC_DEFAULT, 2000));
-  LMEFORM_PETSC_CHECK(KSPSetFromOptions(ksp));
-  LMEFORM_PETSC_CHECK(KSPSolve(ksp, b, T));
-  const double solve_s = max_over_ranks(clock.seconds());
-  KSPConvergedReason reason{};
-  LMEFORM_PETSC_CHECK(KSPGetConvergedReason(ksp, &reason));
-  PetscInt iterations = 0;
-  LMEFORM_PETSC_CHECK(KSPGetIterationNumber(ksp, &iterations));
+  const KrylovSolve solve = solve_cg_gamg(disc.comm(), K, b, T, 1e-8, 2000);
+  const double solve_s = solve.seconds;
+  const KSPConvergedReason reason = solve.reason;
+  const PetscInt iterations = solve.iterations;
   PetscReal t_max = 0;
   LMEFORM_PETSC_CHECK(VecMax(T, nullptr, &t_max));
 
