@@ -137,7 +137,7 @@ def main():
             records.append(run(bench, ranks, ["--case", case, "--dim", str(dim), "--nodes", str(nodes), "--partition", "hilbert",
                                               "--off-process", "exchange"], record))
     doc = {"records": records, "memory_check": {}, "extrapolation": {}}
-    for case, _, _ in sizes:
+    for case in sorted({r["case"] for r in records}):
         hil = [r for r in records if r["case"] == case and r["partition"] == "hilbert" and r["off_process"] == "zero"]
         doc["memory_check"][case] = memory_check(hil)
         doc["extrapolation"][case] = extrapolate(hil)
