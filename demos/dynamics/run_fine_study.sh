@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Regenerates docs/kinetics.md section 3 (deflation at eps/R0 = 0.01): the static start at v = 0.9
 # and the static discocyte at v = 0.8 at eps = 0.004 on interface-resolving grids, the deflation
-# v 0.9 -> 0.8 over t* = T for T = 0.01, 0.1, 1, each followed by relaxation at fixed volume to
+# v 0.9 -> 0.8 over t* = T for T = 0.01, 0.03, 0.1, each followed by relaxation at fixed volume to
 # t* = t_end, and the plots. One rank, one run at a time. Run from the repository root.
 #   demos/dynamics/run_fine_study.sh [lmeform-binary] [output-dir]
 set -euo pipefail
@@ -15,7 +15,7 @@ mkdir -p "$out" docs/figures
 
 histories=()
 labels=()
-for until in ${RATES:-0.01 0.1 1}; do
+for until in ${RATES:-0.01 0.03 0.1}; do
   rate=$($python -c "print(-1.0 / 9.0 / $until)")
   dt=$($python -c "print(min(1e-3, $until / 50))")
   name=kinetics_fine_$until
