@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
 # Regenerates docs/kinetics.md section 3 (deflation at eps/R0 = 0.01): the static start at v = 0.9
-# and the static discocyte at v = 0.8 at eps = 0.004 on interface-resolving grids, the deflation
-# v 0.9 -> 0.8 over t* = T for T = 0.01, 0.03, 0.1, each followed by relaxation at fixed volume to
-# t* = t_end, and the plots. One rank, one run at a time. Run from the repository root.
+# and the static discocyte at v = 0.8 at eps = 0.004 on interface-resolving grids (about 4.5 minutes
+# each), the deflation v 0.9 -> 0.8 over t* = T for T = 0.01, 0.03, 0.1, each followed by
+# relaxation at fixed volume until max_steps = 24 (15-20 minutes each), the tables and the plots.
+# One rank, one run at a time. Run from the repository root.
 #   demos/dynamics/run_fine_study.sh [lmeform-binary] [output-dir]
+#   RATES="0.1" demos/dynamics/run_fine_study.sh ...     other deflation times
 set -euo pipefail
 lmeform=${1:-build/lmeform}
 out=${2:-build/demo}
@@ -33,3 +35,4 @@ $python scripts/plot_dynamics.py "${histories[0]}" --out docs/figures/kinetics_f
   --labels "${labels[@]}" --mirror --snapshots 4 --max-energy-shapes \
   --equilibrium "$out/kinetics_fine_equilibrium/kinetics_fine_equilibrium.h5" \
   --reference-energy "$($python -c "import json; print(json.load(open('$out/kinetics_fine_equilibrium.json'))['energy'])")"
+$python demos/dynamics/kinetics_fine_table.py "$out" ${RATES:-0.01 0.03 0.1}
