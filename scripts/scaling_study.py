@@ -35,6 +35,30 @@ def run(bench, ranks, args, record):
     return last
 
 
+def strong_scaling(lmeform, out_dir):
+    """One statics stage (demos/scaling/statics_stage.toml) on 1 and 2 ranks: `lmeform run`'s own stage timings."""
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    rows = []
+    for ranks in (1, 2):
+        path = os.path.join(out_dir, f"statics_stage_{ranks}.json")
+        cmd = ([] if ranks == 1 else ["mpirun", "-n", str(ranks)]) + [lmeform, "run", "demos/scaling/statics_stage.toml", "--json", path,
+                                                                      "--output", os.path.join(out_dir, f"statics_stage_{ranks}")]
+        done = subprocess.run(cmd, env=env, capture_output=True, text=True)
+        if done.returncode != 0:
+            sys.stderr.write(done.stdout[-3000:] + done.stderr[-3000:])
+            raise SystemExit(f"scaling_study: {' '.join(cmd)} failed")
+        with open(path) as f:
+            run_json = json.load(f)
+        stage = run_json["stages"][0]
+        rows.append({"case": "statics_stage", "nodes": stage["nodes"], "ranks": ranks, "energy": stage["energy"],
+                     "newton_iterations": stage["newton_iterations"], "setup_s": stage["setup_s"],
+                     "assembly_s": stage["hessian_s"], "solve_s": stage["factor_solve_s"], "wall_s": stage["wall_s"]})
+        print(f"  statics_stage {stage['nodes']} nodes {ranks} ranks: stage {stage['wall_s']:.1f} s (setup {stage['setup_s']:.2f}, "
+              f"Hessians {stage['hessian_s']:.2f}, factor+solve {stage['factor_solve_s']:.2f}), E = {stage['energy']:.12f}", flush=True)
+    return {"records": rows, "speedup_stage_wall": rows[0]["wall_s"] / rows[1]["wall_s"],
+            "speedup_assembly": rows[0]["assembly_s"] / rows[1]["assembly_s"], "speedup_solve": rows[0]["solve_s"] / rows[1]["solve_s"]}
+
+
 def memory_check(records):
     """Work memory per rank against the 1-rank figure over p: the issue's 1/p within 20 %."""
     out = []
@@ -141,6 +165,9 @@ def main():
         hil = [r for r in records if r["case"] == case and r["partition"] == "hilbert" and r["off_process"] == "zero"]
         doc["memory_check"][case] = memory_check(hil)
         doc["extrapolation"][case] = extrapolate(hil)
+    lmeform = os.path.join(args.build, "lmeform")
+    if not args.from_runs and os.path.exists(lmeform):
+        doc["strong_scaling"] = strong_scaling(lmeform, out_dir)
     path = os.path.join(out_dir, "scaling.json")
     with open(path + ".tmp", "w") as f:
         json.dump(doc, f, indent=1)
