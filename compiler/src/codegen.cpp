@@ -71,6 +71,7 @@ KernelPlan plan_point(const CompiledForm& form, const OutputDecl& output, int di
   plan.reads_qdata = false;
   for (NodeId id : g.reachable(plan.point.components)) {
     if (g.node(id).op == Op::Qdata) plan.reads_qdata = true;
+    if (g.node(id).op == Op::Spacing) plan.reads_spacing = true;
     if (g.node(id).op != Op::Jet) continue;
     const auto v = g.jet_var(id);
     int& order = v.role == ir::Role::Coefficient ? plan.coefficient_order : plan.basis_order;
@@ -211,6 +212,7 @@ class KernelWriter {
       case Op::Param: return "k_" + std::to_string(n.arg[0]);
       case Op::Qdata: return "qd_" + std::to_string(n.arg[0]);
       case Op::Normal: return "nrm_" + std::to_string(n.arg[0]);
+      case Op::Spacing: return "spc";
       default: {
         if (const auto it = inlined_.find(id); it != inlined_.end()) return "(" + it->second + ")";
         return "t" + std::to_string(id);
@@ -280,6 +282,7 @@ class KernelWriter {
     std::set<int> params;
     std::vector<NodeId> jets;
     std::set<int> coords, qdata, normals;
+    bool spacing = false;
     double flops = 0;
     for (NodeId id : order) {
       const ir::Node& n = g_.node(id);
@@ -287,6 +290,7 @@ class KernelWriter {
       if (n.op == Op::Coord) coords.insert(n.arg[0]);
       if (n.op == Op::Qdata) qdata.insert(n.arg[0]);
       if (n.op == Op::Normal) normals.insert(n.arg[0]);
+      if (n.op == Op::Spacing) spacing = true;
       if (n.op == Op::Jet) jets.push_back(id);
       flops += ir::flop_cost(n.op);
     }
@@ -296,6 +300,7 @@ class KernelWriter {
     os << "    [[maybe_unused]] const double* Bq = in.basis + std::size_t(q) * std::size_t(J) * std::size_t(n);\n";
     for (int c : coords) os << "    const double x_" << c << " = in.points[std::size_t(q) * " << plan_.dim << " + " << c << "];\n";
     for (int i : normals) os << "    const double nrm_" << i << " = in.normals[std::size_t(q) * " << plan_.dim << " + " << i << "];\n";
+    if (spacing) os << "    const double spc = in.spacing[q];\n";
     const int qpp = form_.qdata_per_point(plan_.dim);
     for (int o : qdata) os << "    const double qd_" << o << " = in.qdata[std::size_t(q) * " << qpp << " + " << o << "];\n";
     if (!jets.empty()) {
@@ -827,6 +832,8 @@ void ModuleWriter::descriptor(const EmittedKernel& k) {
       h_ << "  k.requirement = \"" << json_escape(p.output->requirement) << "\";\n  k.requirement_condition = \""
          << json_escape(p.output->requirement_condition) << "\";\n  k.requirement_pointwise = " << (p.output->requirement_pointwise ? "true" : "false")
          << ";\n";
+    if (p.reads_spacing) h_ << "  k.reads_spacing = true;\n";
+    if (p.output->requirement_advisory) h_ << "  k.requirement_advisory = true;\n";
   }
   // A point kernel's cost is reported as the value's: it is the one kernel of a point output.
   const FlopModel& value = p.is_point() ? k.point : k.value;

@@ -11,11 +11,11 @@
 
 namespace lmeform::compiler::ir {
 
-bool is_terminal(Op op) { return op <= Op::Normal; }
+bool is_terminal(Op op) { return op <= Op::Spacing; }
 
 int flop_cost(Op op) {
   switch (op) {
-    case Op::Const: case Op::Jet: case Op::Coord: case Op::Param: case Op::Qdata: case Op::Normal: return 0;
+    case Op::Const: case Op::Jet: case Op::Coord: case Op::Param: case Op::Qdata: case Op::Normal: case Op::Spacing: return 0;
     case Op::Sqrt: case Op::Div: return 4;
     case Op::Exp: case Op::Log: case Op::Sin: case Op::Cos: case Op::Tanh: case Op::Pow: return 20;
     default: return 1;
@@ -77,6 +77,7 @@ NodeId Graph::coord(int i) { return intern(leaf(Op::Coord, i)); }
 NodeId Graph::param(int i) { return intern(leaf(Op::Param, i)); }
 NodeId Graph::qdata(int i) { return intern(leaf(Op::Qdata, i)); }
 NodeId Graph::normal(int i) { return intern(leaf(Op::Normal, i)); }
+NodeId Graph::spacing() { return intern(leaf(Op::Spacing, 0)); }
 
 static Node op2(Op op, NodeId a, NodeId b) {
   Node n;
@@ -282,6 +283,7 @@ NodeId Differentiator::apply_rule(NodeId id, const Node& n) {
   switch (n.op) {
     case Op::Const: d = g_.zero(); break;
     case Op::Jet: case Op::Coord: case Op::Param: case Op::Qdata: case Op::Normal: d = rule_(g_, id); break;
+    case Op::Spacing: d = g_.zero(); break;
     case Op::Add: d = g_.add(D(a), D(b)); break;
     case Op::Mul: d = g_.add(g_.mul(D(a), b), g_.mul(a, D(b))); break;
     case Op::Neg: d = g_.neg(D(a)); break;
@@ -582,7 +584,7 @@ std::vector<double> Interpreter::evaluate(std::span<const NodeId> roots,
     double r = 0;
     switch (n.op) {
       case Op::Const: r = n.value; break;
-      case Op::Jet: case Op::Coord: case Op::Param: case Op::Qdata: case Op::Normal: r = terminal(n); break;
+      case Op::Jet: case Op::Coord: case Op::Param: case Op::Qdata: case Op::Normal: case Op::Spacing: r = terminal(n); break;
       case Op::Add: r = A(0) + A(1); break;
       case Op::Mul: r = A(0) * A(1); break;
       case Op::Neg: r = -A(0); break;

@@ -115,7 +115,7 @@ int builtin_arity(const std::string& name) {
 bool is_builtin_value(const std::string& n) { return n == "pi" || n == "identity" || n == "I" || n == "dx" || n == "ds"; }
 /// Builtins that a declaration may hide: short names that forms already use for their own things
 /// (`let e = sym(grad(u))`, `unknown n`), so reserving them would break such forms.
-bool is_predefined(const std::string& n) { return n == "e" || n == "dim" || n == "n"; }
+bool is_predefined(const std::string& n) { return n == "e" || n == "dim" || n == "n" || n == "spacing"; }
 
 constexpr const char* kNormalOnCells = "the normal n exists only on the boundary: this term is integrated with dx";
 
@@ -173,6 +173,8 @@ class Lowering {
   /// Where the current statement first names the normal and a measure (file -1: not yet), for
   /// diagnostics about a whole output.
   Loc normal_use_{-1, 0}, measure_use_{-1, 0};
+  /// Lowering the condition of a `require` or `recommend` line (the only place `spacing` is known).
+  bool in_requirement_ = false;
 
   [[noreturn]] void fail(const Loc& loc, const std::string& msg) const { fail_at(form_.sources, loc, msg); }
 
@@ -316,8 +318,12 @@ class Lowering {
   void output(const Stmt& s) {
     auto it = std::find_if(form_.outputs.begin(), form_.outputs.end(), [&](const OutputDecl& o) { return o.name == s.name; });
     OutputDecl& out = *it;
+    in_requirement_ = s.keyword == "require" || s.keyword == "recommend";
     const Value v = expr(*s.body);
-    if (s.keyword == "require") return requirement(s, out, v);
+    if (in_requirement_) {
+      in_requirement_ = false;
+      return requirement(s, out, v);
+    }
     if (out.kind == OutputKind::Point) return point_output(s, out, v);
     if (!v.measure)
       fail(s.body->loc, std::string("the right-hand side of ") + to_string(out.kind) + " '" + s.name +
@@ -380,7 +386,7 @@ class Lowering {
       const Op op = g_->node(id).op;
       if (op == Op::Qdata) fail(s.body->loc, what + " must not read quadrature-point data: it is checked at the nodes");
       if (op == Op::Normal) fail(s.body->loc, what + " must not read the normal n: it is checked at the nodes");
-      pointwise = pointwise || op == Op::Coord;
+      pointwise = pointwise || op == Op::Coord || op == Op::Spacing;
     }
     const std::string& text = form_.sources.file(s.body->begin.file).text;
     const std::size_t from = s.body->begin.offset, to = text.find_last_of(',', text.find('"', from));
@@ -493,7 +499,7 @@ class Lowering {
     if (!scopes_.empty())
       for (const auto& [n, v] : scopes_.back().params) names.push_back(n);
     for (const auto& [n, a] : builtin_functions()) names.push_back(n);
-    for (const char* n : {"pi", "identity", "I", "dx", "ds", "e", "dim", "n"}) names.push_back(n);
+    for (const char* n : {"pi", "identity", "I", "dx", "ds", "e", "dim", "n", "spacing"}) names.push_back(n);
     return names;
   }
 
@@ -608,6 +614,14 @@ class Lowering {
     if (e.name == "identity" || e.name == "I") return identity();
     if (e.name == "dx") return unit_measure(Domain{}, e.loc);
     if (e.name == "ds") return unit_measure(Domain{true, ""}, e.loc);
+    if (e.name == "spacing") {
+      // The node spacing is a property of the node set, not of the model's fields: an integrand
+      // that read it would change with the discretization.
+      if (!in_requirement_)
+        fail(e.loc, "'spacing' (the local node spacing) is known in require lines only, where the runtime checks the model's "
+                    "resolution rules (require l >= 2*spacing, ...)");
+      return scalar(g_->spacing());
+    }
     if (e.name == "n") {
       if (normal_use_.file < 0) normal_use_ = e.loc;
       Value v;
@@ -1169,7 +1183,8 @@ void collect_declarations(CompiledForm& form, const std::vector<const Stmt*>& st
         o.kind = s->keyword == "energy" ? OutputKind::Energy : s->keyword == "constraint" ? OutputKind::Constraint
                : s->keyword == "residual" ? OutputKind::Residual : s->keyword == "bilinear" ? OutputKind::Bilinear
                : s->keyword == "linear"   ? OutputKind::Linear : OutputKind::Point;
-        if (s->keyword == "require") o.requirement = s->message;
+        if (s->keyword == "require" || s->keyword == "recommend") o.requirement = s->message;
+        o.requirement_advisory = s->keyword == "recommend";
         if (s->target) {
           if (s->target->kind == ExprKind::Number) {
             o.target_value = s->target->number;

@@ -41,7 +41,7 @@ const std::set<std::string>& keywords() {
   static const std::set<std::string> k = {
       "form", "dimension", "unknown", "test", "trial", "coefficient", "qdata", "constant",
       "coordinate", "let", "def", "measure", "include", "energy", "constraint", "residual",
-      "bilinear", "linear", "point", "require", "if", "then", "else", "and", "or", "not"};
+      "bilinear", "linear", "point", "require", "recommend", "if", "then", "else", "and", "or", "not"};
   return k;
 }
 
@@ -322,7 +322,7 @@ const auto set_message = [](auto& ctx) {
   Stmt& s = state_of(ctx).statements.back();
   s.message = _attr(ctx);
   // A requirement has no name of its own: its place in the sources makes one (a C++ identifier).
-  s.name = "require_" + std::to_string(s.loc.file) + "_" + std::to_string(s.loc.offset);
+  s.name = s.keyword + "_" + std::to_string(s.loc.file) + "_" + std::to_string(s.loc.offset);
   s.name_loc = s.loc;
 };
 
@@ -381,7 +381,8 @@ const auto statement =
      body) |
     (kw("constraint")[begin_stmt(StmtKind::Output)] > stmt_name > '=' > sum_body > equals_target >
      target) |
-    (kw("require")[begin_stmt(StmtKind::Output)] > body > require_comma > require_message);
+    (kw("require")[begin_stmt(StmtKind::Output)] > body > require_comma > require_message) |
+    (kw("recommend")[begin_stmt(StmtKind::Output)] > body > require_comma > require_message);
 
 const auto skipper = x3::space | x3::lexeme['#' >> *(x3::char_ - x3::eol)];
 
@@ -476,7 +477,7 @@ std::vector<Stmt> parse_form(const SourceSet& sources, int file) {
     const std::string found = w == first ? std::string(1, *first) : std::string(first, w);
     fail_at(sources, Loc{file, static_cast<std::size_t>(first - text.begin())},
             "expected a statement (form, dimension, unknown, test, trial, coefficient, qdata, constant, "
-            "coordinate, let, def, measure, include, energy, constraint, residual, bilinear, linear, point, require), found '" +
+            "coordinate, let, def, measure, include, energy, constraint, residual, bilinear, linear, point, require, recommend), found '" +
                 found + "'");
   }
   return std::move(st.statements);

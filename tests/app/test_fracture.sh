@@ -95,6 +95,23 @@ refused negative_gc "form fracture_at2 requires Gc > 0 and l > 0 (the toughness 
 refused start_above_one "requires v > -1e-9 and v < 1 + 1e-9 (the phase field v starts in \[0, 1\].*at the start state: it fails at node" \
   -e 's/^v = 1.0/v = "1 + x[0]"/'
 
+# The resolution rule (forms: recommend v > 0.5 or l >= 2*spacing) is warned of, not refused: the
+# intact start of a bar with l = 0.03 on h = 0.025 passes it, the step whose crack (v < 1/2) lies on
+# nodes too coarse for l is named; with l = 0.05 = 2 h nothing is warned of.
+sed -e 's/^l = 0.05/l = 0.03/' -e 's/^count = 6/count = 3/' -e 's/^values = .*/values = { delta = [0.0, 1.0, 2.0, 3.0] }/' \
+  "$out/cycle.toml" > "$out/coarse_crack.toml"
+run coarse_crack
+grep -q "^lmeform: warning: .*form fracture_at2 recommends v > 0.5 or l >= 1.7\*spacing (the crack band needs l >= 2 h.* at step 3: it fails at node" \
+  "$out/coarse_crack.log" || { cat "$out/coarse_crack.log"; fail "coarse_crack: no warning naming the step where the crack outgrew the nodes"; }
+grep -q "at the start state" "$out/coarse_crack.log" && fail "coarse_crack: the intact start was warned of"
+sed -e 's/^l = 0.03/l = 0.05/' "$out/coarse_crack.toml" > "$out/resolved_crack.toml"
+run resolved_crack
+grep -q "recommends" "$out/resolved_crack.log" && fail "resolved_crack: l = 2 h was warned of"
+sed -e 's/^spacing = 0.025/spacing = 0.05/' "$out/profile_at2.toml" > "$out/coarse_profile.toml"
+run coarse_profile
+grep -q "^lmeform: warning: .*recommends v > 0.5 or l >= 1.7\*spacing.* at the start state" "$out/coarse_profile.log" ||
+  fail "coarse_profile: a start crack on nodes too coarse for l was not warned of"
+
 /usr/bin/python3 - "$out" <<'PY'
 import json, sys, pathlib
 import h5py, numpy as np

@@ -475,6 +475,34 @@ TEST(CompilerFrontend, Requirements) {
             std::string::npos);
 }
 
+TEST(CompilerFrontend, RecommendationsAndTheNodeSpacing) {
+  const auto form = compile_source(
+      "dimension 2\nunknown v\nconstant l\n"
+      "recommend v > 0.5 or l >= 2*spacing, \"resolve the band\"\n"
+      "require l > 0, \"l positive\"\n"
+      "energy E = l*v^2*dx\n",
+      "t.form");
+  ASSERT_EQ(form.outputs.size(), 3U);
+  EXPECT_TRUE(form.outputs[0].requirement_advisory);
+  EXPECT_TRUE(form.outputs[0].requirement_pointwise) << "it reads v and the spacing";
+  EXPECT_FALSE(form.outputs[1].requirement_advisory);
+  const auto gen = generate(form, "t.form");
+  EXPECT_NE(gen.header.find("k.reads_spacing = true;"), std::string::npos);
+  EXPECT_NE(gen.header.find("k.requirement_advisory = true;"), std::string::npos);
+  EXPECT_NE(gen.header.find("in.spacing[q]"), std::string::npos);
+  // A requirement on the constants alone reads no spacing; only one kernel is advisory.
+  EXPECT_EQ(gen.header.find("k.reads_spacing = true;"), gen.header.rfind("k.reads_spacing = true;"));
+  EXPECT_EQ(gen.header.find("k.requirement_advisory = true;"), gen.header.rfind("k.requirement_advisory = true;"));
+  // The spacing is a property of the nodes, known where requirements are checked only.
+  EXPECT_EQ(compile_error("unknown v\nenergy E = spacing*v^2*dx\n"),
+            "t.form:2:12: error: 'spacing' (the local node spacing) is known in require lines only, where the runtime checks the "
+            "model's resolution rules (require l >= 2*spacing, ...)\nenergy E = spacing*v^2*dx\n           ^\n");
+  EXPECT_NE(compile_error("unknown v\npoint P = v/spacing\n").find("is known in require lines only"), std::string::npos);
+  // A form may name its own 'spacing'.
+  EXPECT_NO_THROW(compile_source("unknown v\nconstant spacing = 2\nenergy E = spacing*v^2*dx\n", "t.form"));
+  EXPECT_NE(compile_error("unknown v\nrecommend v > 0\nenergy E = v*dx\n").find("expected ',' and the requirement's message"), std::string::npos);
+}
+
 TEST(CompilerFrontend, KernelNamesOfDomainsMustNotCollide) {
   EXPECT_NE(compile_error_generating("unknown u\nenergy E_ds = u^2*dx\nenergy E = u^2*dx + u*ds\n")
                 .find("t.form:3:1: error: the kernels of energy E [ds] and of energy 'E_ds' would both be named 't_E_ds_2d'"),

@@ -158,6 +158,7 @@ class Evaluator {
   const kernel::FormKernels& form_;
   Cell cell_;
   State state_;
+  std::vector<double> spacing_;  ///< per point, for a kernel that reads the node spacing
   std::vector<double> workspace_;
   int ndofs_ = 0;
 };

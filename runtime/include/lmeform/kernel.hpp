@@ -36,7 +36,8 @@
 //   the points, the cell's neighbourhood. Cell kernels never read `normals`.
 // * Point kernels (kind Point) write, for each quadrature point q, the output's n_values
 //   components (row-major, of shape point_extents[0 .. point_rank-1]) to values[q * n_values + i],
-//   overwriting; they read no weights and have no derivatives.
+//   overwriting; they read no weights and have no derivatives. A requirement's kernel may read
+//   `CellInputs::spacing` (FormKernels::reads_spacing), the local node spacing at each point.
 // * Kernels allocate nothing: the runtime passes `workspace` of at least
 //   `workspace_doubles(n, nq)` doubles.
 // * The dense contractions with the basis (gradient = Bsᵀ G, Hessian blocks Bsᵀ D Bs) are
@@ -49,7 +50,7 @@
 
 namespace lmeform::kernel {
 
-inline constexpr int kContractVersion = 5;
+inline constexpr int kContractVersion = 6;
 
 /// Number of jet slots of a scalar field for dimension d and derivative order k (0, 1, 2).
 constexpr int jet_size(int dim, int order) noexcept {
@@ -125,6 +126,9 @@ struct CellInputs {
   double* workspace = nullptr;         ///< scratch, at least workspace_doubles(n, nq)
   const ContractionRoutines* contractions = nullptr;  ///< null: the plain loops of this header
   const double* normals = nullptr;     ///< [nq * dim] outward unit normals (boundary kernels; else null)
+  /// [nq] the local node spacing at each point, which is a node: its distance to the nearest other
+  /// node (point kernels with FormKernels::reads_spacing, i.e. requirements; else null).
+  const double* spacing = nullptr;
 };
 
 using ValueKernel = double (*)(const CellInputs&);
@@ -201,7 +205,9 @@ struct FormKernels {
   /// kernel is 1 where CONDITION holds, 0 where it fails; the runtime refuses a start that fails it.
   const char* requirement = nullptr;        ///< MESSAGE (nullptr: an ordinary point output)
   const char* requirement_condition = "";   ///< CONDITION as written
-  bool requirement_pointwise = false;       ///< it reads the coordinate or the unknowns (else only constants)
+  bool requirement_pointwise = false;       ///< it reads the coordinate, the unknowns or the spacing (else only constants)
+  bool reads_spacing = false;               ///< Point: reads CellInputs::spacing (a requirement on the resolution)
+  bool requirement_advisory = false;        ///< `recommend`: a failure is warned of, not refused
 };
 
 /// A compiled form module: every functional it defines (each output in each declared dimension).

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <functional>
+#include <limits>
 #include <optional>
 #include <sstream>
 #include <stdexcept>
@@ -78,6 +79,24 @@ kernel::CellInputs Evaluator::inputs(const std::vector<double>& u) {
   in.constants = state_.constants.empty() ? nullptr : state_.constants.data();
   in.workspace = workspace_.empty() ? nullptr : workspace_.data();
   in.normals = cell_.normals.empty() ? nullptr : cell_.normals.data();
+  if (form_.reads_spacing) {
+    // A requirement on the resolution is checked at nodes; here each point's distance to its
+    // nearest cell node stands in for a node's distance to its nearest neighbour.
+    if (spacing_.empty())
+      for (int q = 0; q < cell_.nq; ++q) {
+        double nearest = std::numeric_limits<double>::infinity();
+        for (int a = 0; a < cell_.n; ++a) {
+          double d2 = 0;
+          for (int i = 0; i < cell_.dim; ++i) {
+            const double d = cell_.points[std::size_t(q * cell_.dim + i)] - cell_.nodes[std::size_t(a * cell_.dim + i)];
+            d2 += d * d;
+          }
+          nearest = std::min(nearest, std::sqrt(d2));
+        }
+        spacing_.push_back(nearest);
+      }
+    in.spacing = spacing_.data();
+  }
   return in;
 }
 

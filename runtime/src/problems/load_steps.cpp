@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <map>
 #include <sstream>
 
 #include <fmt/format.h>
@@ -13,6 +14,7 @@
 #include "lmeform/scene_table.hpp"
 #include "lmeform/stopwatch.hpp"
 #include "quantities.hpp"
+#include "requirements.hpp"
 #include "stationary.hpp"
 
 namespace lmeform::problems {
@@ -108,6 +110,7 @@ class LoadStepper {
   [[nodiscard]] bool advance(int step);
   void record(int step, double lambda, const ProblemResult& result, int cuts);
   void write_outputs(int step);
+  void check_state_requirements(int step);
   void write_history() const;
   void resume();
   [[nodiscard]] fs::path path(const std::string& suffix) const { return ctx_.output_directory / (ctx_.scene->name + suffix); }
@@ -126,6 +129,7 @@ class LoadStepper {
   std::vector<double> multipliers_;
   std::optional<TimeSeriesWriter> series_;  ///< with an output folder
   LoadStepRun run_;
+  std::map<std::string, std::size_t> requirement_failures_;  ///< condition -> failing nodes when last warned
 };
 
 void LoadStepper::setup() {
@@ -216,6 +220,20 @@ void LoadStepper::record(int step, double lambda, const ProblemResult& result, i
             << std::endl;
 }
 
+/// A requirement on the state that held at the start can fail later (a crack grown into nodes too
+/// coarse for its band): warned when it first fails and whenever more nodes fail, not refused —
+/// the step itself converged.
+void LoadStepper::check_state_requirements(int step) {
+  const std::vector<double> state = to_original(*space_.disc, u_, bound_.layout.dofs_per_node);
+  for (const RequirementFailure& f : failed_state_requirements(bound_, space_, state, fmt::format("step {}", step))) {
+    std::size_t& warned = requirement_failures_[f.condition];
+    if (f.nodes <= warned) continue;
+    warned = f.nodes;
+    run_.warnings.push_back(f.message);
+    if (ctx_.log != nullptr) *ctx_.log << "lmeform: warning: " << f.message << std::endl;
+  }
+}
+
 void LoadStepper::write_history() const {
   write_step_history(ctx_.output_directory, ctx_.scene->name, kHistoryFormat, run_.history);
 }
@@ -261,6 +279,9 @@ LoadStepRun LoadStepper::run() {
   setup();
   const ScopedPetscOptions petsc_options(ctx_.scene->solver.petsc_options);
   if (ctx_.restart) resume();
+  // The start's failures were warned of when the problem was built.
+  for (const RequirementFailure& f : failed_state_requirements(bound_, space_, to_original(*space_.disc, u_, bound_.layout.dofs_per_node), "the start"))
+    requirement_failures_[f.condition] = f.nodes;
   for (int step = first_step_; step <= settings_.until; ++step) {
     if (step == 0 && !settings_.solve_start) {
       ProblemResult none;
@@ -269,6 +290,7 @@ LoadStepRun LoadStepper::run() {
     } else if (!advance(step)) {
       break;
     }
+    check_state_requirements(step);
     write_outputs(step);
   }
   run_.wall_s = clock_.seconds();
@@ -315,6 +337,7 @@ class LoadStepsDriver final : public ProblemDriver {
                                                       : std::string("every step converged");
     if (run.history.empty()) throw std::runtime_error(report.status);
     describe_steps(settings, run, report);
+    report.warnings.insert(report.warnings.end(), run.warnings.begin(), run.warnings.end());
     report.fields = stepper.final_fields();
     report_step_history(kHistoryFormat, run.history, ctx.output_directory, ctx.scene->name, report);
     return report;

@@ -54,6 +54,7 @@ struct LoadStepSettings {
 struct LoadStepRun {
   std::vector<StepRow> history;     ///< position: the load λ ∈ [0, count]; counts: iterations, cuts
   std::string failure;          ///< empty when every step converged
+  std::vector<std::string> warnings;  ///< a state requirement that stopped holding at a step
   double wall_s = 0;
 };
 

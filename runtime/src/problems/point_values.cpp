@@ -46,7 +46,8 @@ PointEvaluator::PointEvaluator(const kernel::FormKernels& output, const StateLay
   }
 }
 
-void PointEvaluator::evaluate(const LmeBasis& basis, std::span<const double> x, std::span<const double> state, std::span<double> values) const {
+void PointEvaluator::evaluate(const LmeBasis& basis, std::span<const double> x, std::span<const double> state, std::span<double> values,
+                              double spacing) const {
   const kernel::FormKernels& k = *kernel_;
   const int order = k.basis_order;
   std::vector<double> at(x.begin(), x.end());
@@ -108,13 +109,18 @@ void PointEvaluator::evaluate(const LmeBasis& basis, std::span<const double> x, 
   in.constants = constants_.empty() ? nullptr : constants_.data();
   in.workspace = workspace.data();
   in.contractions = &dense_contractions();
+  if (k.reads_spacing) {
+    if (!(spacing > 0))
+      throw std::invalid_argument(std::string("PointEvaluator: ") + k.module + "." + k.name + " reads the node spacing: evaluate it at a node");
+    in.spacing = &spacing;
+  }
   k.point(in, values.data());
 }
 
 CellPointValues point_values_on_cells(const Discretization& disc, const kernel::FormKernels& output, std::span<const double> state,
                                      int dofs_per_node, int offset, std::span<const double> constants) {
   if (output.kind != kernel::FunctionalKind::Point || output.point == nullptr || output.n_coefficients > 0 || output.qdata_per_point > 0 ||
-      static_cast<std::size_t>(output.n_constants) != constants.size())
+      output.reads_spacing || static_cast<std::size_t>(output.n_constants) != constants.size())
     throw std::invalid_argument(std::string("point_values_on_cells: ") + output.module + "." + output.name +
                                 " is not a point output of the unknowns and the given constants");
   const int order = output.basis_order;

@@ -37,8 +37,11 @@ class PointEvaluator {
   /// derivatives are the limit of an ill-conditioned solve (J is singular across the boundary;
   /// at a vertex in every direction): a point of the domain's boundary is moved a thousandth of
   /// the local spacing towards its neighbours when the output reads derivatives, a hundredth
-  /// where derivatives are still undefined.
-  void evaluate(const LmeBasis& basis, std::span<const double> x, std::span<const double> state, std::span<double> values) const;
+  /// where derivatives are still undefined. `spacing`: the local node spacing at x, for an output
+  /// that reads it (a requirement on the resolution, checked at nodes); such an output without it
+  /// is an error.
+  void evaluate(const LmeBasis& basis, std::span<const double> x, std::span<const double> state, std::span<double> values,
+                double spacing = -1.0) const;
 
  private:
   const kernel::FormKernels* kernel_;

@@ -386,7 +386,7 @@ ProblemSpace build_problem_space(MPI_Comm comm, const BoundScene& b, const Probl
   make_assemblers(b, input, targets, scales, space);
   set_initial_targets(b, input, space);
   make_bounds(b, space);
-  check_requirements(b, space);
+  check_requirements(b, space, input.log);
   return space;
 }
 

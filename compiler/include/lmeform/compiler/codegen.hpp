@@ -26,6 +26,8 @@ struct KernelPlan {
   /// Whether the kernel reads quadrature-point data. A point output that reads none can be
   /// evaluated anywhere (at a node, a probe), though its form declares data for its integrals.
   bool reads_qdata = true;
+  /// A point kernel reads the local node spacing (`spacing`, requirements only).
+  bool reads_spacing = false;
 
   ir::NodeId value = -1;            ///< energy/constraint integrand
   struct VectorEntry { int row; int slot_index; ir::NodeId node; };

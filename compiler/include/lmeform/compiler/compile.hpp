@@ -72,7 +72,10 @@ struct OutputDecl {
   /// holds and 0 where it fails; the runtime checks it at every node of the start state.
   std::string requirement;
   std::string requirement_condition;   ///< the condition as written
-  bool requirement_pointwise = false;  ///< it reads the coordinate or an unknown (else constants only)
+  bool requirement_pointwise = false;  ///< it reads the coordinate, an unknown or the spacing (else constants only)
+  /// `recommend CONDITION, "MESSAGE"`: a failure is a warning, not a refusal (a resolution rule
+  /// that a convergence study breaks on purpose).
+  bool requirement_advisory = false;
   /// The integrand over one domain (by default the cells) at dimension dim.
   ir::NodeId integrand(int dim, int domain = kCellDomain) const { return integrands.at(dim).at(domain); }
 };

@@ -33,7 +33,7 @@ constexpr int hessian_slot(int i, int j, int dim) noexcept {
 constexpr int slot_order(int slot, int dim) noexcept { return slot == 0 ? 0 : slot <= dim ? 1 : 2; }
 
 enum class Op : std::uint8_t {
-  Const, Jet, Coord, Param, Qdata, Normal,               // terminals
+  Const, Jet, Coord, Param, Qdata, Normal, Spacing,      // terminals
   Add, Mul, Neg, Div, Pow,                               // arithmetic
   Sqrt, Exp, Log, Sin, Cos, Tanh, Abs, Sign,             // functions
   Select, Lt, Le, Gt, Ge, Eq, Ne, And, Or, Not,          // conditionals (true = 1.0)
@@ -77,6 +77,9 @@ class Graph {
   NodeId qdata(int offset);
   /// Component i of the outward unit normal at a boundary quadrature point.
   NodeId normal(int i);
+  /// The local node spacing at the point (a node: the distance to its nearest other node): known
+  /// where requirements are checked, a constant to differentiation.
+  NodeId spacing();
 
   NodeId add(NodeId a, NodeId b);
   NodeId sub(NodeId a, NodeId b) { return add(a, neg(b)); }
