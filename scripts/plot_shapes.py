@@ -18,7 +18,7 @@ def main() -> int:
     if len(sys.argv) != 3:
         print("usage: plot_shapes.py shapes.json out.png", file=sys.stderr)
         return 2
-    records = json.load(open(sys.argv[1]))
+    records = [r for r in json.load(open(sys.argv[1])) if "record" not in r]  # stages only, not the extrapolation
     branches = [b for b in ("oblate", "prolate") if any(r["branch"] == b for r in records)]
     fig, axes = plt.subplots(1, len(branches), figsize=(5.2 * len(branches), 4.2), squeeze=False)
     for ax, branch in zip(axes[0], branches):

@@ -2,7 +2,7 @@
 """Force-displacement of a load-stepped fracture run (SENT, SENS), optionally overlaid with a
 FEniCSx reference run (demos/fracture/fenicsx_fracture.py JSON): the peak force, the displacement
 at the peak, steps, wall time, and per step the alternations and the seconds of assembly and solve.
-    force_displacement.py RUN_DIR CASE OUT_DIR [--fenicsx JSON] [--reference KN --cite TEXT]
+    force_displacement.py RUN_DIR CASE OUT_DIR [--fenicsx JSON] [--reference KN --cite TEXT] [--l 0.015 --h 0.0075]
 Appends a record (case sent or sens) to OUT_DIR/fracture.json and draws OUT_DIR/fracture_CASE.png.
 """
 import json
@@ -27,7 +27,7 @@ def main():
     print(f"{case}: {len(rows) - 1} steps to delta {delta[-1]:.5g}, peak force {force[i]:.4f} kN at delta {delta[i]:.5g} mm; "
           f"{sum(alternations):.0f} alternations (at most {max(alternations):.0f} in a step); assembly {assembly:.0f} s, solves {solve:.0f} s, "
           f"wall {wall:.0f} s")
-    record = {"case": case, "model": "at2", "l": 0.015, "h_min": 0.0075, "nodes": None, "steps": len(rows) - 1, "peak_force": force[i],
+    record = {"case": case, "model": "at2", "l": float(arg("--l", 0.015)), "h_min": float(arg("--h", 0.0075)), "nodes": None, "steps": len(rows) - 1, "peak_force": force[i],
               "delta_at_peak": delta[i], "last_delta": delta[-1], "alternations": sum(alternations), "assembly_s": assembly, "solve_s": solve,
               "wall_s": wall}
     fenicsx = arg("--fenicsx")
@@ -52,7 +52,7 @@ def main():
         fig, ax = plt.subplots(figsize=(5.5, 3.8))
         ax.plot(delta, force, "-", lw=1.5, label=f"lmeform (LME), peak {force[i]:.3f} kN")
         if ref:
-            ax.plot(ref["delta"], ref["force"], "--", lw=1.2, label=f"FEniCSx P1, peak {ref['peak_force']:.3f} kN")
+            ax.plot(ref["delta"], ref["force"], "--", lw=1.2, label=f"FEniCSx P1 (l = {ref.get('l', 0.015)}), peak {ref['peak_force']:.3f} kN")
         ax.set_xlabel("imposed displacement (mm)")
         ax.set_ylabel("force (kN)")
         ax.set_title(case.upper())

@@ -4,7 +4,10 @@
 // iterations, how far the constraint residual rose above its best value during the stage, and the
 // wall time. Runs the scenes through the stage loop of `lmeform run` (problems::run_vesicle); under mpirun
 // every scene runs on all ranks. Writes DIR/shapes.json and DIR/shapes.png (energy against eps).
-//   bench_shapes [--quick] [--log] [--out DIR] [--nodes N] [--shape oblate:0.8 ...]
+// --fine goes on from eps = 0.01 to a fourth grid resolving eps = 0.005 (stages 0.0075, 0.005) and
+// writes DIR/shapes_fine.json, with one `extrapolation` record per shape: E(eps) = E0 + a eps +
+// b eps^2 fitted to the stages eps <= 0.02, E0 against the sharp-interface reference.
+//   bench_shapes [--quick | --fine] [--log] [--out DIR] [--nodes N] [--shape oblate:0.8 ...]
 // --log prints the progress of every stage (the Newton iterates) as `lmeform run` does.
 #include <algorithm>
 #include <cmath>
@@ -17,6 +20,8 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Dense>
+#include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 #include "lmeform/output.hpp"
@@ -48,6 +53,7 @@ double hex_spacing(int n) { return std::sqrt(2.0 * 1.5 * 2.0 / (std::sqrt(3.0) *
 // grid that resolves eps >= 0.025 around the eps_0 solution (stages 0.04, 0.03, 0.025) and one that
 // resolves eps >= last_eps around the eps = 0.025 solution (stages 0.02, 0.015, ..., last_eps).
 std::string shape_scene(const Shape& shape, int nodes, double last_eps) {
+  const bool fine = last_eps < 0.01 - 1e-12;
   const double eps0 = std::max(0.05, std::ceil(1000.0 * 2.05 * hex_spacing(nodes)) / 1000.0);
   std::ostringstream s;
   s << "[scene]\nname = \"" << shape.branch << "_" << shape.v << "\"\ncoordinates = \"axisymmetric\"\n"
@@ -62,9 +68,12 @@ std::string shape_scene(const Shape& shape, int nodes, double last_eps) {
     << "[vesicle.initial]\nshape = \"" << shape.branch << "\"\ncenter = [0.0, 1.0]\n"
     << "[vesicle.adaptivity]\nlloyd_iterations = 20\nstages = [\n"
     << "  { eps = 0.04, resolve = 0.025 },\n  { eps = 0.03, lloyd_iterations = 0 },\n"
-    << "  { eps = 0.025, lloyd_iterations = 0 },\n  { eps = 0.02, resolve = " << last_eps << " },\n";
+    << "  { eps = 0.025, lloyd_iterations = 0 },\n  { eps = 0.02, resolve = " << std::max(last_eps, 0.01) << " },\n";
   for (const double eps : {0.015, 0.01})
     if (eps >= last_eps - 1e-12) s << "  { eps = " << eps << ", lloyd_iterations = 0 },\n";
+  // Finer than 0.01: a fourth grid resolving last_eps around the eps = 0.01 solution (the grids
+  // before are the full run's, so its records up to 0.01 compare with shapes.json).
+  if (fine) s << "  { eps = 0.0075, resolve = " << last_eps << " },\n  { eps = " << last_eps << ", lloyd_iterations = 0 },\n";
   s << "]\n";
   return s.str();
 }
@@ -86,13 +95,15 @@ double constraint_rise(const ConstrainedResult& r) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  bool quick = false, log = false;
+  bool quick = false, fine = false, log = false;
   std::filesystem::path out = "build/bench";
   int nodes = 0;
   std::vector<Shape> shapes;
   for (int i = 1; i < argc; ++i) {
     if (std::strcmp(argv[i], "--quick") == 0) {
       quick = true;
+    } else if (std::strcmp(argv[i], "--fine") == 0) {
+      fine = true;
     } else if (std::strcmp(argv[i], "--log") == 0) {
       log = true;
     } else if (std::strcmp(argv[i], "--out") == 0 && i + 1 < argc) {
@@ -109,7 +120,7 @@ int main(int argc, char** argv) {
       }
       shapes.push_back({branch, std::atof(s.c_str() + colon + 1)});
     } else {
-      std::fprintf(stderr, "usage: bench_shapes [--quick] [--log] [--out DIR] [--nodes N] [--shape oblate:0.8 ...]\n");
+      std::fprintf(stderr, "usage: bench_shapes [--quick | --fine] [--log] [--out DIR] [--nodes N] [--shape oblate:0.8 ...]\n");
       return 2;
     }
   }
@@ -123,7 +134,12 @@ int main(int argc, char** argv) {
   // coarser start needs a larger eps by the resolution rule, and at eps = 0.07 (3000 nodes) the
   // oblate v = 0.9 energy lies below its eps = 0.04 value (8.0115 against 8.0286).
   if (nodes == 0) nodes = 6124;
-  const double last_eps = quick ? 0.015 : 0.01;
+  if (quick && fine) {
+    std::fprintf(stderr, "bench_shapes: --quick and --fine exclude each other\n");
+    return 2;
+  }
+  const double last_eps = quick ? 0.015 : fine ? 0.005 : 0.01;
+  const std::string name = fine ? "shapes_fine" : "shapes";
 
   nlohmann::json records = nlohmann::json::array();
   for (const Shape& shape : shapes) {
@@ -161,14 +177,37 @@ int main(int argc, char** argv) {
       records.push_back(std::move(r));
     }
     if (!run.failure.empty()) std::printf("%s v %.2f stopped: %s\n", shape.branch.c_str(), shape.v, run.failure.c_str());
+    if (fine) {
+      // The phase-field energy approaches the sharp one as E0 + a eps + b eps^2 (a from the
+      // interface's profile, b its next order): least squares over the converged stages eps <= 0.02.
+      std::vector<double> eps, energy;
+      for (const auto& st : run.stages)
+        if (st.eps <= 0.02 + 1e-12 && st.result.converged) eps.push_back(st.eps), energy.push_back(st.result.energy);
+      if (eps.size() >= 4) {
+        Eigen::MatrixXd A(eps.size(), 3);
+        Eigen::VectorXd b(eps.size());
+        for (std::size_t i = 0; i < eps.size(); ++i) {
+          A(Eigen::Index(i), 0) = 1, A(Eigen::Index(i), 1) = eps[i], A(Eigen::Index(i), 2) = eps[i] * eps[i];
+          b(Eigen::Index(i)) = energy[i];
+        }
+        const Eigen::VectorXd c = A.colPivHouseholderQr().solve(b);
+        const double residual = (A * c - b).cwiseAbs().maxCoeff();
+        nlohmann::json r{{"branch", shape.branch}, {"v", shape.v}, {"record", "extrapolation"}, {"fit", "E0 + a eps + b eps^2"},
+                         {"eps_fitted", eps}, {"E0", c(0)}, {"a", c(1)}, {"b", c(2)}, {"max_fit_residual", residual}};
+        if (std::isfinite(reference)) r["relative_error_sharp"] = (c(0) - reference) / reference;
+        std::printf("%-7s v %.2f  extrapolated E0 = %.5f (fit over %zu stages, residual %.1e)%s\n", shape.branch.c_str(), shape.v, c(0), eps.size(),
+                    residual, std::isfinite(reference) ? fmt::format(", {:+.3f} % from the sharp {:.5f}", 100 * (c(0) - reference) / reference, reference).c_str() : "");
+        records.push_back(std::move(r));
+      }
+    }
   }
 
   if (PetscSession::rank() == 0) {
-    write_text_atomically(out / "shapes.json", records.dump(1) + "\n");
-    const std::string command = "/usr/bin/python3 " LMEFORM_SOURCE_DIR "/scripts/plot_shapes.py '" + (out / "shapes.json").string() +
-                                "' '" + (out / "shapes.png").string() + "'";
+    write_text_atomically(out / (name + ".json"), records.dump(1) + "\n");
+    const std::string command = "/usr/bin/python3 " LMEFORM_SOURCE_DIR "/scripts/plot_shapes.py '" + (out / (name + ".json")).string() +
+                                "' '" + (out / (name + ".png")).string() + "'";
     if (std::system(command.c_str()) != 0) std::fprintf(stderr, "bench_shapes: the plot script failed\n");
-    std::printf("wrote %s and shapes.png\n", (out / "shapes.json").c_str());
+    std::printf("wrote %s and %s.png\n", (out / (name + ".json")).c_str(), name.c_str());
   }
   return 0;
 }
