@@ -3,6 +3,8 @@
 #   make demo   - the main demo
 #   make test   - the whole test suite (unit, form FD checks, 2-rank MPI tests)
 #   make bench  - the benchmarks in quick mode; JSON lands in build/bench/
+#   make bench-full - the long benchmarks: the vesicle shape family down to eps = 0.005
+#                  (build/bench/shapes_fine.json, hours on one core)
 #   make compare - Stokes and the cantilever: lmeform against FEniCSx; results in build/compare/
 
 BUILD_DIR ?= build
@@ -10,7 +12,7 @@ BUILD_TYPE ?= Release
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?=
 
-.PHONY: all deps configure build test demo bench compare clean
+.PHONY: all deps configure build test demo bench bench-full compare clean
 
 all: build
 
@@ -31,6 +33,9 @@ demo: build
 
 bench: build
 	bash scripts/run-benchmarks.sh $(BUILD_DIR)
+
+bench-full: build
+	$(BUILD_DIR)/tests/solvers/bench_shapes --fine --out $(BUILD_DIR)/bench
 
 compare: build
 	bash demos/stokes/compare.sh $(BUILD_DIR)
