@@ -5,7 +5,8 @@
 #   make bench  - the benchmarks in quick mode; JSON lands in build/bench/
 #   make bench-full - the long benchmarks: the vesicle shape family down to eps = 0.005
 #                  (build/bench/shapes_fine.json, hours on one core)
-#   make compare - Stokes and the cantilever: lmeform against FEniCSx; results in build/compare/
+#   make compare - Stokes, the cantilever and fracture (SENT, SENS at l = 0.03): lmeform against
+#                  FEniCSx; results in build/compare/
 
 BUILD_DIR ?= build
 BUILD_TYPE ?= Release
@@ -40,6 +41,7 @@ bench-full: build
 compare: build
 	bash demos/stokes/compare.sh $(BUILD_DIR)
 	bash demos/solids/compare.sh $(BUILD_DIR)
+	bash demos/fracture/compare.sh $(BUILD_DIR) --quick
 
 clean:
 	rm -rf $(BUILD_DIR)
