@@ -21,6 +21,11 @@ if [ -x "$lmeform_exe" ]; then
     echo "benchmark fracture gamma_convergence failed" >&2
     status=1
   fi
+  echo "== fracture: the opened band's energy (demos/fracture/opening_study.py, about 30 s)"
+  if ! /usr/bin/python3 demos/fracture/opening_study.py "$lmeform_exe" "$out"; then
+    echo "benchmark fracture opening_study failed" >&2
+    status=1
+  fi
   echo "== forming: upsetting of a viscoplastic billet (demos/forming/forming_study.py)"
   if ! /usr/bin/python3 demos/forming/forming_study.py --lmeform "$lmeform_exe" --json "$out/forming.json" --work "$build/forming" --quick; then
     echo "benchmark forming failed" >&2
