@@ -15,20 +15,7 @@ build=${1:-build}
 quick=0
 [ "${2:-}" = "--quick" ] && quick=1
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
-py=/usr/bin/python3   # the Debian python: python3-dolfinx is installed for it
-export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
-export OMP_NUM_THREADS=${OMP_NUM_THREADS:-1} OPENBLAS_NUM_THREADS=${OPENBLAS_NUM_THREADS:-1}
-
-if ! "$py" -c 'import dolfinx, dolfinx.fem.petsc, matplotlib, h5py' >/dev/null 2>&1; then
-  echo "== installing python3-dolfinx python3-matplotlib python3-h5py"
-  sudo=()
-  [ "$(id -u)" -ne 0 ] && sudo=(sudo)
-  export DEBIAN_FRONTEND=noninteractive
-  if ! "${sudo[@]}" apt-get install -y --no-install-recommends python3-dolfinx python3-matplotlib python3-h5py; then
-    "${sudo[@]}" apt-get update
-    "${sudo[@]}" apt-get install -y --no-install-recommends python3-dolfinx python3-matplotlib python3-h5py
-  fi
-fi
+source "$here/../../scripts/fenicsx-env.sh"
 
 out="$build/compare/fracture"
 mkdir -p "$out"
