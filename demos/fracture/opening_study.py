@@ -13,6 +13,9 @@ import sys
 import tempfile
 import time
 
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from gamma_convergence import merge_records  # noqa: E402  (one writer of fracture.json's records)
+
 HERE = pathlib.Path(__file__).resolve().parent
 GC, L, E = 1.0, 0.02, 1.0
 
@@ -45,10 +48,7 @@ def main():
             records.append({"case": "opening", "model": "at2", "l": L, "h_min": spacing, "delta": delta,
                             "delta_over_sqrt_gc_l_over_e": [d / scale for d in delta], "band_energy_per_gc": energy,
                             "reference": 1.0, "rel_error": [e - 1.0 for e in energy], "wall_s": wall})
-    path = out / "fracture.json"
-    old = json.loads(path.read_text()) if path.exists() else {"records": []}
-    old["records"] = [r for r in old.get("records", []) if r.get("case") != "opening"] + records
-    path.write_text(json.dumps(old, indent=1))
+    merge_records(out / "fracture.json", records, {"opening"})
     try:
         import matplotlib
         matplotlib.use("Agg")
