@@ -3,7 +3,11 @@
 # AT2 and the fourth-order model on a coarse bar (h = l/2) within 2 % of their closed-form energies
 # (measured: 9.7e-4, 1.6e-4, 5.2e-4: demos/fracture/gamma_convergence.py); irreversibility under
 # unloading (v never increases from one step to the next, and does fall while loading); a
-# load-stepped run stopped half way and restarted equals the uninterrupted run.
+# load-stepped run stopped half way and restarted equals the uninterrupted run. In 2D, nodes that
+# follow the crack ([nodes] adapt, demos/fracture/sent_adaptive.toml made coarse): the notched square
+# breaks, the steps whose damage reached coarse nodes are solved again on refined ones, every node
+# near the crack ends fine enough, the dissipated energy never falls across a refinement, and a
+# run restarted before a refinement equals the uninterrupted one; a followed field that is no unknown and a scene without load steps are refused.
 #
 #   test_fracture.sh LMEFORM OUT_DIR
 set -euo pipefail
@@ -112,6 +116,31 @@ run coarse_profile
 grep -q "^lmeform: warning: .*recommends v > 0.5 or l >= 1.7\*spacing.* at the start state" "$out/coarse_profile.log" ||
   fail "coarse_profile: a start crack on nodes too coarse for l was not warned of"
 
+# Nodes that follow the crack: the SENT demo at l = 0.06 on nodes of spacing 0.1, refined to 0.027 (l/2.2)
+# within 0.09 of v < 0.8, pulled to complete failure in 7 steps (breaks at step 6).
+sed -e 's#^spacing = 0.05#spacing = 0.1#' -e 's#spacing = 0.0068, width = 0.03#spacing = 0.027, width = 0.09#' -e 's#^l = 0.015#l = 0.06#' \
+  -e 's# - 0.0075, 0)/l)# - 0.03, 0)/l)#' -e 's#^values = { delta = .*#ramp = { delta = [0.0, 0.007] }#' -e 's#^count = 125#count = 7#' \
+  -e 's#^name = "sent_adaptive"#name = "adaptive"#' "$demo/sent_adaptive.toml" > "$out/adaptive.toml"
+grep -q '^ramp = { delta = \[0.0, 0.007\] }$' "$out/adaptive.toml" && grep -q 'spacing = 0.027, width = 0.09' "$out/adaptive.toml" ||
+  fail "could not make the adaptive scene from demos/fracture/sent_adaptive.toml"
+run adaptive
+grep -q "^start: v < 0.8 within 0.09 of .* nodes coarser than 1.25 x 0.027" "$out/adaptive.log" || fail "adaptive: the notch was not refined at the start"
+grep -q "^  step [0-9]*: v < 0.8 .* solving the step again" "$out/adaptive.log" || fail "adaptive: no step was refined and solved again"
+grep -q "recommends" "$out/adaptive.log" && fail "adaptive: the crack band was warned of as under-resolved: the nodes did not follow it"
+sed -e 's#^count = 7#count = 7\nuntil = 5#' "$out/adaptive.toml" > "$out/adaptive_restarted.toml"
+run adaptive_restarted
+"$lmeform" run "$out/adaptive.toml" --output "$out/adaptive_restarted" --restart > "$out/adaptive_restart.log" 2>&1 ||
+  { tail -20 "$out/adaptive_restart.log"; fail "the adaptive run's --restart failed (log: $out/adaptive_restart.log)"; }
+grep -q "^  step 6: v < 0.8 .* solving the step again" "$out/adaptive_restart.log" ||
+  fail "adaptive restart: step 6 was not refined after the restart (the test means to restart before a refinement)"
+sed -e 's#field = "v"#field = "w"#' "$out/adaptive.toml" > "$out/adaptive_unknown.toml"
+if "$lmeform" run "$out/adaptive_unknown.toml" --output "$out/adaptive_unknown" > "$out/adaptive_unknown.log" 2>&1; then fail "adapt.field = w was not refused"; fi
+grep -q "key 'nodes.adapt.field': 'w' is no unknown of the forms" "$out/adaptive_unknown.log" || { cat "$out/adaptive_unknown.log"; fail "adapt.field = w: no clear message"; }
+sed -e '/^\[steps\]/,$d' "$out/adaptive.toml" > "$out/adaptive_static.toml"
+if "$lmeform" run "$out/adaptive_static.toml" > "$out/adaptive_static.log" 2>&1; then fail "adapt without [steps] was not refused"; fi
+grep -q "key 'nodes.adapt': nodes follow a field through load steps (\[steps\]); this scene is solved by the staggered" "$out/adaptive_static.log" ||
+  { cat "$out/adaptive_static.log"; fail "adapt without [steps]: no clear message"; }
+
 /usr/bin/python3 - "$out" <<'PY'
 import json, sys, pathlib
 import h5py, numpy as np
@@ -149,6 +178,48 @@ for name in ("u", "v"):
     print(f"restart: |{name} uninterrupted - restarted|_max = {d:.1e}")
     if not d <= 1e-12:
         print(f"FAIL: the restarted run's {name} differs from the uninterrupted one by {d:.1e}"); ok = False
+
+# Nodes that followed the crack.
+from scipy.spatial import cKDTree
+history = json.loads((out / "adaptive" / "history.json").read_text())
+rows = history["steps"] if isinstance(history, dict) else history
+def quantity(row, name):
+    return row["quantities"][name] if "quantities" in row else row[name]
+force = [quantity(r, "force") for r in rows]
+dissipated = [quantity(r, "dissipated") for r in rows]
+nodes = [quantity(r, "nodes") for r in rows]
+print("adaptive: nodes per step", [int(n) for n in nodes], "force", ", ".join(f"{f:.3g}" for f in force))
+if not nodes[-1] > nodes[0]:
+    print("FAIL: the node set did not grow with the crack"); ok = False
+if not force[-1] < 0.2 * max(force):
+    print(f"FAIL: the notched square did not break (last force {force[-1]:.3g}, peak {max(force):.3g})"); ok = False
+falls = [(a - b) / a for a, b in zip(dissipated, dissipated[1:])]
+print(f"adaptive: largest relative fall of the dissipated energy from step to step {max(falls):.1e}")
+if max(falls) > 1e-3:
+    print("FAIL: the dissipated energy fell across a step (a refinement healed the crack)"); ok = False
+last = sorted((out / "adaptive" / "series").glob("adaptive_*.h5"))[-1]
+with h5py.File(last, "r") as f:
+    x = np.array(f["nodes"])
+    v = np.array(f["fields"]["v"]).ravel()
+tree = cKDTree(x)
+nearest = tree.query(x, k=2)[0][:, 1]
+crack = x[v < 0.8]
+near = cKDTree(crack).query(x)[0] <= 0.09
+worst = float(np.max(nearest[near]))
+print(f"adaptive: {int(near.sum())} nodes within 0.09 of v < 0.8, their largest nearest distance {worst:.4f} (allowed 1.25 x 0.027)")
+if not worst <= 1.25 * 0.027:
+    print("FAIL: nodes near the final crack are coarser than the adaptation asks"); ok = False
+whole = out / "adaptive" / "series" / "adaptive_000007.h5"
+parts = out / "adaptive_restarted" / "series" / "adaptive_000007.h5"
+with h5py.File(whole, "r") as a, h5py.File(parts, "r") as b:
+    if a["nodes"].shape != b["nodes"].shape or np.max(np.abs(np.array(a["nodes"]) - np.array(b["nodes"]))) > 0:
+        print("FAIL: the restarted adaptive run ended on other nodes than the uninterrupted one"); ok = False
+    else:
+        for name in ("u", "v"):
+            d = float(np.max(np.abs(np.array(a["fields"][name]) - np.array(b["fields"][name]))))
+            print(f"adaptive restart: |{name} uninterrupted - restarted|_max = {d:.1e}")
+            if not d <= 1e-12:
+                print(f"FAIL: the restarted adaptive run's {name} differs from the uninterrupted one by {d:.1e}"); ok = False
 sys.exit(0 if ok else 1)
 PY
 echo "PASS"

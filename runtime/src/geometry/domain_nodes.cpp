@@ -151,7 +151,8 @@ void add_face_nodes(const Domain& domain, const DomainFace& f, const SpacingFunc
 
 }  // namespace
 
-NodeSet domain_nodes(const Domain& domain, const SpacingFunction& spacing, std::uint64_t seed, std::size_t max_nodes) {
+NodeSet domain_nodes(const Domain& domain, const SpacingFunction& spacing, std::uint64_t seed, std::size_t max_nodes,
+                     std::span<const double> kept) {
   if (!spacing.h || !(spacing.h_min > 0)) throw std::invalid_argument("domain_nodes: the spacing needs a function and h_min > 0");
   const int dim = domain.dim();
   const Box& box = domain.bounds();
@@ -171,6 +172,14 @@ NodeSet domain_nodes(const Domain& domain, const SpacingFunction& spacing, std::
   SplitMix64 rng(seed);
   if (dim == 3)
     for (const auto& f : domain.faces()) add_face_nodes(domain, f, spacing, rng, cloud);
+  // Interior nodes of an earlier set stay where they are (a field on them is carried exactly) unless a
+  // boundary node took their place.
+  for (std::size_t a = 0; a * std::size_t(dim) < kept.size(); ++a) {
+    Point x{};
+    for (std::size_t i = 0; i < std::size_t(dim); ++i) x[i] = kept[a * std::size_t(dim) + i];
+    const double h = spacing_at(spacing, x, dim);
+    if (domain.depth(std::span<const double>(x.data(), std::size_t(dim))) >= 0.25 * h && cloud.free(x, 0.5 * h)) cloud.add(x);
+  }
   std::vector<Point> axes;
   std::vector<double> extent;
   for (int i = 0; i < dim; ++i) {

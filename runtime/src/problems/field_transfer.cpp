@@ -73,10 +73,14 @@ std::vector<double> interpolate_nodal_field(const NodeSet& old_nodes, std::span<
 }
 
 std::vector<double> fit_nodal_values(const NodeSet& nodes, std::span<const double> values, double gamma, const LmeOptions& lme,
-                                     int iterations) {
-  if (values.size() != nodes.size())
-    throw std::invalid_argument(fmt::format("fit_nodal_values: {} values for {} nodes", values.size(), nodes.size()));
+                                     int iterations, std::span<const double> held) {
+  if (values.size() != nodes.size() || (!held.empty() && held.size() != nodes.size()))
+    throw std::invalid_argument(fmt::format("fit_nodal_values: {} values and {} held coefficients for {} nodes", values.size(), held.size(),
+                                            nodes.size()));
   std::vector<double> phi(values.begin(), values.end());
+  auto is_held = [&](std::size_t node) { return !held.empty() && !std::isnan(held[node]); };
+  for (std::size_t node = 0; node < nodes.size(); ++node)
+    if (is_held(node)) phi[node] = held[node];
   if (iterations <= 0) return phi;
   const LmeBasis basis(nodes, std::vector<double>(nodes.size(), gamma), lme);
   std::vector<std::vector<int>> rows(nodes.size());
@@ -90,7 +94,7 @@ std::vector<double> fit_nodal_values(const NodeSet& nodes, std::span<const doubl
     for (std::size_t node = 0; node < nodes.size(); ++node) {
       double v = 0;
       for (std::size_t m = 0; m < rows[node].size(); ++m) v += weights[node][m] * phi[std::size_t(rows[node][m])];
-      next[node] = phi[node] + values[node] - v;
+      next[node] = is_held(node) ? phi[node] : phi[node] + values[node] - v;
     }
     phi.swap(next);
   }

@@ -57,8 +57,10 @@ std::vector<double> evaluate_with_cell_fallback(const LmeBasis& basis, std::span
 /// interpolating (Σ_a p_a(x_b) φ_a ≠ φ_b), so using values as coefficients smooths the field once
 /// more (an interface widens). Richardson iterations on P φ = g, P_ba = p_a(x_b), an averaging
 /// operator with eigenvalues in (0, 1]; 0 iterations returns the values.
+/// `held` (optional, one per node): coefficients known already (a node kept from the set the
+/// values came from), NaN for the free ones; only the free ones are iterated.
 [[nodiscard]] std::vector<double> fit_nodal_values(const NodeSet& nodes, std::span<const double> values, double gamma,
-                                                   const LmeOptions& lme, int iterations);
+                                                   const LmeOptions& lme, int iterations, std::span<const double> held = {});
 
 /// The L2 projection onto the LME space of `nodes` of a field known only at weighted points (a
 /// field carried by quadrature points, as a material field after a motion): the coefficients c

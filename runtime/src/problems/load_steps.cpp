@@ -10,9 +10,11 @@
 #include <nlohmann/json.hpp>
 
 #include "lmeform/delaunay.hpp"
+#include "lmeform/domain.hpp"
 #include "lmeform/output.hpp"
 #include "lmeform/scene_table.hpp"
 #include "lmeform/stopwatch.hpp"
+#include "node_adaptation.hpp"
 #include "quantities.hpp"
 #include "requirements.hpp"
 #include "stationary.hpp"
@@ -97,6 +99,16 @@ class LoadStepper {
         for (const auto& [n, v] : bound_.constants) names.push_back(n);
         throw SceneError(fmt::format("{}: '{}' is no constant of the forms{}", c.where, c.name, did_you_mean(c.name, names)));
       }
+    if (const auto& adapt = ctx.scene->nodes.adapt) {
+      std::vector<std::string> names;
+      for (const auto& f : bound_.layout.fields) names.push_back(f.name);
+      if (!bound_.layout.has(adapt->field))
+        throw SceneError(fmt::format("{}: key 'nodes.adapt.field': '{}' is no unknown of the forms{}", adapt->where, adapt->field,
+                                     did_you_mean(adapt->field, names)));
+      if (bound_.layout.field(adapt->field).components != 1)
+        throw SceneError(fmt::format("{}: key 'nodes.adapt.field': '{}' has {} components; the nodes follow a scalar field", adapt->where,
+                                     adapt->field, bound_.layout.field(adapt->field).components));
+    }
   }
 
   LoadStepRun run();
@@ -111,6 +123,10 @@ class LoadStepper {
   void record(int step, double lambda, const ProblemResult& result, int cuts);
   void write_outputs(int step);
   void check_state_requirements(int step);
+  [[nodiscard]] bool adapting() const noexcept { return ctx_.scene->nodes.adapt.has_value(); }
+  void rebuild(NodeSet nodes, std::vector<double> start);
+  void refine_start();
+  [[nodiscard]] bool follow_field(int step, std::vector<double> before, double lambda_before);
   void write_history() const;
   void resume();
   [[nodiscard]] fs::path path(const std::string& suffix) const { return ctx_.output_directory / (ctx_.scene->name + suffix); }
@@ -132,17 +148,109 @@ class LoadStepper {
   std::map<std::string, std::size_t> requirement_failures_;  ///< condition -> failing nodes when last warned
 };
 
+/// Refinements of one step before the run goes on with nodes still too coarse (and says so).
+constexpr int kMaxRefinementsPerStep = 4;
+
 void LoadStepper::setup() {
   input_.nodes = initial_nodes(*ctx_.scene, ctx_.log);
-  input_.log = ctx_.log;
   input_.lme = bound_.lme(AxisParity::even);
   set_load(0.0);  // the expressions of the start and the Dirichlet values at step 0
+  // Nodes that follow a field are judged (the forms' requirements) once they have followed it.
+  input_.log = adapting() ? nullptr : ctx_.log;
   space_ = build_problem_space(ctx_.comm, bound_, input_);
+  input_.log = ctx_.log;
   cells_ = delaunay(input_.nodes);
   if (!ctx_.output_directory.empty()) series_.emplace(ctx_.output_directory, ctx_.scene->name);
   u_ = space_.primary->create_vector();
   trial_ = space_.primary->create_vector();
   set_from_original(*space_.disc, space_.state, bound_.layout.dofs_per_node, u_);
+  if (adapting()) {
+    if (!ctx_.restart) refine_start();
+    check_requirements(bound_, space_, ctx_.log);
+  }
+}
+
+/// The problem on other nodes, from `start` (original order; empty: the scene's [initial]). A
+/// carried start may overshoot a bound by the transfer's error: it is moved onto it.
+void LoadStepper::rebuild(NodeSet nodes, std::vector<double> start) {
+  input_.nodes = std::move(nodes);
+  input_.initial = std::move(start);
+  input_.clamp_start_to_bounds = !input_.initial.empty();
+  space_ = build_problem_space(ctx_.comm, bound_, input_);
+  input_.initial.clear();
+  cells_ = delaunay(input_.nodes);
+  u_ = space_.primary->create_vector();
+  trial_ = space_.primary->create_vector();
+  set_from_original(*space_.disc, space_.state, bound_.layout.dofs_per_node, u_);
+}
+
+/// An initial field (a notch) already below the threshold gets its refinement before any solve.
+/// Silent about the forms' requirements: the caller checks them on the nodes it ends with.
+void LoadStepper::refine_start() {
+  const SceneAdaptation& adapt = *ctx_.scene->nodes.adapt;
+  for (int round = 0; round < kMaxRefinementsPerStep; ++round) {
+    const NodeSet marked = marked_nodes(adapt, bound_.layout, input_.nodes, space_.state);
+    const CoarseNodes coarse = coarse_nodes(*ctx_.scene, input_.nodes, marked);
+    if (coarse.count == 0) return;
+    const Stopwatch clock;
+    const std::size_t before = input_.nodes.size();
+    input_.log = nullptr;
+    rebuild(refined_nodes(*ctx_.scene, input_.nodes, marked), {});
+    input_.log = ctx_.log;
+    if (ctx_.log != nullptr)
+      *ctx_.log << fmt::format("start: {} < {:.3g} within {:.3g} of {} nodes coarser than {} x {:.3g} (up to {:.3g}): {} -> {} nodes, {:.2f} s\n",
+                               adapt.field, adapt.below, adapt.width, coarse.count, kCoarseRatio, adapt.spacing, coarse.coarsest, before,
+                               input_.nodes.size(), clock.seconds());
+  }
+}
+
+/// After a converged step: where the followed field fell below its threshold near nodes too coarse
+/// for it, new nodes, both the state before the step (the irreversibility bound) and the step's
+/// solution (the start) carried to them, and the step solved again — until the nodes suffice.
+bool LoadStepper::follow_field(int step, std::vector<double> before, double lambda_before) {
+  const SceneAdaptation& adapt = *ctx_.scene->nodes.adapt;
+  const int bs = bound_.layout.dofs_per_node;
+  const double gamma = bound_.discretization.gamma;
+  for (int round = 0;; ++round) {
+    const std::vector<double> state = to_original(*space_.disc, u_, bs);
+    const NodeSet marked = marked_nodes(adapt, bound_.layout, input_.nodes, state);
+    const CoarseNodes coarse = coarse_nodes(*ctx_.scene, input_.nodes, marked);
+    if (coarse.count == 0) return true;
+    if (round == kMaxRefinementsPerStep) {
+      const std::string message = fmt::format("step {}: {} nodes within {:.3g} of {} < {:.3g} are still coarser than {} x {:.3g} after {} refinements",
+                                              step, coarse.count, adapt.width, adapt.field, adapt.below, kCoarseRatio, adapt.spacing, round);
+      run_.warnings.push_back(message);
+      if (ctx_.log != nullptr) *ctx_.log << "lmeform: warning: " << message << std::endl;
+      return true;
+    }
+    const Stopwatch clock;
+    const NodeSet old_nodes = input_.nodes;
+    const double energy_before = space_.energy(u_);
+    NodeSet nodes = refined_nodes(*ctx_.scene, old_nodes, marked);
+    std::size_t kept = 0;
+    std::vector<double> start = transfer_state(old_nodes, before, bs, gamma, input_.lme, nodes, adapt.fit_iterations, &kept);
+    const std::vector<double> solution = transfer_state(old_nodes, state, bs, gamma, input_.lme, nodes, adapt.fit_iterations);
+    rebuild(std::move(nodes), start);  // at the step's load: the bound "previous" is the state before the step
+    before = to_original(*space_.disc, u_, bs);
+    set_from_original(*space_.disc, solution, bs, u_);
+    if (space_.bounded()) {
+      LMEFORM_PETSC_CHECK(VecPointwiseMax(u_, u_, space_.lower_bound));
+      LMEFORM_PETSC_CHECK(VecPointwiseMin(u_, u_, space_.upper_bound));
+    }
+    space_.impose_dirichlet_values(bound_, u_);
+    const double energy_after = space_.energy(u_);
+    ++run_.refinements;
+    if (ctx_.log != nullptr)
+      *ctx_.log << fmt::format("  step {}: {} < {:.3g} within {:.3g} of {} nodes coarser than {} x {:.3g} (up to {:.3g}): {} -> {} nodes ({} kept), "
+                               "energy carried {:+.2e} (relative), {:.2f} s; solving the step again\n",
+                               step, adapt.field, adapt.below, adapt.width, coarse.count, kCoarseRatio, adapt.spacing, coarse.coarsest,
+                               old_nodes.size(), input_.nodes.size(), kept, (energy_after - energy_before) / std::max(std::abs(energy_before), 1e-300),
+                               clock.seconds());
+    set_load(lambda_before);
+    lambda_ = lambda_before;
+    run_.history.pop_back();
+    if (!advance(step)) return false;
+  }
 }
 
 void LoadStepper::set_load(double lambda) {
@@ -209,6 +317,7 @@ void LoadStepper::record(int step, double lambda, const ProblemResult& result, i
     s.quantities.emplace_back("active_upper", double(result.active_upper));
   }
   s.quantities.insert(s.quantities.end(), result.solver_figures.begin(), result.solver_figures.end());
+  if (adapting()) s.quantities.emplace_back("nodes", double(input_.nodes.size()));
   s.counts = {{"iterations", result.iterations}, {"cuts", cuts}};
   s.wall_s = clock_.seconds();
   run_.history.push_back(s);
@@ -262,13 +371,16 @@ void LoadStepper::resume() {
     throw std::runtime_error(fmt::format("--restart: no checkpoint in {} (expected {} and history.json)", ctx_.output_directory.string(),
                                          checkpoint.filename().string()));
   const FieldFile cp = read_field_hdf5(checkpoint);
-  if (cp.nodes.coords != input_.nodes.coords)
-    throw std::runtime_error(fmt::format("--restart: {} was written for other nodes than the scene's", checkpoint.string()));
   const int step = static_cast<int>(std::get<std::int64_t>(cp.attributes.at("step")));
-  set_from_original(*space_.disc, cp.fields.at("state").values, bound_.layout.dofs_per_node, u_);
-  space_.update_previous_bounds(bound_, u_);  // irreversibility continues from the checkpoint, not from the start
   lambda_ = std::get<double>(cp.attributes.at("load"));
   set_load(lambda_);
+  if (cp.nodes.coords != input_.nodes.coords) {
+    // Nodes that followed a field are the checkpoint's own; any other scene's nodes are fixed.
+    if (!adapting()) throw std::runtime_error(fmt::format("--restart: {} was written for other nodes than the scene's", checkpoint.string()));
+    rebuild(cp.nodes, cp.fields.at("state").values);
+  }
+  set_from_original(*space_.disc, cp.fields.at("state").values, bound_.layout.dofs_per_node, u_);
+  space_.update_previous_bounds(bound_, u_);  // irreversibility continues from the checkpoint, not from the start
   run_.history = read_step_history(ctx_.output_directory, kHistoryFormat, step);
   series_->restore(restored_series(*series_, ctx_.output_directory, run_.history, bound_.layout, bound_.dim));
   first_step_ = step + 1;
@@ -287,8 +399,11 @@ LoadStepRun LoadStepper::run() {
       ProblemResult none;
       none.converged = true;
       record(0, 0.0, none, 0);
-    } else if (!advance(step)) {
-      break;
+    } else {
+      const double lambda_before = lambda_;
+      std::vector<double> before;
+      if (adapting()) before = to_original(*space_.disc, u_, bound_.layout.dofs_per_node);
+      if (!advance(step) || (adapting() && !follow_field(step, std::move(before), lambda_before))) break;
     }
     check_state_requirements(step);
     write_outputs(step);
@@ -313,6 +428,7 @@ void describe_steps(const LoadStepSettings& settings, const LoadStepRun& run, Ru
                                   [&] { long c = 0; for (const auto& s : run.history) c += s.count("cuts"); return c; }()));
   for (const auto& [name, v] : last.constants) report.row(name, fmt::format("{:.10g}", v));
   describe_quantities(last.quantities, report);
+  if (run.refinements > 0) report.row("refinements", fmt::format("{} (the nodes followed the field: steps solved again)", run.refinements));
 }
 
 class LoadStepsDriver final : public ProblemDriver {

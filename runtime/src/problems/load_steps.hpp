@@ -55,6 +55,7 @@ struct LoadStepRun {
   std::vector<StepRow> history;     ///< position: the load λ ∈ [0, count]; counts: iterations, cuts
   std::string failure;          ///< empty when every step converged
   std::vector<std::string> warnings;  ///< a state requirement that stopped holding at a step
+  int refinements = 0;          ///< new node sets ([nodes] adapt), each followed by a step solved again
   double wall_s = 0;
 };
 

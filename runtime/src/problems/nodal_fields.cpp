@@ -13,6 +13,7 @@
 #include "lmeform/node_sets.hpp"
 #include "lmeform/output.hpp"
 #include "lmeform/stopwatch.hpp"
+#include "node_adaptation.hpp"
 #include "problem_space.hpp"
 
 namespace lmeform::problems {
@@ -75,25 +76,6 @@ NodeSet cvt_nodes(const Scene& scene, std::ostream* log) {
   return nodes;
 }
 
-/// The spacing of generated nodes: nodes.spacing, finer near each refinement's part or path.
-SpacingFunction scene_spacing(const Scene& scene) {
-  const double h0 = scene.nodes.spacing;
-  double h_min = h0;
-  for (const auto& r : scene.nodes.refine) h_min = std::min(h_min, r.spacing);
-  const Domain& geometry = scene.geometry;
-  const int dim = scene.dim();
-  const std::vector<SceneRefinement> refine = scene.nodes.refine;
-  return {[h0, refine, &geometry, dim](std::span<const double> x) {
-            double h = h0;
-            for (const auto& r : refine) {
-              const double d = r.part.empty() ? distance_to_polyline(x, r.path, dim) : geometry.distance_to_part(x, r.part);
-              h = std::min(h, r.spacing + r.grading * std::max(0.0, d - r.width));
-            }
-            return h;
-          },
-          h_min};
-}
-
 /// Every node of a previous run inside the domain (a point file is checked line by line).
 void check_inside(const Scene& scene, const NodeSet& nodes) {
   if (scene.geometry.is_box()) return;
@@ -127,7 +109,7 @@ NodeSet initial_nodes(const Scene& scene, std::ostream* log) {
   switch (scene.nodes.kind) {
     case SceneNodes::Kind::spacing:
       // A box without refinement keeps its uniform grid; anything else is generated for the domain.
-      if (scene.geometry.is_box() && scene.nodes.refine.empty()) return uniform_grid(scene.domain, scene.nodes.spacing);
+      if (scene.geometry.is_box() && scene.nodes.refine.empty() && !scene.nodes.adapt) return uniform_grid(scene.domain, scene.nodes.spacing);
       return domain_nodes(scene.geometry, scene_spacing(scene));
     case SceneNodes::Kind::counts: return uniform_grid(scene.domain, scene.nodes.counts);
     case SceneNodes::Kind::count: return cvt_nodes(scene, log);

@@ -3,6 +3,8 @@
 #include <array>
 #include <stdexcept>
 
+#include <fmt/format.h>
+
 #include "dynamics.hpp"
 #include "flow_steps.hpp"
 #include "load_steps.hpp"
@@ -41,7 +43,12 @@ std::span<const ProblemDriver* const> problem_drivers() { return all_drivers(); 
 
 const ProblemDriver& driver_for(const Scene& scene) {
   for (const ProblemDriver* d : all_drivers())
-    if (d->claims(scene)) return *d;
+    if (d->claims(scene)) {
+      if (scene.nodes.adapt && d != &load_steps_driver())
+        throw SceneError(fmt::format("{}: key 'nodes.adapt': nodes follow a field through load steps ([steps]); this scene is solved by the {} "
+                                     "driver", scene.nodes.adapt->where, d->name()));
+      return *d;
+    }
   throw std::logic_error("no problem driver claims the scene " + scene.source);
 }
 

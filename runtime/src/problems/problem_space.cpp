@@ -262,7 +262,7 @@ void make_assemblers(const BoundScene& b, const ProblemInput& input, const std::
 
 /// The bound vectors from [bounds]: values at the nodes, or the start for "previous"; the start must
 /// lie within them.
-void make_bounds(const BoundScene& b, ProblemSpace& space) {
+void make_bounds(const BoundScene& b, const ProblemInput& input, ProblemSpace& space) {
   if (b.bounds.empty()) return;
   const Discretization& disc = *space.disc;
   const int bs = b.layout.dofs_per_node;
@@ -279,6 +279,7 @@ void make_bounds(const BoundScene& b, ProblemSpace& space) {
         const std::size_t dof = a * std::size_t(bs) + std::size_t(bb.field.offset + c);
         if (bb.lower) fill(*bb.lower, space.nodes.point(a)), lower[dof] = value[std::size_t(c)];
         if (bb.upper) fill(*bb.upper, space.nodes.point(a)), upper[dof] = value[std::size_t(c)];
+        if (input.clamp_start_to_bounds && lower[dof] <= upper[dof]) space.state[dof] = std::clamp(space.state[dof], lower[dof], upper[dof]);
         if (bb.lower_previous) lower[dof] = space.state[dof];
         if (bb.upper_previous) upper[dof] = space.state[dof];
         if (lower[dof] > upper[dof])
@@ -385,7 +386,7 @@ ProblemSpace build_problem_space(MPI_Comm comm, const BoundScene& b, const Probl
   impose_dirichlet(b, input, space);
   make_assemblers(b, input, targets, scales, space);
   set_initial_targets(b, input, space);
-  make_bounds(b, space);
+  make_bounds(b, input, space);
   check_requirements(b, space, input.log);
   return space;
 }

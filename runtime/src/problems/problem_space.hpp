@@ -33,6 +33,9 @@ struct ProblemInput {
   std::ostream* log = nullptr;
   /// Only evaluate the energies and constraints at the start (ProblemResult::values), no solve.
   bool evaluate_only = false;
+  /// A start outside [bounds] is moved onto them instead of refused (a state carried to new nodes,
+  /// whose fitted coefficients overshoot a bound by the transfer's error).
+  bool clamp_start_to_bounds = false;
   /// Cells and quadrature points carried from a previous reference configuration (a reset).
   std::optional<CarriedQuadrature> carried;
   /// Quadrature data given by value, by name (every global point, the datum's size each): they

@@ -44,7 +44,7 @@ void read_scene_section(const Section& root, Scene& s) {
 
 void read_nodes(const Section& root, const std::filesystem::path& folder, Scene& s) {
   const Section t = root.table("nodes", {"spacing", "counts", "count", "lloyd_iterations", "file", "gamma", "spacing_smoothing",
-                                         "quadrature_points", "refine", "boundary_points", "integration", "basis", "partition"});
+                                         "quadrature_points", "refine", "adapt", "boundary_points", "integration", "basis", "partition"});
   SceneNodes& n = s.nodes;
   const char* const kinds[] = {"spacing", "counts", "count", "file"};
   std::vector<std::string> present;
@@ -120,6 +120,12 @@ void read_nodes(const Section& root, const std::filesystem::path& folder, Scene&
     n.refine = scene_detail::read_refinements(t, s);
     for (const auto& r : n.refine)
       if (r.spacing > n.spacing) t.fail_key("refine", "asks for a spacing " + format_number(r.spacing) + " coarser than nodes.spacing = " + format_number(n.spacing));
+  }
+  if (t.has("adapt")) {
+    if (n.kind != SceneNodes::Kind::spacing) t.fail_key("adapt", "refines the nodes generated for 'nodes.spacing'");
+    n.adapt = scene_detail::read_adaptation(t);
+    if (n.adapt->spacing > n.spacing)
+      t.fail_key("adapt", "asks for a spacing " + format_number(n.adapt->spacing) + " coarser than nodes.spacing = " + format_number(n.spacing));
   }
   n.gamma = t.positive("gamma", t.number("gamma", n.gamma));
   // The LME support radius is h sqrt(-ln(tol0) / gamma): above -ln(tol0) it is shorter than the

@@ -171,6 +171,19 @@ std::vector<SceneRefinement> read_refinements(const SceneTable& nodes, const Sce
   return out;
 }
 
+SceneAdaptation read_adaptation(const SceneTable& nodes) {
+  const SceneTable t = nodes.table_of("adapt", *nodes.node("adapt"), {"field", "below", "spacing", "width", "grading", "fit_iterations"});
+  SceneAdaptation a;
+  a.where = where_of(nodes, "adapt");
+  a.field = t.string("field");
+  a.below = t.number("below", a.below);
+  a.spacing = t.positive("spacing", t.number("spacing"));
+  a.width = t.non_negative("width", t.number("width", 0.0));
+  a.grading = t.positive("grading", t.number("grading", a.grading));
+  a.fit_iterations = t.at_least("fit_iterations", t.integer("fit_iterations", a.fit_iterations), 0);
+  return a;
+}
+
 void read_quantities(const SceneTable& root, Scene& s) {
   const auto table = root.optional_any_table("quantities");
   if (!table) return;

@@ -22,4 +22,7 @@ void read_bounds(const SceneTable& root, Scene& s);
 /// The `refine` entries of [nodes] (after [domain]).
 [[nodiscard]] std::vector<SceneRefinement> read_refinements(const SceneTable& nodes, const Scene& s);
 
+/// The `adapt` table of [nodes] (present).
+[[nodiscard]] SceneAdaptation read_adaptation(const SceneTable& nodes);
+
 }  // namespace lmeform::scene_detail
