@@ -102,9 +102,9 @@ struct SpacingFunction {
 /// lattice at h_min / 4, a candidate taken when no node is closer than h(x) and it lies at least
 /// h(x) / 2 inside. Deterministic for a given seed. Throws std::invalid_argument for a spacing that
 /// would give more than `max_nodes` nodes.
-/// `kept`: interior points of an earlier set (coordinates interleaved) taken before the sample,
-/// each unless it lies within h(x) / 4 of the boundary or h(x) / 2 of a boundary node — a refinement
-/// that keeps the nodes where the spacing did not change.
+/// `kept`: points of an earlier set (coordinates interleaved, in its order) offered before the
+/// lattice, each taken by the sample's rule (h(x) / 2 inside, no node closer than h(x)) — a
+/// refinement that keeps the nodes where the spacing did not change.
 [[nodiscard]] NodeSet domain_nodes(const Domain& domain, const SpacingFunction& spacing, std::uint64_t seed = 1,
                                    std::size_t max_nodes = 2'000'000, std::span<const double> kept = {});
 

@@ -172,13 +172,14 @@ NodeSet domain_nodes(const Domain& domain, const SpacingFunction& spacing, std::
   SplitMix64 rng(seed);
   if (dim == 3)
     for (const auto& f : domain.faces()) add_face_nodes(domain, f, spacing, rng, cloud);
-  // Interior nodes of an earlier set stay where they are (a field on them is carried exactly) unless a
-  // boundary node took their place.
+  // Interior nodes of an earlier set stay where they are (a field on them is carried exactly) where
+  // the sample's own rule accepts them, in their order: in the earlier set's sampling order that
+  // rule accepts them all wherever the spacing did not change.
   for (std::size_t a = 0; a * std::size_t(dim) < kept.size(); ++a) {
     Point x{};
     for (std::size_t i = 0; i < std::size_t(dim); ++i) x[i] = kept[a * std::size_t(dim) + i];
     const double h = spacing_at(spacing, x, dim);
-    if (domain.depth(std::span<const double>(x.data(), std::size_t(dim))) >= 0.25 * h && cloud.free(x, 0.5 * h)) cloud.add(x);
+    if (domain.depth(std::span<const double>(x.data(), std::size_t(dim))) >= 0.5 * h && cloud.free(x, h)) cloud.add(x);
   }
   std::vector<Point> axes;
   std::vector<double> extent;

@@ -13,6 +13,32 @@
 
 namespace lmeform::problems {
 
+namespace {
+
+/// The vertices of a Delaunay cell of the nodes holding x (none outside their hull): for points
+/// the plain neighbour lists cannot evaluate. Triangulated on first use.
+class EnclosingCell {
+ public:
+  explicit EnclosingCell(const NodeSet& nodes) : nodes_(nodes) {}
+  std::vector<int> operator()(std::span<const double> x) {
+    if (!locator_) {
+      cells_.emplace(delaunay(nodes_));
+      locator_.emplace(*cells_, nodes_);
+    }
+    const long c = locator_->locate(x, 1e-10);
+    if (c < 0) return {};
+    const auto v = cells_->cell(std::size_t(c));
+    return {v.begin(), v.end()};
+  }
+
+ private:
+  const NodeSet& nodes_;
+  std::optional<BackgroundCells> cells_;
+  std::optional<CellLocator> locator_;
+};
+
+}  // namespace
+
 std::vector<double> nodal_gradient_norm(const LmeBasis& basis, std::span<const double> field, std::span<const char> skip,
                                         std::size_t* undefined) {
   const NodeSet& nodes = basis.nodes();
@@ -46,18 +72,27 @@ std::vector<double> nodal_gradient_norm(const LmeBasis& basis, std::span<const d
 }
 
 std::vector<double> interpolate_nodal_field(const NodeSet& old_nodes, std::span<const double> phi, double gamma, const LmeOptions& lme,
-                                            const NodeSet& new_nodes, std::size_t* nearest_fallbacks) {
+                                            const NodeSet& new_nodes, std::size_t* nearest_fallbacks,
+                                            std::vector<std::array<double, 2>>* local_range) {
+  if (local_range != nullptr) local_range->assign(new_nodes.size(), {INFINITY, -INFINITY});
   const std::vector<double> gammas(old_nodes.size(), gamma);
   const LmeBasis basis(old_nodes, gammas, lme);
   std::vector<double> out(new_nodes.size());
+  EnclosingCell enclosing_cell(old_nodes);
   for (std::size_t a = 0; a < new_nodes.size(); ++a) {
     const auto x = new_nodes.point(a);
-    const auto list = basis.neighbours(x);
+    auto list = basis.neighbours(x);
     try {
-      const auto p = basis.evaluate(x, list, 0);
+      // A new node on the boundary between two old ones far apart sees only interior old nodes.
+      const auto p = evaluate_with_cell_fallback(basis, x, list, 0, [&] { return enclosing_cell(x); });
       double v = 0;
       for (std::size_t m = 0; m < list.size(); ++m) v += p[m] * phi[static_cast<std::size_t>(list[m])];
       out[a] = v;
+      if (local_range != nullptr)
+        for (const int b : list) {
+          (*local_range)[a][0] = std::min((*local_range)[a][0], phi[std::size_t(b)]);
+          (*local_range)[a][1] = std::max((*local_range)[a][1], phi[std::size_t(b)]);
+        }
     } catch (const LmeEvaluationError&) {
       if (nearest_fallbacks == nullptr) throw;
       double best = std::numeric_limits<double>::infinity();
@@ -66,6 +101,7 @@ std::vector<double> interpolate_nodal_field(const NodeSet& old_nodes, std::span<
         for (int i = 0; i < old_nodes.dim; ++i) d2 += std::pow(old_nodes.point(b)[std::size_t(i)] - x[std::size_t(i)], 2);
         if (d2 < best) best = d2, out[a] = phi[b];
       }
+      if (local_range != nullptr) (*local_range)[a] = {out[a], out[a]};
       ++*nearest_fallbacks;
     }
   }
@@ -124,18 +160,7 @@ PointProjection project_point_values(const NodeSet& nodes, double gamma, const L
     std::vector<double> p;
   };
   std::vector<Row> rows;
-  std::optional<BackgroundCells> cells;  // for points the plain neighbour lists cannot evaluate
-  std::optional<CellLocator> locator;
-  auto enclosing_cell = [&](std::span<const double> x) {
-    if (!locator) {
-      cells.emplace(delaunay(nodes));
-      locator.emplace(*cells, nodes);
-    }
-    const long c = locator->locate(x, 1e-10);
-    if (c < 0) return std::vector<int>{};
-    const auto v = cells->cell(std::size_t(c));
-    return std::vector<int>(v.begin(), v.end());
-  };
+  EnclosingCell enclosing_cell(nodes);
   Eigen::VectorXd rhs = Eigen::VectorXd::Zero(Eigen::Index(n)), diagonal = Eigen::VectorXd::Zero(Eigen::Index(n));
   for (std::size_t q = 0; q < weights.size(); ++q) {
     if (weights[q] <= 0) continue;

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <algorithm>
+#include <array>
 #include <cstddef>
 #include <span>
 #include <vector>
@@ -49,9 +50,12 @@ std::vector<double> evaluate_with_cell_fallback(const LmeBasis& basis, std::span
 /// A point the old basis cannot evaluate (outside the hull of its neighbours, where a motion tore
 /// the old nodes apart) throws LmeEvaluationError, unless `nearest_fallbacks` is given: then it
 /// takes the value of its nearest old node, counted there (for a start guess, not a result).
+/// `local_range` (optional) receives, per new node, the least and the largest φ among the old
+/// nodes weighting it (the bounds a monotone transfer keeps).
 [[nodiscard]] std::vector<double> interpolate_nodal_field(const NodeSet& old_nodes, std::span<const double> phi, double gamma,
                                                           const LmeOptions& lme, const NodeSet& new_nodes,
-                                                          std::size_t* nearest_fallbacks = nullptr);
+                                                          std::size_t* nearest_fallbacks = nullptr,
+                                                          std::vector<std::array<double, 2>>* local_range = nullptr);
 
 /// Nodal coefficients whose LME field takes the given values at the nodes themselves: LME is not
 /// interpolating (Σ_a p_a(x_b) φ_a ≠ φ_b), so using values as coefficients smooths the field once

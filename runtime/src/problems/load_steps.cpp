@@ -194,8 +194,10 @@ void LoadStepper::refine_start() {
     if (coarse.count == 0) return;
     const Stopwatch clock;
     const std::size_t before = input_.nodes.size();
+    NodeSet nodes = refined_nodes(*ctx_.scene, input_.nodes, marked);
+    if (nodes.coords == input_.nodes.coords) return;
     input_.log = nullptr;
-    rebuild(refined_nodes(*ctx_.scene, input_.nodes, marked), {});
+    rebuild(std::move(nodes), {});
     input_.log = ctx_.log;
     if (ctx_.log != nullptr)
       *ctx_.log << fmt::format("start: {} < {:.3g} within {:.3g} of {} nodes coarser than {} x {:.3g} (up to {:.3g}): {} -> {} nodes, {:.2f} s\n",
@@ -227,6 +229,7 @@ bool LoadStepper::follow_field(int step, std::vector<double> before, double lamb
     const NodeSet old_nodes = input_.nodes;
     const double energy_before = space_.energy(u_);
     NodeSet nodes = refined_nodes(*ctx_.scene, old_nodes, marked);
+    if (nodes.coords == old_nodes.coords) return true;  // the sample cannot do better there
     std::size_t kept = 0;
     std::vector<double> start = transfer_state(old_nodes, before, bs, gamma, input_.lme, nodes, adapt.fit_iterations, &kept);
     const std::vector<double> solution = transfer_state(old_nodes, state, bs, gamma, input_.lme, nodes, adapt.fit_iterations);

@@ -101,7 +101,7 @@ NodeSet refined_nodes(const Scene& scene, const NodeSet& nodes, const NodeSet& m
   for (std::size_t a = 0; a < nodes.size(); ++a) {
     const auto x = nodes.point(a);
     tree.knn(x, 2, nearest, &d);
-    if (d.back() <= kCoarseRatio * h.h(x)) kept.insert(kept.end(), x.begin(), x.end());
+    if (d.back() <= kKeptRatio * h.h(x)) kept.insert(kept.end(), x.begin(), x.end());
   }
   return domain_nodes(scene.geometry, h, 1, 2'000'000, kept);
 }
@@ -128,9 +128,12 @@ std::vector<double> transfer_state(const NodeSet& from, std::span<const double> 
   for (std::size_t c = 0; c < bs; ++c) {
     for (std::size_t a = 0; a < from.size(); ++a) component[a] = state[a * bs + c];
     for (std::size_t a = 0; a < to.size(); ++a) held[a] = kept[a] >= 0 ? component[std::size_t(kept[a])] : std::nan("");
-    const std::vector<double> values = interpolate_nodal_field(from, component, gamma, lme, to);
+    std::vector<std::array<double, 2>> range;
+    const std::vector<double> values = interpolate_nodal_field(from, component, gamma, lme, to, nullptr, &range);
     const std::vector<double> fitted = fit_nodal_values(to, values, gamma, lme, fit_iterations, held);
-    for (std::size_t a = 0; a < to.size(); ++a) out[a * bs + c] = fitted[a];
+    // Fitting sharpens, and overshoots next to a jump (v = 1.0000002 beside a crack): a new
+    // coefficient stays within the old ones that weight its node, so that a field in [0, 1] stays.
+    for (std::size_t a = 0; a < to.size(); ++a) out[a * bs + c] = kept[a] >= 0 ? fitted[a] : std::clamp(fitted[a], range[a][0], range[a][1]);
   }
   return out;
 }

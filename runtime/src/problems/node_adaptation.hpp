@@ -30,9 +30,11 @@ namespace lmeform::problems {
 
 /// Nodes within the adaptation's width of a marked point that are too coarse for it: their nearest
 /// other node farther than `kCoarseRatio` times the adapted spacing there. A Poisson-disk sample at
-/// spacing h keeps its nearest distances within 1.13–1.18 h (measured on the fracture demos): the
-/// ratio leaves room for that scatter, and a refinement keeps only old nodes within it.
-inline constexpr double kCoarseRatio = 1.25;
+/// spacing h keeps its nearest distances within 1.13–1.26 h (measured on the fracture demos): a
+/// refinement keeps the old nodes within `kKeptRatio` of the new spacing, and is asked for only
+/// beyond `kCoarseRatio`, so that the sample's own scatter never asks for one.
+inline constexpr double kKeptRatio = 1.3;
+inline constexpr double kCoarseRatio = 1.4;
 struct CoarseNodes {
   std::size_t count = 0;
   double coarsest = 0;  ///< the largest nearest distance among them
@@ -40,13 +42,13 @@ struct CoarseNodes {
 [[nodiscard]] CoarseNodes coarse_nodes(const Scene& scene, const NodeSet& nodes, const NodeSet& marked);
 
 /// The nodes of a refinement: the old nodes where they are fine enough for the adapted spacing
-/// (nearest other node within kCoarseRatio times it), the boundary and the gaps sampled anew.
+/// (nearest other node within kKeptRatio times it), the boundary and the gaps sampled anew.
 [[nodiscard]] NodeSet refined_nodes(const Scene& scene, const NodeSet& nodes, const NodeSet& marked);
 
 /// A state (dofs interleaved, `dofs_per_node` per node) carried to other nodes: a node at the place
 /// of an old one keeps its coefficients (counted in `kept_nodes`); the others get the old field's
 /// values there, then coefficients fitted to them (`fit_iterations` Richardson iterations: LME is
-/// not interpolating).
+/// not interpolating), each within the least and largest old coefficient weighting its node.
 [[nodiscard]] std::vector<double> transfer_state(const NodeSet& from, std::span<const double> state, int dofs_per_node, double gamma,
                                                  const LmeOptions& lme, const NodeSet& to, int fit_iterations,
                                                  std::size_t* kept_nodes = nullptr);

@@ -7,6 +7,7 @@
 //   groups = [["u"], ["v"]]    # solved in this order
 //   tolerance = 1e-6           # stop when no group's fields change by more than this (relative)
 //   max_iterations = 200
+//   relaxation = 1.0           # over-relaxation of each group's update (1: none; 1 < ω < 2)
 //
 // Each group's solve is the problem's own stationary solve (with its bounds), the other groups'
 // dofs fixed. Load steps ([steps]) take it as their stationary solve.
@@ -33,11 +34,12 @@ struct StaggeredSettings {
   std::vector<std::vector<std::string>> groups;
   double tolerance = 1e-6;
   int max_iterations = 200;
+  double relaxation = 1.0;
   std::string where;
 };
 
 StaggeredSettings read_staggered(const Scene& scene) {
-  const auto t = extension_table(scene, kStaggeredTable, {"groups", "tolerance", "max_iterations"});
+  const auto t = extension_table(scene, kStaggeredTable, {"groups", "tolerance", "max_iterations", "relaxation"});
   StaggeredSettings s;
   s.where = t->where("groups");
   const toml::node& n = t->require("groups");
@@ -52,6 +54,8 @@ StaggeredSettings read_staggered(const Scene& scene) {
   }
   s.tolerance = t->relative_tolerance("tolerance", t->number("tolerance", s.tolerance));
   s.max_iterations = t->at_least("max_iterations", t->integer("max_iterations", s.max_iterations), 1);
+  s.relaxation = t->number("relaxation", s.relaxation);
+  if (!(s.relaxation > 0 && s.relaxation < 2)) t->fail_key("relaxation", "must lie in (0, 2): the factor of each group's update (1: none)");
   return s;
 }
 
@@ -162,6 +166,15 @@ void StaggeredDriver::solve(MPI_Comm comm, const BoundScene& b, ProblemSpace& sp
       group_newton[g] += part.iterations;
       inner_iterations += part.iterations;
       if (!part.converged) failure = fmt::format("the solve of group {} ({}) did not converge: {}", g, fmt::join(s.groups[g], ", "), part.message);
+      // Over-relaxation: the update stretched by ω, then put back within the bounds (the other
+      // groups' and the prescribed dofs did not move, so they stay).
+      if (s.relaxation != 1.0 && failure.empty()) {
+        LMEFORM_PETSC_CHECK(VecAXPBY(u, 1.0 - s.relaxation, s.relaxation, before));
+        if (space.bounded()) {
+          LMEFORM_PETSC_CHECK(VecPointwiseMax(u, u, space.lower_bound));
+          LMEFORM_PETSC_CHECK(VecPointwiseMin(u, u, space.upper_bound));
+        }
+      }
       change = std::max(change, relative_change(comm, u, before, dofs[g], first));
       result.minimization = part.minimization;
       result.active_lower = part.active_lower;
