@@ -7,7 +7,7 @@
 //   groups = [["u"], ["v"]]    # solved in this order
 //   tolerance = 1e-6           # stop when no group's fields change by more than this (relative)
 //   max_iterations = 200
-//   relaxation = 1.0           # over-relaxation of each group's update (1: none; 1 < ω < 2)
+//   relaxation = 1.0           # the largest over-relaxation of the updates (1: none; < 2)
 //
 // Each group's solve is the problem's own stationary solve (with its bounds), the other groups'
 // dofs fixed. Load steps ([steps]) take it as their stationary solve.
@@ -55,7 +55,7 @@ StaggeredSettings read_staggered(const Scene& scene) {
   s.tolerance = t->relative_tolerance("tolerance", t->number("tolerance", s.tolerance));
   s.max_iterations = t->at_least("max_iterations", t->integer("max_iterations", s.max_iterations), 1);
   s.relaxation = t->number("relaxation", s.relaxation);
-  if (!(s.relaxation > 0 && s.relaxation < 2)) t->fail_key("relaxation", "must lie in (0, 2): the factor of each group's update (1: none)");
+  if (!(s.relaxation >= 1 && s.relaxation < 2)) t->fail_key("relaxation", "must lie in [1, 2): the largest factor of the updates (1: none)");
   return s;
 }
 
@@ -144,7 +144,7 @@ void StaggeredDriver::solve(MPI_Comm comm, const BoundScene& b, ProblemSpace& sp
     for (const auto& [label, a] : space.assemblers) t += a->totals().create_matrix + a->totals().value + a->totals().vector + a->totals().matrix;
     return t;
   };
-  double change = 0;
+  double change = 0, last_change = -1, omega = 1.0;
   bool converged = false;
   std::string failure;
   for (; iterations < s.max_iterations && !converged && failure.empty(); ++iterations) {
@@ -168,8 +168,8 @@ void StaggeredDriver::solve(MPI_Comm comm, const BoundScene& b, ProblemSpace& sp
       if (!part.converged) failure = fmt::format("the solve of group {} ({}) did not converge: {}", g, fmt::join(s.groups[g], ", "), part.message);
       // Over-relaxation: the update stretched by ω, then put back within the bounds (the other
       // groups' and the prescribed dofs did not move, so they stay).
-      if (s.relaxation != 1.0 && failure.empty()) {
-        LMEFORM_PETSC_CHECK(VecAXPBY(u, 1.0 - s.relaxation, s.relaxation, before));
+      if (omega != 1.0 && failure.empty()) {
+        LMEFORM_PETSC_CHECK(VecAXPBY(u, 1.0 - omega, omega, before));
         if (space.bounded()) {
           LMEFORM_PETSC_CHECK(VecPointwiseMax(u, u, space.lower_bound));
           LMEFORM_PETSC_CHECK(VecPointwiseMin(u, u, space.upper_bound));
@@ -181,6 +181,15 @@ void StaggeredDriver::solve(MPI_Comm comm, const BoundScene& b, ProblemSpace& sp
       result.active_upper = part.active_upper;
     }
     converged = failure.empty() && change <= s.tolerance;
+    // The alternation is a fixed-point iteration whose changes fall by ρ per round; stretched by
+    // ω = 1/(1 − ρ) its slow mode would vanish in one. Measured on the coarse SENT: a fixed ω = 1.5
+    // cut the alternations of the steps where the crack runs 2.6-fold but raised those of the
+    // quiet steps (ρ ≈ 0) from 2 to 12, so ω follows ρ, within [1, relaxation].
+    if (s.relaxation != 1.0 && last_change > 0) {
+      const double rho = std::clamp(change / last_change, 0.0, 0.95);
+      omega = std::clamp(1.0 / (1.0 - rho), 1.0, s.relaxation);
+    }
+    last_change = change;
   }
   space.fixed = prescribed;
   result.solver_figures.emplace_back("alternations", double(iterations));
