@@ -3,7 +3,8 @@
 # AT2 and the fourth-order model on a coarse bar (h = l/2) within 2 % of their closed-form energies
 # (measured: 9.7e-4, 1.6e-4, 5.2e-4: demos/fracture/gamma_convergence.py); irreversibility under
 # unloading (v never increases from one step to the next, and does fall while loading); a
-# load-stepped run stopped half way and restarted equals the uninterrupted run. In 2D, nodes that
+# load-stepped run stopped half way and restarted equals the uninterrupted run, and so does an
+# over-relaxed alternation (to its tolerance). In 2D, nodes that
 # follow the crack ([nodes] adapt, demos/fracture/sent_adaptive.toml made coarse): the notched square
 # breaks, the steps whose damage reached coarse nodes are solved again on refined ones, every node
 # near the crack ends fine enough, the dissipated energy never falls across a refinement, and a
@@ -83,6 +84,13 @@ run restarted
 "$lmeform" run "$out/cycle.toml" --output "$out/restarted" --restart > "$out/restart.log" 2>&1 ||
   { tail -20 "$out/restart.log"; fail "lmeform run --restart failed (log: $out/restart.log)"; }
 grep -q "^step    3/6" "$out/restart.log" && fail "the restart solved step 3 again instead of continuing after it"
+# The over-relaxed alternation ([staggered] relaxation) ends where the plain one does; a factor
+# outside [1, 2) is refused naming the key.
+sed -e 's#^max_iterations = 2000#max_iterations = 2000\nrelaxation = 1.5#' "$out/cycle.toml" > "$out/relaxed.toml"
+run relaxed
+sed -e 's#^max_iterations = 2000#max_iterations = 2000\nrelaxation = 2.5#' "$out/cycle.toml" > "$out/overrelaxed.toml"
+if "$lmeform" run "$out/overrelaxed.toml" > "$out/overrelaxed.log" 2>&1; then fail "relaxation = 2.5 was not refused"; fi
+grep -q "key 'staggered.relaxation'.*must lie in \[1, 2)" "$out/overrelaxed.log" || { cat "$out/overrelaxed.log"; fail "relaxation = 2.5: no clear message"; }
 
 # Bad input: the forms' requirements refuse a negative toughness and a start outside [0, 1] before
 # anything is solved or written.
@@ -171,6 +179,12 @@ if max(rises) > 1e-12:
 if not falls[0] > 1e-3 or not falls[1] > 1e-3:
     print("FAIL: loading did not damage the bar: the irreversibility check proves nothing"); ok = False
 
+relaxed = out / "relaxed" / "series" / "cycle_000006.h5"
+for name in ("u", "v"):
+    d = float(np.max(np.abs(field(out / "cycle" / "series" / "cycle_000006.h5", name) - field(relaxed, name))))
+    print(f"relaxation 1.5: |{name} plain - over-relaxed|_max = {d:.1e} (alternation tolerance 1e-9)")
+    if not d <= 1e-8:
+        print(f"FAIL: the over-relaxed alternation ends {d:.1e} away from the plain one"); ok = False
 whole = out / "cycle" / "series" / "cycle_000006.h5"
 parts = out / "restarted" / "series" / "cycle_000006.h5"
 for name in ("u", "v"):
