@@ -179,6 +179,40 @@ CsrLists point_lists_of_cells(const LmeBasis& basis, const CellQuadrature& quadr
   return out;
 }
 
+// Every facet point's neighbours and its facet's vertices. A hull facet whose points see only
+// nodes of its own face (a boundary refined more finely than the nodes beside it) has a flat
+// neighbourhood, where the dual problem is singular: there the vertices of its cell join, as a
+// quadrature point's own cell's do.
+CsrLists facet_point_lists(const LmeBasis& basis, const detail::CellFacets& facets, const BackgroundCells& cells, const NodeSet& nodes) {
+  const CsrLists own = basis.neighbour_lists(facets.points);
+  const auto per_facet = static_cast<std::size_t>(facets.points_per_facet);
+  const auto dim = static_cast<std::size_t>(nodes.dim);
+  std::vector<long> facet_cell(facets.size(), -1);
+  for (std::size_t c = 0; c < cells.size(); ++c)
+    for (std::size_t k = 0; k <= dim; ++k) {
+      const auto f = static_cast<std::size_t>(facets.cell_facets[c * (dim + 1) + k]);
+      if (facet_cell[f] < 0) facet_cell[f] = static_cast<long>(c);
+    }
+  auto on_facet_plane = [&](std::size_t f, int node) {
+    const auto v0 = nodes.point(static_cast<std::size_t>(facets.facet_vertices(f)[0])), x = nodes.point(static_cast<std::size_t>(node));
+    double distance = 0, size = 0;
+    for (std::size_t i = 0; i < dim; ++i) {
+      distance += (x[i] - v0[i]) * facets.normals[f * dim + i];
+      size = std::max(size, std::abs(x[i] - v0[i]));
+    }
+    return std::abs(distance) <= 1e-10 * std::max(size, 1e-300);
+  };
+  return with_vertices(own, [&](std::size_t p) {
+    const std::size_t f = p / per_facet;
+    const auto facet = facets.facet_vertices(f);
+    std::vector<int> extra(facet.begin(), facet.end());
+    const auto list = own[p];
+    if (facet_cell[f] >= 0 && std::all_of(list.begin(), list.end(), [&](int a) { return on_facet_plane(f, a); }))
+      for (const int v : cells.cell(static_cast<std::size_t>(facet_cell[f]))) extra.push_back(v);
+    return extra;
+  });
+}
+
 }  // namespace
 
 std::vector<char> Discretization::cells_reaching_owned_nodes() const {
@@ -370,34 +404,7 @@ Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, Discretizati
       const int m = options_.consistent_integration;
       facets_ = std::make_shared<const detail::CellFacets>(
           detail::cell_facets(cells_, nodes_, nodes.dim == 2 ? gauss_legendre(m) : triangle_rule(m)));
-      const auto per_facet = static_cast<std::size_t>(facets_->points_per_facet);
-      // A hull facet whose points see only nodes of its own face (a boundary refined more finely
-      // than the nodes beside it) has a flat neighbourhood, where the dual problem is singular:
-      // there the vertices of its cell join, as a quadrature point's own cell's do.
-      const CsrLists own = basis_->neighbour_lists(facets_->points);
-      const std::size_t dim = std::size_t(nodes.dim);
-      std::vector<long> facet_cell(facets_->size(), -1);
-      for (std::size_t c = 0; c < cells_.size(); ++c)
-        for (std::size_t k = 0; k <= dim; ++k)
-          if (facet_cell[std::size_t(facets_->cell_facets[c * (dim + 1) + k])] < 0) facet_cell[std::size_t(facets_->cell_facets[c * (dim + 1) + k])] = long(c);
-      auto on_facet_plane = [&](std::size_t f, int node) {
-        const auto v0 = nodes_.point(std::size_t(facets_->facet_vertices(f)[0])), x = nodes_.point(std::size_t(node));
-        double distance = 0, size = 0;
-        for (std::size_t i = 0; i < dim; ++i) {
-          distance += (x[i] - v0[i]) * facets_->normals[f * dim + i];
-          size = std::max(size, std::abs(x[i] - v0[i]));
-        }
-        return std::abs(distance) <= 1e-10 * std::max(size, 1e-300);
-      };
-      facet_point_lists_ = with_vertices(own, [&](std::size_t p) {
-        const std::size_t f = p / per_facet;
-        const auto facet = facets_->facet_vertices(f);
-        std::vector<int> extra(facet.begin(), facet.end());
-        const auto list = own[p];
-        if (std::all_of(list.begin(), list.end(), [&](int a) { return on_facet_plane(f, a); }) && facet_cell[f] >= 0)
-          for (const int v : cells_.cell(std::size_t(facet_cell[f]))) extra.push_back(v);
-        return extra;
-      });
+      facet_point_lists_ = facet_point_lists(*basis_, *facets_, cells_, nodes_);
     }
   }
 
