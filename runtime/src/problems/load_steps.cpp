@@ -152,18 +152,13 @@ class LoadStepper {
 constexpr int kMaxRefinementsPerStep = 4;
 
 void LoadStepper::setup() {
-  input_.nodes = initial_nodes(*ctx_.scene, ctx_.log);
   input_.lme = bound_.lme(AxisParity::even);
   set_load(0.0);  // the expressions of the start and the Dirichlet values at step 0
   // Nodes that follow a field are judged (the forms' requirements) once they have followed it.
   input_.log = adapting() ? nullptr : ctx_.log;
-  space_ = build_problem_space(ctx_.comm, bound_, input_);
+  rebuild(initial_nodes(*ctx_.scene, ctx_.log), {});
   input_.log = ctx_.log;
-  cells_ = delaunay(input_.nodes);
   if (!ctx_.output_directory.empty()) series_.emplace(ctx_.output_directory, ctx_.scene->name);
-  u_ = space_.primary->create_vector();
-  trial_ = space_.primary->create_vector();
-  set_from_original(*space_.disc, space_.state, bound_.layout.dofs_per_node, u_);
   if (adapting()) {
     if (!ctx_.restart) refine_start();
     check_requirements(bound_, space_, ctx_.log);
