@@ -8,7 +8,11 @@ BUILD_DIR/bench/stokes.json (bench_stokes).  Of the lmeform records it keeps, pe
 uniform node sets with stabilization "gls" and the (gamma, C) pair that occurs most often.
 Writes BUILD_DIR/compare/stokes_fenicsx.json (both codes, one record per run),
 BUILD_DIR/compare/stokes_<problem>.png (2x2: u and p L2 error against unknowns and against wall
-time) and BUILD_DIR/compare/stokes_fenicsx.md, and prints the Markdown table.
+time) and BUILD_DIR/compare/stokes_fenicsx.md, and prints the Markdown table and the error per
+second: for the finest run of each lmeform series, the wall time each FEniCSx element needs for the
+same velocity L2 error (log-log interpolation along its mesh ladder) and lmeform's time over it,
+with lmeform's time taken whole and without its setup (node set, LME basis, quadrature; FEniCSx's
+times exclude its mesh and function space).
 """
 import collections
 import json
@@ -60,15 +64,17 @@ def lmeform_records(path):
     by_problem = collections.defaultdict(list)  # (problem, basis): the first- and second-order series apart
     for r in raw:
         if r.get("node_set", "uniform") == "uniform" and str(r.get("stabilization", "")).lower() == "gls":
-            by_problem[(r["problem"], r.get("basis", "first"))].append(r)
+            by_problem[(r["problem"], r.get("basis", "first"), num(r.get("support_tolerance")) or 1e-6,
+                        r.get("solver", "mumps"))].append(r)
     if not by_problem:
         stabs = sorted({str(r.get("stabilization")) for r in raw})
         print(f"note: {path} has no uniform-node 'gls' records (stabilizations present: {stabs})")
-    for (problem, basis), rows in by_problem.items():
+    for (problem, basis, tol, solver), rows in by_problem.items():
         counts = collections.Counter((num(r.get("gamma")), num(r.get("C"))) for r in rows)
         (gamma, c), _ = max(counts.items(), key=lambda kv: (kv[1], -(kv[0][0] or 0)))
         label = ("LME gls" if basis == "first" else "2nd-order max-ent gls, consistent") + f" gamma={gamma:g}" + \
-            (f" C={c}" if c is not None else "")
+            (f" C={c}" if c is not None else "") + (f" support to {tol:g}" if tol != 1e-6 else "") + \
+            (f", {solver}" if solver != "mumps" else "")
         kept = [r for r in rows if (num(r.get("gamma")), num(r.get("C"))) == (gamma, c)]
         if len(counts) > 1:
             print(f"note: {problem}: {len(counts)} (gamma, C) pairs among uniform gls runs; "
@@ -87,6 +93,7 @@ def lmeform_records(path):
                         "unknowns": int(r["unknowns"]), "error_u_l2": num(r.get("error_u_l2")),
                         "error_u_h1": num(r.get("error_u_h1")),
                         "error_p_l2": num(r.get("error_p_l2")), "wall_s": wall,
+                        "setup_s": num(r.get("setup_s")), "matrix_nonzeros": r.get("matrix_nonzeros"),
                         "nodes": r.get("nodes")})
     return out
 
@@ -135,6 +142,56 @@ def table(records, problems):
                              f"{fmt_e(r['error_p_l2'])}{fmt_r(rp)} | {wall} |")
                 prev = r
     return "\n".join(lines)
+
+
+def time_for_error(rows, error):
+    """Wall time along a series (sorted by unknowns) to reach a velocity L2 error, by log-log
+    interpolation between the two runs that bracket it; beyond the ladder, the last two runs
+    extrapolated. Returns (seconds, extrapolated) or (None, False)."""
+    pts = [(r["error_u_l2"], r["wall_s"]) for r in rows
+           if r.get("error_u_l2") and r.get("wall_s") and r["error_u_l2"] > 1e-11 and r["wall_s"] > 0]
+    if len(pts) < 2:
+        return None, False
+    for (e0, t0), (e1, t1) in zip(pts, pts[1:]):
+        if min(e0, e1) <= error <= max(e0, e1) and e0 != e1:
+            w = math.log(error / e0) / math.log(e1 / e0)
+            return math.exp(math.log(t0) + w * math.log(t1 / t0)), False
+    (e0, t0), (e1, t1) = (pts[0], pts[1]) if error > pts[0][0] else (pts[-2], pts[-1])
+    if e0 == e1 or t0 == t1:
+        return None, False
+    w = math.log(error / e0) / math.log(e1 / e0)
+    return math.exp(math.log(t0) + w * math.log(t1 / t0)), True
+
+
+def error_per_second(records, problems):
+    """The finest run of each lmeform series against each FEniCSx element at equal velocity error."""
+    lines = ["| problem | lmeform series | unknowns | u L2 | wall s (without setup) | FEniCSx element | its time for that error | "
+             "lmeform / FEniCSx time (without setup) |",
+             "| --- | --- | ---: | ---: | ---: | --- | ---: | ---: |"]
+    out = []
+    for problem in problems:
+        groups = series(records, problem)
+        for (code, element), rows in groups.items():
+            if code != "lmeform" or not rows:
+                continue
+            r = rows[-1]
+            if not r.get("error_u_l2") or not r.get("wall_s"):
+                continue
+            solve_only = r["wall_s"] - (r.get("setup_s") or 0.0)
+            for (fcode, felement), frows in groups.items():
+                if fcode != "fenicsx":
+                    continue
+                t, extrapolated = time_for_error(frows, r["error_u_l2"])
+                if t is None:
+                    continue
+                mark = " (extrapolated)" if extrapolated else ""
+                lines.append(f"| {problem} | {element} | {r['unknowns']} | {r['error_u_l2']:.3e} | {r['wall_s']:.2f} ({solve_only:.2f}) | "
+                             f"{felement} | {t:.3f}{mark} | {r['wall_s'] / t:.1f} ({solve_only / t:.1f}) |")
+                out.append({"problem": problem, "lmeform": element, "unknowns": r["unknowns"], "error_u_l2": r["error_u_l2"],
+                            "wall_s": r["wall_s"], "wall_without_setup_s": solve_only, "fenicsx": felement,
+                            "fenicsx_wall_s": t, "extrapolated": extrapolated, "time_ratio": r["wall_s"] / t,
+                            "time_ratio_without_setup": solve_only / t})
+    return "\n".join(lines), out
 
 
 STYLE = {"fenicsx": {"ls": "--", "marker": "s"}, "lmeform": {"ls": "-", "marker": "o"}}
@@ -203,10 +260,16 @@ def main(argv):
         plot(records, problem, png)
         pngs.append(png)
     md = table(records, problems)
+    eps_md, eps_records = error_per_second(records, problems)
     with open(os.path.join(cdir, "stokes_fenicsx.md"), "w") as fh:
-        fh.write(md + "\n")
+        fh.write(md + "\n\n" + eps_md + "\n")
+    with open(os.path.join(cdir, "stokes_error_per_second.json"), "w") as fh:
+        json.dump(eps_records, fh, indent=1)
     print()
     print(md)
+    print()
+    print("Error per second: the wall time to the same velocity L2 error")
+    print(eps_md)
     print(f"\nwrote {out_json}, {os.path.join(cdir, 'stokes_fenicsx.md')}")
     for png in pngs:
         print(f"wrote {png}")

@@ -542,6 +542,12 @@ TEST(SceneMutations, TheReaderRefusesGridsAndBasesThatCannotRun) {
   // gamma above -ln(1e-6): the LME support is shorter than the spacing.
   expect_refused(p, replaced(p.text, "gamma = 0.8 ", "gamma = 20 "), {":18: key 'nodes.gamma' = 20", "give at most 13.8"});
   EXPECT_EQ(refusal(p, replaced(p.text, "gamma = 0.8 ", "gamma = 13.8 ")), "");
+  // A compact support (the weight at its edge 1e-3) lowers the largest gamma to -ln(1e-3) = 6.9.
+  expect_refused(p, replaced(p.text, "gamma = 0.8 ", "gamma = 8\nsupport_tolerance = 1e-3 "),
+                 {"key 'nodes.gamma' = 8", "give at most 6.9"});
+  EXPECT_EQ(refusal(p, replaced(p.text, "gamma = 0.8 ", "gamma = 6\nsupport_tolerance = 1e-3 ")), "");
+  expect_refused(p, replaced(p.text, "gamma = 0.8 ", "gamma = 0.8\nsupport_tolerance = 0.1 "),
+                 {"key 'nodes.support_tolerance' = 0.1 must lie in [1e-12, 1e-2]"});
   expect_refused(p, replaced(p.text, "spacing = 0.05 ", "spacing = 1e-8 "),
                  {"key 'nodes.spacing' = 1e-08 gives 100000000 intervals on axis x"});
   expect_refused(p, replaced(p.text, "spacing = 0.05 ", "counts = [60000, 60000] "),

@@ -643,7 +643,7 @@ std::vector<const BoundOutput*> BoundScene::outputs() const {
 }
 
 LmeOptions BoundScene::lme(AxisParity parity) const {
-  return lme_options(discretization.spacing_smoothing, axisymmetric, parity, discretization.basis);
+  return lme_options(discretization.spacing_smoothing, axisymmetric, parity, discretization.basis, discretization.support_tolerance);
 }
 
 BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, const StationaryDriver& solver, const OutputRoles& extra) {
@@ -656,7 +656,7 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
   b.geometry = scene.geometry;
   b.boundary_points = scene.nodes.boundary_points;
   b.discretization = {scene.nodes.gamma, scene.nodes.quadrature_points, scene.nodes.spacing_smoothing, scene.nodes.consistent_integration,
-                      scene.nodes.basis, scene.nodes.partition};
+                      scene.nodes.basis, scene.nodes.partition, scene.nodes.support_tolerance};
   b.solver = &solver;
   OutputRoles roles = solver.roles(scene);
   roles.auxiliary.insert(roles.auxiliary.end(), extra.auxiliary.begin(), extra.auxiliary.end());

@@ -142,6 +142,7 @@ struct DiscretizationSettings {
   bool consistent_integration = false;  ///< gradients corrected cell by cell (DiscretizationOptions)
   LmeConsistency basis = LmeConsistency::first;  ///< first- or second-order max-ent basis
   PartitionMethod partition = PartitionMethod::Metis;  ///< how the nodes are split among ranks
+  double support_tolerance = 1e-6;  ///< LmeOptions::tol0: the Gaussian weight at the support's edge
 };
 
 /// A scene with its forms loaded and every name checked against them.

@@ -62,6 +62,9 @@ class LinearDriver final : public StationaryDriver {
     space.bilinear->matrix(u, A);
     space.linear->vector(u, rhs);
     result.seconds_assembly = clock.seconds();
+    MatInfo info{};
+    LMEFORM_PETSC_CHECK(MatGetInfo(A, MAT_GLOBAL_SUM, &info));
+    result.matrix_nonzeros = static_cast<long long>(info.nz_used);
     if (space.bounded()) {
       if (!b.zero_mean.empty()) throw SceneError(fmt::format("{}: [bounds] and model.zero_mean together are not supported", b.source));
       // A bounded linear problem is a linear complementarity problem: F = A u − b, Jacobian A.

@@ -166,9 +166,11 @@ void describe_equation_solve(const ProblemResult& r, RunReport& report) {
 }
 
 void describe_basis(const SceneNodes& nodes, RunReport& report) {
-  report.row("basis", fmt::format("{}-order max-ent, gamma {:g}, {} points per cell{}", to_string(nodes.basis), nodes.gamma,
-                                  nodes.quadrature_points, nodes.consistent_integration ? ", consistent integration" : ""));
+  report.row("basis", fmt::format("{}-order max-ent, gamma {:g}, support to weight {:g}, {} points per cell{}", to_string(nodes.basis),
+                                  nodes.gamma, nodes.support_tolerance, nodes.quadrature_points,
+                                  nodes.consistent_integration ? ", consistent integration" : ""));
   report.json["basis"] = to_string(nodes.basis);
+  report.json["support_tolerance"] = nodes.support_tolerance;
   report.json["gamma"] = nodes.gamma;
   report.json["quadrature_points"] = nodes.quadrature_points;
 }
@@ -208,6 +210,11 @@ RunReport StationaryDriver::run(const DriverContext& ctx) const {
   describe_quantities(r.quantities, report);
   report.row("nodes", fmt::format("{} (h_min {:.4g}, h_mean {:.4g})", r.nodes.size(), r.h_min, r.h_mean));
   describe_basis(ctx.scene->nodes, report);
+  if (r.matrix_nonzeros > 0) {
+    const auto rows = static_cast<double>(r.state.size());
+    report.row("matrix", fmt::format("{} non-zeros, {:.0f} per row", r.matrix_nonzeros, static_cast<double>(r.matrix_nonzeros) / std::max(rows, 1.0)));
+    report.json["matrix_nonzeros"] = r.matrix_nonzeros;
+  }
   report.row("times", fmt::format("setup {:.2f} s, solve {:.2f} s", r.seconds_setup, r.seconds_solve));
   report.json["nodes"] = r.nodes.size();
   report.json["h_min"] = json_number(r.h_min);

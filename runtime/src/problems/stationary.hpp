@@ -54,6 +54,7 @@ struct ProblemResult {
   double h_min = 0, h_mean = 0;
   double seconds_setup = 0, seconds_solve = 0;
   double seconds_assembly = 0;               ///< linear problems: assembly of A and b; saddle points: gradients and Hessians (in seconds_solve)
+  long long matrix_nonzeros = 0;             ///< linear problems: non-zeros of the assembled matrix (all ranks)
   double seconds_factorization = 0;          ///< saddle points: the LDLᵀ factorizations and solves (in seconds_solve)
   /// Linear problems with zero-mean unknowns: how the level was fixed ("constraint": a bordered
   /// system, "null space": the Krylov method's null space + the mean removed afterwards).

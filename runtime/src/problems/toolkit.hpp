@@ -44,7 +44,7 @@ enum class AxisParity { even, odd };
 /// even in r of an axisymmetric scene the basis mirrored across the axis, so that the symmetry
 /// holds exactly and φ_r / r stays finite.
 [[nodiscard]] LmeOptions lme_options(int spacing_smoothing, bool axisymmetric, AxisParity parity,
-                                     LmeConsistency basis = LmeConsistency::first);
+                                     LmeConsistency basis = LmeConsistency::first, double support_tolerance = 1e-6);
 [[nodiscard]] LmeOptions lme_options(const Scene& scene, AxisParity parity);
 
 /// The constrained minimizer's options from the scene's [solver] table.

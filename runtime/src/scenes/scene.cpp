@@ -44,7 +44,7 @@ void read_scene_section(const Section& root, Scene& s) {
 
 void read_nodes(const Section& root, const std::filesystem::path& folder, Scene& s) {
   const Section t = root.table("nodes", {"spacing", "counts", "count", "lloyd_iterations", "file", "gamma", "spacing_smoothing",
-                                         "quadrature_points", "refine", "adapt", "boundary_points", "integration", "basis", "partition"});
+                                         "quadrature_points", "refine", "adapt", "boundary_points", "integration", "basis", "partition", "support_tolerance"});
   SceneNodes& n = s.nodes;
   const char* const kinds[] = {"spacing", "counts", "count", "file"};
   std::vector<std::string> present;
@@ -131,7 +131,12 @@ void read_nodes(const Section& root, const std::filesystem::path& folder, Scene&
   // The LME support radius is h sqrt(-ln(tol0) / gamma): above -ln(tol0) it is shorter than the
   // nodal spacing h, and a node sees no other node (gamma = 20 on the Poisson demo's grid failed
   // its first LME evaluation with 1 neighbour; 50 and 1e100 did not converge).
-  const double largest_gamma = -std::log(LmeOptions{}.tol0);
+  n.support_tolerance = t.number("support_tolerance", n.support_tolerance);
+  if (!(n.support_tolerance >= 1e-12 && n.support_tolerance <= 1e-2))
+    t.fail_key("support_tolerance", "= " + format_number(n.support_tolerance) +
+                                        " must lie in [1e-12, 1e-2]: above, the support cuts weights the basis needs (the list holds only the "
+                                        "nearest ring); below, the lists grow without changing the basis");
+  const double largest_gamma = -std::log(n.support_tolerance);
   if (n.gamma > largest_gamma)
     t.fail_key("gamma", "= " + format_number(n.gamma) + " makes the LME support (radius h sqrt(" + format_number(largest_gamma) +
                             " / gamma)) shorter than the nodal spacing h: give at most " + format_number(largest_gamma) +
