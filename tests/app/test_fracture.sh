@@ -141,6 +141,13 @@ run adaptive_restarted
   { tail -20 "$out/adaptive_restart.log"; fail "the adaptive run's --restart failed (log: $out/adaptive_restart.log)"; }
 grep -q "^  step 6: v < 0.8 .* solving the step again" "$out/adaptive_restart.log" ||
   fail "adaptive restart: step 6 was not refined after the restart (the test means to restart before a refinement)"
+# The first five steps on 2 ranks (every rank writes its own rows of the series and checkpoint files:
+# collective HDF5), the rest on 1 rank from that 2-rank checkpoint.
+export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
+mpirun -n 2 "$lmeform" run "$out/adaptive_restarted.toml" --output "$out/adaptive_ranks" > "$out/adaptive_ranks.log" 2>&1 ||
+  { tail -20 "$out/adaptive_ranks.log"; fail "the adaptive run on 2 ranks failed (log: $out/adaptive_ranks.log)"; }
+"$lmeform" run "$out/adaptive.toml" --output "$out/adaptive_ranks" --restart > "$out/adaptive_ranks_restart.log" 2>&1 ||
+  { tail -20 "$out/adaptive_ranks_restart.log"; fail "the 1-rank restart of the 2-rank adaptive run failed"; }
 sed -e 's#field = "v"#field = "w"#' "$out/adaptive.toml" > "$out/adaptive_unknown.toml"
 if "$lmeform" run "$out/adaptive_unknown.toml" --output "$out/adaptive_unknown" > "$out/adaptive_unknown.log" 2>&1; then fail "adapt.field = w was not refused"; fi
 grep -q "key 'nodes.adapt.field': 'w' is no unknown of the forms" "$out/adaptive_unknown.log" || { cat "$out/adaptive_unknown.log"; fail "adapt.field = w: no clear message"; }
@@ -234,6 +241,22 @@ with h5py.File(whole, "r") as a, h5py.File(parts, "r") as b:
             print(f"adaptive restart: |{name} uninterrupted - restarted|_max = {d:.1e}")
             if not d <= 1e-12:
                 print(f"FAIL: the restarted adaptive run's {name} differs from the uninterrupted one by {d:.1e}"); ok = False
+# Written by 2 ranks (step 5) and finished by 1 (step 7): the uninterrupted 1-rank run's files, to the
+# round-off of another partition's sums.
+for step in ("000005", "000007"):
+    one = out / "adaptive" / "series" / f"adaptive_{step}.h5"
+    two = out / "adaptive_ranks" / "series" / f"adaptive_{step}.h5"
+    with h5py.File(one, "r") as a, h5py.File(two, "r") as b:
+        if a["nodes"].shape != b["nodes"].shape or np.max(np.abs(np.array(a["nodes"]) - np.array(b["nodes"]))) > 0:
+            print(f"FAIL: step {step}: the 2-rank run is on other nodes than the 1-rank run"); ok = False
+            continue
+        if not np.array_equal(np.array(a["cells"]), np.array(b["cells"])):
+            print(f"FAIL: step {step}: the 2-rank file has other cells"); ok = False
+        for name in ("u", "v"):
+            d = float(np.max(np.abs(np.array(a["fields"][name]) - np.array(b["fields"][name]))))
+            print(f"2 ranks then 1, step {step}: |{name} 1 rank - 2 ranks|_max = {d:.1e}")
+            if not d <= 1e-8:
+                print(f"FAIL: step {step}: {name} of the 2-rank run differs from the 1-rank run by {d:.1e}"); ok = False
 sys.exit(0 if ok else 1)
 PY
 echo "PASS"

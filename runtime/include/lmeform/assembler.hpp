@@ -167,4 +167,12 @@ void set_from_original(const Discretization& disc, std::span<const double> origi
 /// Gathers v into the original node order on every rank.
 [[nodiscard]] std::vector<double> to_original(const Discretization& disc, Vec v, int block_size);
 
+/// The rows of v this rank owns, in the original node order: their original node indices and
+/// their values (block_size per row, row-major). What a collective writer needs, without a gather.
+struct OwnedRows {
+  std::vector<int> rows;
+  std::vector<double> values;
+};
+[[nodiscard]] OwnedRows owned_original(const Discretization& disc, Vec v, int block_size);
+
 }  // namespace lmeform

@@ -3,8 +3,9 @@
 // renamed into place at the end; on any error the temporaries are removed and an exception
 // naming the path and the HDF5 / OS error is thrown.
 //
-// The HDF5 writer is serial: call it on one rank (rank 0) with the data gathered in the original
-// node order. Library `lmeform_io` (alias `lmeform::io`); see docs/output.md for the file layout.
+// The HDF5 writer comes in two forms: serial (one rank, the data gathered in the original node
+// order) and collective (every rank writes the rows it owns into the same file through MPI-IO; the
+// file is the same). Library `lmeform_io` (alias `lmeform::io`); see docs/output.md for the layout.
 #pragma once
 
 #include <cstdint>
@@ -15,6 +16,8 @@
 #include <string_view>
 #include <variant>
 #include <vector>
+
+#include <mpi.h>
 
 #include "lmeform/delaunay.hpp"
 #include "lmeform/node_set.hpp"
@@ -48,6 +51,22 @@ using OutputAttributes = std::map<std::string, OutputAttribute, std::less<>>;
 /// std::runtime_error naming the path and the HDF5 / OS error when writing fails.
 void write_field_hdf5(const std::filesystem::path& path, const NodeSet& nodes, const BackgroundCells& cells,
                       const FieldViews& fields, const OutputAttributes& attributes = {});
+
+/// One rank's part of nodal fields written collectively: the file rows it holds (original node
+/// indices) and, per field, its values there (value k of row rows[i] is values[i * components + k]).
+/// The ranks' rows together are every node once.
+struct DistributedFields {
+  std::span<const int> rows;
+  FieldViews fields;
+};
+
+/// The collective form of write_field_hdf5: call it on every rank of comm with the same path, nodes,
+/// cells, field names and attributes (all replicated) and this rank's rows. Rank 0 writes /nodes and
+/// /cells, every rank its own rows of each field, all through one MPI-IO file; rank 0 then writes the
+/// sidecar and renames both into place. The file equals the serial writer's. Throws on every rank
+/// when any rank's input is inconsistent or the file cannot be written (nothing is left behind).
+void write_field_hdf5(MPI_Comm comm, const std::filesystem::path& path, const NodeSet& nodes, const BackgroundCells& cells,
+                      const DistributedFields& local, const OutputAttributes& attributes = {});
 
 /// The XDMF sidecar's path for an HDF5 path: "out/state.h5" -> "out/state.xmf".
 [[nodiscard]] std::filesystem::path xdmf_sidecar_path(const std::filesystem::path& h5_path);
@@ -93,6 +112,9 @@ class TimeSeriesWriter {
   /// Writes one step at `time`.
   void write(double time, int step, const NodeSet& nodes, const BackgroundCells& cells, const FieldViews& fields,
              const OutputAttributes& attributes);
+  /// The same, collectively: every rank of comm calls it with its own rows (rank 0 writes the collection).
+  void write(MPI_Comm comm, double time, int step, const NodeSet& nodes, const BackgroundCells& cells,
+             const DistributedFields& local, const OutputAttributes& attributes);
   /// The file of a step, relative to the folder.
   [[nodiscard]] std::filesystem::path file_of(int step) const;
   /// The steps written so far (a restart puts back those of the run it continues).
@@ -100,6 +122,9 @@ class TimeSeriesWriter {
   void restore(std::vector<TimeSeriesStep> steps) { steps_ = std::move(steps); }
 
  private:
+  void add_step(double time, const std::filesystem::path& file, const NodeSet& nodes, const BackgroundCells& cells,
+                const FieldViews& fields, bool write_collection);
+
   std::filesystem::path directory_;
   std::string name_;
   std::vector<TimeSeriesStep> steps_;

@@ -570,6 +570,18 @@ void set_from_original(const Discretization& disc, std::span<const double> origi
   }
 }
 
+OwnedRows owned_original(const Discretization& disc, Vec v, int block_size) {
+  OwnedRows out;
+  const VecReadView in(v);
+  out.values.assign(in.data(), in.data() + in.size());
+  out.rows.reserve(static_cast<std::size_t>(disc.n_owned()));
+  for (int b = disc.owned_begin(); b < disc.owned_end(); ++b) out.rows.push_back(disc.original_index()[static_cast<std::size_t>(b)]);
+  if (out.values.size() != out.rows.size() * static_cast<std::size_t>(block_size))
+    throw std::invalid_argument("owned_original: vector has local size " + std::to_string(out.values.size()) + ", expected " +
+                                std::to_string(out.rows.size() * static_cast<std::size_t>(block_size)));
+  return out;
+}
+
 std::vector<double> to_original(const Discretization& disc, Vec v, int block_size) {
   const int n = disc.n_nodes();
   std::vector<int> counts(static_cast<std::size_t>(disc.ranks()));

@@ -137,6 +137,29 @@ void write_attribute(const Checker& check, hid_t object, const std::string& name
   }
 }
 
+void check_file_name(const std::string& context, const std::filesystem::path& path) {
+  if (path.filename().empty() || path.extension() == ".xmf" || path.extension() == ".tmp") {
+    throw std::invalid_argument(context + ": expected a file name such as 'state.h5'");
+  }
+}
+
+/// Every field has a valid name and `rows` x components values (`rows` the nodes, or a rank's rows).
+void validate_fields(const std::string& context, const FieldViews& fields, std::size_t rows, const char* what) {
+  const auto bad = [&](const std::string& message) { throw std::invalid_argument(context + ": " + message); };
+  for (const auto& [name, field] : fields) {
+    if (name.empty() || name == "." || name.find('/') != std::string::npos) {
+      bad("field name '" + name + "' is empty, '.' or contains '/'");
+    }
+    if (field.components < 1) bad("field '" + name + "' has " + std::to_string(field.components) + " components");
+    const std::size_t expected = rows * static_cast<std::size_t>(field.components);
+    if (field.values.size() != expected) {
+      bad("field '" + name + "' has " + std::to_string(field.values.size()) + " values, expected " +
+          std::to_string(expected) + " (" + std::to_string(rows) + " " + what + " x " + std::to_string(field.components) +
+          " components)");
+    }
+  }
+}
+
 void validate(const std::string& context, const NodeSet& nodes, const BackgroundCells& cells,
               const FieldViews& fields, const OutputAttributes& attributes) {
   const auto bad = [&](const std::string& what) { throw std::invalid_argument(context + ": " + what); };
@@ -161,18 +184,7 @@ void validate(const std::string& context, const NodeSet& nodes, const Background
       bad("cell node index " + std::to_string(*lo < 0 ? *lo : *hi) + " outside [0, " + std::to_string(n) + ")");
     }
   }
-  for (const auto& [name, field] : fields) {
-    if (name.empty() || name == "." || name.find('/') != std::string::npos) {
-      bad("field name '" + name + "' is empty, '.' or contains '/'");
-    }
-    if (field.components < 1) bad("field '" + name + "' has " + std::to_string(field.components) + " components");
-    const std::size_t expected = n * static_cast<std::size_t>(field.components);
-    if (field.values.size() != expected) {
-      bad("field '" + name + "' has " + std::to_string(field.values.size()) + " values, expected " +
-          std::to_string(expected) + " (" + std::to_string(n) + " nodes x " + std::to_string(field.components) +
-          " components)");
-    }
-  }
+  validate_fields(context, fields, n, "nodes");
   for (const auto& entry : attributes) {
     if (entry.first.empty()) bad("an attribute has an empty name");
   }
@@ -198,6 +210,86 @@ void write_hdf5_file(const Checker& check, const std::filesystem::path& file, co
       std::vector<hsize_t> dims{n};
       if (field.components > 1) dims.push_back(static_cast<hsize_t>(field.components));
       write_dataset(check, group.get(), name, H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, dims, field.values.data());
+    }
+    for (const auto& [name, value] : attributes) write_attribute(check, h5.get(), name, value);
+  }
+  check.status(H5Fflush(h5.get(), H5F_SCOPE_GLOBAL), "cannot flush '" + file.string() + "'");
+  check.status(h5.close(), "cannot close '" + file.string() + "'");
+}
+
+// ---- writing collectively ------------------------------------------------------------------------
+
+/// A dataset written through MPI-IO by every rank at once: rank r writes `count` elements from `data`
+/// at the file positions `coordinates` (count x rank of the dataset), or everything (`all`), or nothing.
+struct Selection {
+  bool all = false;
+  hsize_t count = 0;
+  std::vector<hsize_t> coordinates;
+};
+
+void write_dataset_collective(const Checker& check, hid_t parent, const std::string& name, hid_t file_type, hid_t mem_type,
+                              const std::vector<hsize_t>& dims, const Selection& mine, const void* data, hid_t transfer) {
+  const Handle file_space = check.handle(H5Screate_simple(static_cast<int>(dims.size()), dims.data(), nullptr), H5Sclose,
+                                         "cannot create the dataspace of " + name);
+  const Handle set = check.handle(H5Dcreate2(parent, name.c_str(), file_type, file_space.get(), H5P_DEFAULT, H5P_DEFAULT,
+                                             H5P_DEFAULT),
+                                  H5Dclose, "cannot create dataset " + name);
+  hsize_t total = 1;
+  for (const hsize_t d : dims) total *= d;
+  if (total == 0) return;
+  const hsize_t count = mine.all ? total : mine.count;
+  const hsize_t memory_dims = std::max<hsize_t>(count, 1);
+  const Handle memory_space = check.handle(H5Screate_simple(1, &memory_dims, nullptr), H5Sclose, "cannot create a memory dataspace");
+  if (mine.all) {
+    check.status(H5Sselect_all(file_space.get()), "cannot select " + name);
+  } else if (count > 0) {
+    check.status(H5Sselect_elements(file_space.get(), H5S_SELECT_SET, count, mine.coordinates.data()), "cannot select rows of " + name);
+  } else {
+    check.status(H5Sselect_none(file_space.get()), "cannot select " + name);
+    check.status(H5Sselect_none(memory_space.get()), "cannot select " + name);
+  }
+  check.status(H5Dwrite(set.get(), mem_type, memory_space.get(), file_space.get(), transfer, count > 0 ? data : nullptr),
+               "cannot write dataset " + name);
+}
+
+void write_hdf5_file_collective(const Checker& check, MPI_Comm comm, const std::filesystem::path& file, const NodeSet& nodes,
+                                const BackgroundCells& cells, const DistributedFields& local, const OutputAttributes& attributes) {
+  int rank = 0;
+  MPI_Comm_rank(comm, &rank);
+  const Handle access = check.handle(H5Pcreate(H5P_FILE_ACCESS), H5Pclose, "cannot create file access properties");
+  check.status(H5Pset_fapl_mpio(access.get(), comm, MPI_INFO_NULL), "cannot open the file through MPI-IO");
+  Handle h5 = check.handle(H5Fcreate(file.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, access.get()), H5Fclose,
+                           "cannot create '" + file.string() + "'");
+  const Handle transfer = check.handle(H5Pcreate(H5P_DATASET_XFER), H5Pclose, "cannot create transfer properties");
+  check.status(H5Pset_dxpl_mpio(transfer.get(), H5FD_MPIO_COLLECTIVE), "cannot ask for collective transfers");
+  {
+    const auto n = static_cast<hsize_t>(nodes.size());
+    const auto d = static_cast<hsize_t>(nodes.dim);
+    const auto per_cell = d + 1;
+    const auto m = static_cast<hsize_t>(cells.connectivity.size()) / per_cell;
+    const Selection everything_on_rank0{rank == 0, 0, {}};
+    write_dataset_collective(check, h5.get(), "nodes", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, {n, d}, everything_on_rank0,
+                             nodes.coords.data(), transfer.get());
+    write_dataset_collective(check, h5.get(), "cells", H5T_STD_I32LE, H5T_NATIVE_INT, {m, per_cell}, everything_on_rank0,
+                             cells.connectivity.data(), transfer.get());
+    const Handle group = check.handle(H5Gcreate2(h5.get(), "fields", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Gclose,
+                                      "cannot create group /fields");
+    write_attribute(check, group.get(), "format", std::string(kFormatName));
+    write_attribute(check, group.get(), "version", kFormatVersion);
+    for (const auto& [name, field] : local.fields) {
+      const auto components = static_cast<hsize_t>(field.components);
+      std::vector<hsize_t> dims{n};
+      if (components > 1) dims.push_back(components);
+      Selection mine;
+      mine.count = static_cast<hsize_t>(local.rows.size()) * components;
+      mine.coordinates.reserve(static_cast<std::size_t>(mine.count) * dims.size());
+      for (const int row : local.rows)
+        for (hsize_t c = 0; c < components; ++c) {
+          mine.coordinates.push_back(static_cast<hsize_t>(row));
+          if (components > 1) mine.coordinates.push_back(c);
+        }
+      write_dataset_collective(check, group.get(), name, H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, dims, mine, field.values.data(),
+                               transfer.get());
     }
     for (const auto& [name, value] : attributes) write_attribute(check, h5.get(), name, value);
   }
@@ -278,40 +370,23 @@ herr_t collect_name(hid_t, const char* name, const H5A_info_t*, void* data) {
   return 0;
 }
 
-}  // namespace
-
-std::filesystem::path xdmf_sidecar_path(const std::filesystem::path& h5_path) {
-  std::filesystem::path xmf = h5_path;
-  xmf.replace_extension(".xmf");
-  return xmf;
-}
-
-void write_field_hdf5(const std::filesystem::path& path, const NodeSet& nodes, const BackgroundCells& cells,
-                      const FieldViews& fields, const OutputAttributes& attributes) {
-  const std::string context = "write_field_hdf5: " + path.string();
-  if (path.filename().empty() || path.extension() == ".xmf" || path.extension() == ".tmp") {
-    throw std::invalid_argument(context + ": expected a file name such as 'state.h5'");
-  }
-  validate(context, nodes, cells, fields, attributes);
-
-  const bool sidecar = nodes.dim >= 2;
+/// Moves a written temporary .h5 into place with its XDMF sidecar (2D and 3D): fsync, the sidecar
+/// renamed first and the data last, so that whenever the new .h5 is in place its .xmf is too.
+/// On failure nothing new is left behind.
+void place_files(const std::string& context, const std::filesystem::path& path, const std::filesystem::path& h5_tmp,
+                 const NodeSet& nodes, const BackgroundCells& cells, const FieldViews& fields) {
   const auto xmf = xdmf_sidecar_path(path);
-  const auto h5_tmp = io_detail::temporary_path(path);
   const auto xmf_tmp = io_detail::temporary_path(xmf);
-  const QuietHdf5Errors quiet;
-  const Checker check{context};
   bool xmf_renamed = false;
   try {
-    write_hdf5_file(check, h5_tmp, nodes, cells, fields, attributes);
     io_detail::sync_file(h5_tmp, context);
-    if (sidecar) {
+    if (nodes.dim >= 2) {
       std::vector<std::pair<std::string, int>> listed;
       for (const auto& [name, field] : fields) listed.emplace_back(name, field.components);
       const std::string xml = io_detail::xdmf_document(path.filename().string(), nodes.dim, nodes.size(),
                                                        cells.connectivity.size() / static_cast<std::size_t>(nodes.dim + 1),
                                                        listed);
       io_detail::write_and_sync(xmf_tmp, xml, context);
-      // The sidecar first, the data last: whenever the new .h5 is in place, so is its .xmf.
       io_detail::rename_into_place(xmf_tmp, xmf, context);
       xmf_renamed = true;
     }
@@ -323,6 +398,88 @@ void write_field_hdf5(const std::filesystem::path& path, const NodeSet& nodes, c
     throw;
   }
   io_detail::sync_parent_directory(path);
+}
+
+}  // namespace
+
+std::filesystem::path xdmf_sidecar_path(const std::filesystem::path& h5_path) {
+  std::filesystem::path xmf = h5_path;
+  xmf.replace_extension(".xmf");
+  return xmf;
+}
+
+void write_field_hdf5(const std::filesystem::path& path, const NodeSet& nodes, const BackgroundCells& cells,
+                      const FieldViews& fields, const OutputAttributes& attributes) {
+  const std::string context = "write_field_hdf5: " + path.string();
+  check_file_name(context, path);
+  validate(context, nodes, cells, fields, attributes);
+
+  const auto h5_tmp = io_detail::temporary_path(path);
+  const QuietHdf5Errors quiet;
+  try {
+    write_hdf5_file(Checker{context}, h5_tmp, nodes, cells, fields, attributes);
+  } catch (...) {
+    io_detail::remove_quietly(h5_tmp);
+    throw;
+  }
+  place_files(context, path, h5_tmp, nodes, cells, fields);
+}
+
+void write_field_hdf5(MPI_Comm comm, const std::filesystem::path& path, const NodeSet& nodes, const BackgroundCells& cells,
+                      const DistributedFields& local, const OutputAttributes& attributes) {
+  const std::string context = "write_field_hdf5: " + path.string();
+  int rank = 0;
+  MPI_Comm_rank(comm, &rank);
+  // Every rank checks its own part; all learn whether any failed, so that none enters the
+  // collective writes alone.
+  std::string refusal;
+  try {
+    check_file_name(context, path);
+    validate(context, nodes, cells, {}, attributes);
+    validate_fields(context, local.fields, local.rows.size(), "rows of this rank");
+    for (const int row : local.rows)
+      if (row < 0 || static_cast<std::size_t>(row) >= nodes.size())
+        throw std::invalid_argument(context + ": row " + std::to_string(row) + " outside [0, " + std::to_string(nodes.size()) + ")");
+  } catch (const std::invalid_argument& e) {
+    refusal = e.what();
+  }
+  long long rows = static_cast<long long>(local.rows.size()), all_rows = 0;
+  int refused = refusal.empty() ? 0 : 1, any_refused = 0;
+  MPI_Allreduce(&rows, &all_rows, 1, MPI_LONG_LONG, MPI_SUM, comm);
+  MPI_Allreduce(&refused, &any_refused, 1, MPI_INT, MPI_MAX, comm);
+  if (any_refused != 0) throw std::invalid_argument(refused != 0 ? refusal : context + ": another rank's part is inconsistent");
+  if (all_rows != static_cast<long long>(nodes.size()))
+    throw std::invalid_argument(context + ": the ranks hold " + std::to_string(all_rows) + " rows together, the file has " +
+                                std::to_string(nodes.size()) + " nodes");
+
+  // One temporary name for all ranks: rank 0's.
+  std::string h5_tmp = rank == 0 ? io_detail::temporary_path(path).string() : std::string();
+  auto length = static_cast<int>(h5_tmp.size());
+  MPI_Bcast(&length, 1, MPI_INT, 0, comm);
+  h5_tmp.resize(static_cast<std::size_t>(length));
+  MPI_Bcast(h5_tmp.data(), length, MPI_CHAR, 0, comm);
+
+  const QuietHdf5Errors quiet;
+  std::string failure;
+  try {
+    write_hdf5_file_collective(Checker{context}, comm, h5_tmp, nodes, cells, local, attributes);
+  } catch (const std::exception& e) {
+    failure = e.what();
+  }
+  int failed = failure.empty() ? 0 : 1, any_failed = 0;
+  MPI_Allreduce(&failed, &any_failed, 1, MPI_INT, MPI_MAX, comm);
+  if (any_failed == 0 && rank == 0) {
+    try {
+      place_files(context, path, h5_tmp, nodes, cells, local.fields);
+    } catch (const std::exception& e) {
+      failed = 1;
+      failure = e.what();
+    }
+  }
+  if (any_failed != 0 && rank == 0) io_detail::remove_quietly(h5_tmp);
+  MPI_Allreduce(MPI_IN_PLACE, &failed, 1, MPI_INT, MPI_MAX, comm);
+  if (failed != 0 || any_failed != 0)
+    throw std::runtime_error(!failure.empty() ? failure : context + ": the file could not be written (the message is on rank 0)");
 }
 
 FieldFile read_field_hdf5(const std::filesystem::path& path) {

@@ -130,6 +130,24 @@ void TimeSeriesWriter::write(double time, int step, const NodeSet& nodes, const 
   const std::filesystem::path file = file_of(step);
   std::filesystem::create_directories(directory_ / "series");
   write_field_hdf5(directory_ / file, nodes, cells, fields, attributes);
+  add_step(time, file, nodes, cells, fields, true);
+}
+
+void TimeSeriesWriter::write(MPI_Comm comm, double time, int step, const NodeSet& nodes, const BackgroundCells& cells,
+                             const DistributedFields& local, const OutputAttributes& attributes) {
+  int rank = 0;
+  MPI_Comm_rank(comm, &rank);
+  const std::filesystem::path file = file_of(step);
+  std::error_code made;
+  if (rank == 0) std::filesystem::create_directories(directory_ / "series", made);
+  // A folder that cannot be made fails the collective write on every rank, naming the file.
+  MPI_Barrier(comm);
+  write_field_hdf5(comm, directory_ / file, nodes, cells, local, attributes);
+  add_step(time, file, nodes, cells, local.fields, rank == 0);
+}
+
+void TimeSeriesWriter::add_step(double time, const std::filesystem::path& file, const NodeSet& nodes, const BackgroundCells& cells,
+                                const FieldViews& fields, bool write_collection) {
   TimeSeriesStep entry;
   entry.time = time;
   entry.h5_file = file;
@@ -138,7 +156,7 @@ void TimeSeriesWriter::write(double time, int step, const NodeSet& nodes, const 
   entry.cells = cells.size();
   for (const auto& [field, view] : fields) entry.fields.emplace_back(field, view.components);
   steps_.push_back(std::move(entry));
-  if (nodes.dim >= 2) write_xdmf_time_series(directory_ / (name_ + ".xmf"), steps_);
+  if (write_collection && nodes.dim >= 2) write_xdmf_time_series(directory_ / (name_ + ".xmf"), steps_);
 }
 
 }  // namespace lmeform

@@ -347,20 +347,22 @@ void LoadStepper::write_history() const {
 
 void LoadStepper::write_outputs(int step) {
   if (ctx_.output_directory.empty()) return;
-  const std::vector<double> state = to_original(*space_.disc, u_, bound_.layout.dofs_per_node);
-  if (rank_ != 0) return;
+  // Every rank writes the rows it owns into the files (collective HDF5): nothing is gathered.
+  const OwnedRows owned = owned_original(*space_.disc, u_, bound_.layout.dofs_per_node);
   std::vector<std::vector<double>> values;
   values.reserve(bound_.layout.fields.size());  // the views below point into it
   FieldViews fields;
   for (const auto& f : bound_.layout.fields) {
-    values.push_back(bound_.layout.values(state, f));
+    values.push_back(bound_.layout.values(owned.values, f));
     fields.emplace(f.name, FieldView{values.back(), f.components});
   }
   const OutputAttributes attributes{{"step", static_cast<std::int64_t>(step)}, {"load", lambda_}};
-  series_->write(lambda_, step, input_.nodes, cells_, fields, attributes);
-  write_history();
+  const MPI_Comm comm = space_.disc->comm();
+  series_->write(comm, lambda_, step, input_.nodes, cells_, DistributedFields{owned.rows, fields}, attributes);
+  if (rank_ == 0) write_history();
   if (settings_.checkpoint_every > 0 && (step % settings_.checkpoint_every == 0 || step == settings_.until))
-    write_field_hdf5(path("_checkpoint.h5"), input_.nodes, cells_, {{"state", FieldView{state, bound_.layout.dofs_per_node}}}, attributes);
+    write_field_hdf5(comm, path("_checkpoint.h5"), input_.nodes, cells_,
+                     DistributedFields{owned.rows, {{"state", FieldView{owned.values, bound_.layout.dofs_per_node}}}}, attributes);
 }
 
 void LoadStepper::resume() {
