@@ -633,6 +633,28 @@ TEST(Dynamics, CarryingAFieldToPointsOutsideTheOldHullFailsOrFallsBackToTheNeare
   EXPECT_NEAR(carried[1], 1.0 + 1.0 + 0.5, 1e-12);  // the nearest old node, (0.5, 0.5)
 }
 
+TEST(Dynamics, FittingNodalValuesWorksAtABoundaryRefinedMoreFinelyThanTheNodesBesideIt) {
+  // Nodes every 0.01 along the edge x = 1 and along x = 0.9, every 0.1 on [0, 0.5] x [0, 1]: at
+  // gamma = 1.4 no support reaches an edge node from inside (radii 0.031 and 0.31), so its list
+  // holds only edge nodes, a flat neighbourhood (as a crack reaching the edge of a SENS specimen
+  // made one). Its Delaunay cell's vertices join, and an affine field's values are its coefficients.
+  std::vector<double> coords;
+  for (int j = 0; j <= 100; ++j) coords.insert(coords.end(), {1.0, 0.01 * j, 0.9, 0.01 * j});
+  for (int i = 0; i <= 5; ++i)
+    for (int j = 0; j <= 10; ++j) coords.insert(coords.end(), {0.1 * i, 0.1 * j});
+  const NodeSet nodes(2, std::move(coords));
+  const LmeBasis basis(nodes, std::vector<double>(nodes.size(), 1.4), LmeOptions{});
+  const auto edge_node = nodes.point(2 * 37);  // (1, 0.37)
+  EXPECT_THROW((void)basis.evaluate(edge_node, basis.neighbours(edge_node), 0), LmeEvaluationError);
+  auto affine = [](std::span<const double> x) { return 0.3 + 2.0 * x[0] - 1.5 * x[1]; };
+  std::vector<double> values;
+  for (std::size_t a = 0; a < nodes.size(); ++a) values.push_back(affine(nodes.point(a)));
+  const std::vector<double> fitted = problems::fit_nodal_values(nodes, values, 1.4, LmeOptions{}, 10);
+  double error = 0;
+  for (std::size_t a = 0; a < nodes.size(); ++a) error = std::max(error, std::abs(fitted[a] - values[a]));
+  EXPECT_LT(error, 1e-10);
+}
+
 TEST(Dynamics, TheL2ProjectionFromPointsReproducesAFieldOfTheSpace) {
   // LME reproduces affine fields: their coefficients are their nodal values, so the projection of an
   // affine field's point values must return exactly those, on a strongly graded node set.
