@@ -226,8 +226,15 @@ bool LoadStepper::follow_field(int step, std::vector<double> before, double lamb
     NodeSet nodes = refined_nodes(*ctx_.scene, old_nodes, marked);
     if (nodes.coords == old_nodes.coords) return true;  // the sample cannot do better there
     std::size_t kept = 0;
-    std::vector<double> start = transfer_state(old_nodes, before, bs, gamma, input_.lme, nodes, adapt.fit_iterations, &kept);
-    const std::vector<double> solution = transfer_state(old_nodes, state, bs, gamma, input_.lme, nodes, adapt.fit_iterations);
+    std::vector<double> start, solution;
+    try {
+      start = transfer_state(old_nodes, before, bs, gamma, input_.lme, nodes, adapt.fit_iterations, &kept);
+      solution = transfer_state(old_nodes, state, bs, gamma, input_.lme, nodes, adapt.fit_iterations);
+    } catch (const std::exception& e) {
+      // The last converged step is on disk already; say where the run stopped.
+      throw std::runtime_error(fmt::format("step {}: carrying the state to {} refined nodes (refinement {} of the step, key 'nodes.adapt'): {}",
+                                           step, nodes.size(), round + 1, e.what()));
+    }
     rebuild(std::move(nodes), start);  // at the step's load: the bound "previous" is the state before the step
     before = to_original(*space_.disc, u_, bs);
     set_from_original(*space_.disc, solution, bs, u_);
