@@ -22,6 +22,7 @@
 #include "dynamics.hpp"
 #include "stationary.hpp"
 #include "field_transfer.hpp"
+#include "point_values.hpp"
 #include "lmeform/delaunay.hpp"
 #include "lmeform/lme_basis.hpp"
 #include "lmeform/quadrature.hpp"
@@ -633,7 +634,7 @@ TEST(Dynamics, CarryingAFieldToPointsOutsideTheOldHullFailsOrFallsBackToTheNeare
   EXPECT_NEAR(carried[1], 1.0 + 1.0 + 0.5, 1e-12);  // the nearest old node, (0.5, 0.5)
 }
 
-TEST(Dynamics, FittingNodalValuesWorksAtABoundaryRefinedMoreFinelyThanTheNodesBesideIt) {
+TEST(Dynamics, NodalFitsAndPointValuesWorkAtABoundaryRefinedMoreFinelyThanTheNodesBesideIt) {
   // Nodes every 0.01 along the edge x = 1 and along x = 0.9, every 0.1 on [0, 0.5] x [0, 1]: at
   // gamma = 1.4 no support reaches an edge node from inside (radii 0.031 and 0.31), so its list
   // holds only edge nodes, a flat neighbourhood (as a crack reaching the edge of a SENS specimen
@@ -653,6 +654,14 @@ TEST(Dynamics, FittingNodalValuesWorksAtABoundaryRefinedMoreFinelyThanTheNodesBe
   double error = 0;
   for (std::size_t a = 0; a < nodes.size(); ++a) error = std::max(error, std::abs(fitted[a] - values[a]));
   EXPECT_LT(error, 1e-10);
+  // A point output evaluated there (a requirement checked at the nodes) takes nodes off the edge.
+  std::vector<int> list = basis.neighbours(edge_node);
+  const std::size_t own = list.size();
+  const std::vector<double> p = problems::evaluate_with_nodes_off_the_line(basis, edge_node, list, 0);
+  EXPECT_GT(list.size(), own);
+  double value = 0;
+  for (std::size_t m = 0; m < list.size(); ++m) value += p[m] * values[std::size_t(list[m])];
+  EXPECT_NEAR(value, affine(edge_node), 1e-12);
 }
 
 TEST(Dynamics, TheL2ProjectionFromPointsReproducesAFieldOfTheSpace) {

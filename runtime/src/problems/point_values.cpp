@@ -18,6 +18,32 @@ const UnknownField* field_of(const StateLayout& layout, const kernel::FieldInfo&
 
 }  // namespace
 
+// On the hull the LME weights of nodes off the edge vanish, so the value stays the edge's, and the
+// dual problem is regular again (measured: a SENS crack reaching the right edge).
+std::vector<double> evaluate_with_nodes_off_the_line(const LmeBasis& basis, std::span<const double> x, std::vector<int>& list, int order) {
+  const NodeSet& nodes = basis.nodes();
+  std::vector<std::pair<double, int>> by_distance;
+  by_distance.reserve(nodes.size());
+  for (std::size_t a = 0; a < nodes.size(); ++a) {
+    if (std::find(list.begin(), list.end(), static_cast<int>(a)) != list.end()) continue;
+    double d2 = 0;
+    for (std::size_t i = 0; i < x.size(); ++i) d2 += (nodes.point(a)[i] - x[i]) * (nodes.point(a)[i] - x[i]);
+    by_distance.emplace_back(d2, static_cast<int>(a));
+  }
+  constexpr std::size_t kMostAdded = 32;
+  const std::size_t candidates = std::min(by_distance.size(), kMostAdded);
+  std::partial_sort(by_distance.begin(), by_distance.begin() + std::ptrdiff_t(candidates), by_distance.end());
+  for (std::size_t k = 0; k < candidates; ++k) {
+    list.insert(std::upper_bound(list.begin(), list.end(), by_distance[k].second), by_distance[k].second);
+    try {
+      return basis.evaluate(x, list, order);
+    } catch (const LmeEvaluationError& e) {
+      if (e.reason() != LmeFailure::degenerate || k + 1 == candidates) throw;
+    }
+  }
+  return basis.evaluate(x, list, order);  // no other node: the original error
+}
+
 bool PointEvaluator::can_evaluate(const kernel::FormKernels& output, const StateLayout& layout) {
   if (output.kind != kernel::FunctionalKind::Point || output.point == nullptr) return false;
   if (output.n_coefficients > 0 || output.qdata_per_point > 0) return false;
@@ -81,11 +107,16 @@ void PointEvaluator::evaluate(const LmeBasis& basis, std::span<const double> x, 
   try {
     jet = basis.evaluate(at, list, order);
   } catch (const LmeEvaluationError& e) {
-    // At a node whose neighbours carry almost no weight the dual problem's Hessian J vanishes
-    // (p is the Kronecker delta to round-off): a hundredth of a spacing away it is regular.
-    if (e.reason() != LmeFailure::singular_jacobian) throw;
-    move_inward(1e-2);
-    jet = basis.evaluate(at, list, order);
+    if (e.reason() == LmeFailure::singular_jacobian) {
+      // At a node whose neighbours carry almost no weight the dual problem's Hessian J vanishes
+      // (p is the Kronecker delta to round-off): a hundredth of a spacing away it is regular.
+      move_inward(1e-2);
+      jet = basis.evaluate(at, list, order);
+    } else if (e.reason() == LmeFailure::degenerate) {
+      jet = evaluate_with_nodes_off_the_line(basis, at, list, order);
+    } else {
+      throw;
+    }
   }
   const std::size_t n = list.size();
   std::vector<double> local(n * static_cast<std::size_t>(k.dofs_per_node));

@@ -17,6 +17,13 @@
 
 namespace lmeform::problems {
 
+/// The basis jet at x on `list` after its flat-neighbourhood fallback: when the nodes of `list` lie
+/// on one line (plane), the next nearest other nodes join `list` until one lies off it (at most 32).
+/// For a boundary point whose supports reach only its own edge's nodes (a boundary refined more
+/// finely than the nodes beside it). Throws the LME error when no node helps.
+[[nodiscard]] std::vector<double> evaluate_with_nodes_off_the_line(const LmeBasis& basis, std::span<const double> x,
+                                                                   std::vector<int>& list, int order);
+
 class PointEvaluator {
  public:
   /// `output`: a Point kernel whose unknowns are fields of `layout` (by name and shape) and which
