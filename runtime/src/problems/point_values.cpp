@@ -20,7 +20,7 @@ const UnknownField* field_of(const StateLayout& layout, const kernel::FieldInfo&
 
 // On the hull the LME weights of nodes off the edge vanish, so the value stays the edge's, and the
 // dual problem is regular again (measured: a SENS crack reaching the right edge).
-std::vector<double> evaluate_with_nodes_off_the_line(const LmeBasis& basis, std::span<const double> x, std::vector<int>& list, int order) {
+std::vector<double> evaluate_with_nearest_nodes(const LmeBasis& basis, std::span<const double> x, std::vector<int>& list, int order) {
   const NodeSet& nodes = basis.nodes();
   std::vector<std::pair<double, int>> by_distance;
   by_distance.reserve(nodes.size());
@@ -38,7 +38,8 @@ std::vector<double> evaluate_with_nodes_off_the_line(const LmeBasis& basis, std:
     try {
       return basis.evaluate(x, list, order);
     } catch (const LmeEvaluationError& e) {
-      if (e.reason() != LmeFailure::degenerate || k + 1 == candidates) throw;
+      const auto r = e.reason();
+      if ((r != LmeFailure::degenerate && r != LmeFailure::too_few_neighbours && r != LmeFailure::outside_hull) || k + 1 == candidates) throw;
     }
   }
   return basis.evaluate(x, list, order);  // no other node: the original error
@@ -112,8 +113,9 @@ void PointEvaluator::evaluate(const LmeBasis& basis, std::span<const double> x, 
       // (p is the Kronecker delta to round-off): a hundredth of a spacing away it is regular.
       move_inward(1e-2);
       jet = basis.evaluate(at, list, order);
-    } else if (e.reason() == LmeFailure::degenerate) {
-      jet = evaluate_with_nodes_off_the_line(basis, at, list, order);
+    } else if (e.reason() == LmeFailure::degenerate || e.reason() == LmeFailure::too_few_neighbours ||
+               e.reason() == LmeFailure::outside_hull) {
+      jet = evaluate_with_nearest_nodes(basis, at, list, order);
     } else {
       throw;
     }

@@ -17,11 +17,12 @@
 
 namespace lmeform::problems {
 
-/// The basis jet at x on `list` after its flat-neighbourhood fallback: when the nodes of `list` lie
-/// on one line (plane), the next nearest other nodes join `list` until one lies off it (at most 32).
-/// For a boundary point whose supports reach only its own edge's nodes (a boundary refined more
-/// finely than the nodes beside it). Throws the LME error when no node helps.
-[[nodiscard]] std::vector<double> evaluate_with_nodes_off_the_line(const LmeBasis& basis, std::span<const double> x,
+/// The basis jet at x on `list` when `list` alone cannot give it: its nodes lie on one line (plane),
+/// are too few, or all on one side of x. The next nearest other nodes join `list` one by one until
+/// the evaluation succeeds (at most 32). For a boundary node whose supports reach only its own
+/// edge's nodes (a boundary refined more finely than the nodes beside it), or only itself (a
+/// compact support). Throws the LME error when no node helps.
+[[nodiscard]] std::vector<double> evaluate_with_nearest_nodes(const LmeBasis& basis, std::span<const double> x,
                                                                    std::vector<int>& list, int order);
 
 class PointEvaluator {
