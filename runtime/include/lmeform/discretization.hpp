@@ -279,6 +279,7 @@ class Discretization {
 
  private:
   [[nodiscard]] std::vector<char> cells_reaching_owned_nodes() const;
+  void search_cells_whose_facets_list_owned_nodes(std::vector<char>& searched) const;
   void build_cell_domain();
   void build_boundary_domain(const BoundaryQuadrature& q);
   void build_gradient_correction();

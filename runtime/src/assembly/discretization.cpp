@@ -215,6 +215,26 @@ CsrLists facet_point_lists(const LmeBasis& basis, const detail::CellFacets& face
 
 }  // namespace
 
+void Discretization::search_cells_whose_facets_list_owned_nodes(std::vector<char>& searched) const {
+  // A facet point's list can hold the vertices of the facet's first cell (a flat neighbourhood,
+  // facet_point_lists), which the other cell sharing the facet merges into its element: that
+  // element can reach an owned node no support of its own reaches (measured: SENT on 2 ranks with
+  // support_tolerance = 1e-3, a cell point with an empty list). Its points are searched too.
+  const auto per_cell = static_cast<std::size_t>(dim() + 1), per_facet = static_cast<std::size_t>(facets_->points_per_facet);
+  for (std::size_t c = 0; c < cells_.size(); ++c) {
+    if (searched[c]) continue;
+    for (std::size_t k = 0; k < per_cell && !searched[c]; ++k) {
+      const auto f = static_cast<std::size_t>(facets_->cell_facets[c * per_cell + k]);
+      for (std::size_t g = 0; g < per_facet && !searched[c]; ++g)
+        for (const int a : facet_point_lists_[f * per_facet + g])
+          if (owns(a)) {
+            searched[c] = 1;
+            break;
+          }
+    }
+  }
+}
+
 std::vector<char> Discretization::cells_reaching_owned_nodes() const {
   // A point x lists node a when |x - x_a| <= r_a (or its mirror image does). A cell's points lie
   // within R_c of its centroid (R_c: the centroid's largest vertex distance), so a cell none of
@@ -394,18 +414,19 @@ Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, Discretizati
     if (!basis_) basis_.emplace(nodes_, renumbered_gamma, std::move(renumbered_spacing), options_.lme);
     // A carried point can take the vertices of a cell other than its own (add_enclosing_cells):
     // its cell is searched on every rank.
-    const std::vector<char> searched = size_ > 1 && !options_.carried ? cells_reaching_owned_nodes() : std::vector<char>();
-    point_lists_ = point_lists_of_cells(*basis_, quadrature_, cells_, searched);
-    cells_searched_ = searched.empty() ? cells_.size() : static_cast<std::size_t>(std::count(searched.begin(), searched.end(), 1));
-    if (options_.carried)
-      points_outside_carried_cells_ =
-          add_enclosing_cells(point_lists_, quadrature_, cells_, nodes_, nodes, partition_.new_index);
     if (options_.consistent_integration > 0) {
       const int m = options_.consistent_integration;
       facets_ = std::make_shared<const detail::CellFacets>(
           detail::cell_facets(cells_, nodes_, nodes.dim == 2 ? gauss_legendre(m) : triangle_rule(m)));
       facet_point_lists_ = facet_point_lists(*basis_, *facets_, cells_, nodes_);
     }
+    std::vector<char> searched = size_ > 1 && !options_.carried ? cells_reaching_owned_nodes() : std::vector<char>();
+    if (facets_ && !searched.empty()) search_cells_whose_facets_list_owned_nodes(searched);
+    point_lists_ = point_lists_of_cells(*basis_, quadrature_, cells_, searched);
+    cells_searched_ = searched.empty() ? cells_.size() : static_cast<std::size_t>(std::count(searched.begin(), searched.end(), 1));
+    if (options_.carried)
+      points_outside_carried_cells_ =
+          add_enclosing_cells(point_lists_, quadrature_, cells_, nodes_, nodes, partition_.new_index);
   }
 
   // Elements of every integration domain; ghosts and the pattern of their union; basis storage.
