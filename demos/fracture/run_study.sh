@@ -2,7 +2,8 @@
 # The 2D fracture studies of docs/fracture.md, one after the other (hours on 2 cores; make bench
 # runs only the 1D study, gamma_convergence.py --quick): SENT and SENS force-displacement, surfing
 # with AT2 and AT1, the anisotropic crack at three orientations, SENT on nodes that follow the
-# crack. Records go to BUILD/bench/fracture.json, figures next to it.
+# crack, SENT to complete failure (sent_fast.toml) and SENS at l = 0.015 on following nodes.
+# Records go to BUILD/bench/fracture.json, figures next to it.
 #   demos/fracture/run_study.sh [BUILD]
 set -euo pipefail
 build=${1:-build}
@@ -27,3 +28,9 @@ done
 "$lmeform" run "$here/sent_adaptive.toml" --output "$build/demo/fracture/sent_adaptive"
 /usr/bin/python3 "$here/adaptive_sent.py" "$build/demo/fracture/sent_adaptive" "$out" --fixed "$build/demo/fracture/sent" \
   --fenicsx "$here/fenicsx_fracture_sent_l0.015.json"
+# SENT to complete failure on 2 ranks (compact support, over-relaxed alternation) and SENS at
+# l = 0.015 on nodes that follow the crack; force records ("sent", "sens") with the FEniCSx peaks.
+OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 mpirun -n 2 "$lmeform" run "$here/sent_fast.toml" --output "$build/demo/fracture/sent_fast"
+/usr/bin/python3 "$here/force_displacement.py" "$build/demo/fracture/sent_fast" sent "$out" --fenicsx "$here/fenicsx_fracture_sent_l0.015.json" --l 0.015 --h 0.0075
+"$lmeform" run "$here/sens_adaptive.toml" --output "$build/demo/fracture/sens_adaptive"
+/usr/bin/python3 "$here/force_displacement.py" "$build/demo/fracture/sens_adaptive" sens "$out" --fenicsx "$here/fenicsx_fracture_sens_l0.015.json" --l 0.015 --h 0.006
