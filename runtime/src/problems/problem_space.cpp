@@ -48,6 +48,12 @@ std::shared_ptr<Discretization> discretization_of(MPI_Comm comm, const BoundScen
   try {
     return std::make_shared<Discretization>(comm, input.nodes, options);
   } catch (const LmeEvaluationError& e) {
+    // A compact support leaves a point few neighbours: say which key made it so.
+    if (e.reason() != LmeFailure::infeasible_second_moment && b.discretization.support_tolerance > 1e-6)
+      throw SceneError(fmt::format("{}: the LME basis cannot be evaluated on these nodes with key 'nodes.support_tolerance' = {:g}: {}\n"
+                                   "  in the scene: a smaller 'nodes.support_tolerance' (the default 1e-6 keeps more neighbours) or "
+                                   "a smaller 'nodes.gamma' (now {:g})",
+                                   b.source, b.discretization.support_tolerance, e.what(), b.discretization.gamma));
     if (e.reason() != LmeFailure::infeasible_second_moment) throw;
     throw SceneError(fmt::format("{}: key 'nodes.basis' = \"second\" cannot be evaluated on these nodes: {}\n  in the scene: a smaller "
                                  "'nodes.gamma' (now {:g}), more nodes there (or less steep 'nodes.refine' grading), or "
