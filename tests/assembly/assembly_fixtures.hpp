@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
@@ -72,6 +73,40 @@ inline Assembled assemble_all(const Discretization& disc, const kernel::FormKern
   out.gradient = to_original(disc, g, bs);
   out.hessian = dense_original(disc, H, bs);
   return out;
+}
+
+/// The components outside `coupled` held fixed: the Hessian from create_matrix(…, coupled) equals
+/// the full one once both have those rows and columns turned into the identity
+/// (MatZeroRowsColumns, as the Newton solvers do), holds fewer entries, and coupled_components()
+/// finds the same components from the fixed dofs.
+inline void expect_coupled_hessian_equals_full(Assembler& assembler, Vec u, const std::vector<int>& coupled,
+                                               Assembler::MatrixInsertion insertion = Assembler::MatrixInsertion::Direct) {
+  const Discretization& disc = assembler.discretization();
+  const int bs = assembler.block_size();
+  std::vector<PetscInt> fixed;
+  for (int b = disc.owned_begin(); b < disc.owned_end(); ++b)
+    for (int c = 0; c < bs; ++c)
+      if (std::find(coupled.begin(), coupled.end(), c) == coupled.end()) fixed.push_back(static_cast<PetscInt>(b) * bs + c);
+  EXPECT_EQ(coupled_components(disc, bs, fixed), coupled);
+  PetscMatrix full = assembler.create_matrix();
+  PetscMatrix restricted = assembler.create_matrix(insertion, coupled);
+  assembler.matrix(u, full);
+  assembler.matrix(u, restricted);
+  for (Mat A : {full.get(), restricted.get()})
+    LMEFORM_PETSC_CHECK(MatZeroRowsColumns(A, static_cast<PetscInt>(fixed.size()), fixed.data(), 1.0, nullptr, nullptr));
+  const auto f = dense_original(disc, full, bs), r = dense_original(disc, restricted, bs);
+  const auto n = static_cast<std::size_t>(disc.n_nodes() * bs);
+  double coupling = 0;  // the largest entry off the diagonal: what the identity rows do not hold
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t j = 0; j < n; ++j)
+      if (i != j) coupling = std::max(coupling, std::abs(f[i * n + j]));
+  ASSERT_GT(coupling, 0.0);
+  EXPECT_LE(max_abs_difference(f, r), 1e-13 * coupling);
+  MatInfo full_info, restricted_info;
+  LMEFORM_PETSC_CHECK(MatGetInfo(full, MAT_GLOBAL_SUM, &full_info));
+  LMEFORM_PETSC_CHECK(MatGetInfo(restricted, MAT_GLOBAL_SUM, &restricted_info));
+  const double share = double(coupled.size()) / bs;
+  EXPECT_LT(restricted_info.nz_used, (share * share + 0.1) * full_info.nz_used);
 }
 
 /// The linear system K x = b of a quadratic energy: K its Hessian, b = −∇E(0). `x` is a zero

@@ -225,6 +225,20 @@ TEST(Assembly, DirectAndSetValuesInsertionGiveTheSameMatrix) {
   }
 }
 
+TEST(Assembly, AHessianOfSomeComponentsEqualsTheFullOneWithTheOthersFixed) {
+  const NodeSet nodes = jittered_grid(9, 0.3, 17);
+  const auto form = JetKernel<VectorField>::descriptor("vector", nullptr, 0);
+  const Discretization disc(PETSC_COMM_SELF, nodes, options(1.6, 6, NeighbourhoodStrategy::CellBased));
+  Assembler assembler(disc, form);
+  PetscVector u = assembler.create_vector();
+  set_from_original(disc, random_values(nodes.size() * 2, 5, 0.5), 2, u);
+  for (const std::vector<int>& coupled : {std::vector<int>{0}, std::vector<int>{1}}) testing::expect_coupled_hessian_equals_full(assembler, u, coupled);
+  testing::expect_coupled_hessian_equals_full(assembler, u, {1}, Assembler::MatrixInsertion::SetValues);
+  // Every component coupled: no restriction, whatever the list says.
+  EXPECT_TRUE(coupled_components(disc, 2, {}).empty());
+  EXPECT_THROW((void)assembler.create_matrix(Assembler::MatrixInsertion::Direct, std::vector<int>{2}), std::invalid_argument);
+}
+
 TEST(Assembly, SolverRefactorsAfterADirectFill) {
   const NodeSet nodes = jittered_grid(9, 0.3, 4);
   const Discretization disc(PETSC_COMM_SELF, nodes, options(1.6, 6, NeighbourhoodStrategy::CellBased));

@@ -73,8 +73,17 @@ class Assembler {
   /// element row) instead of MatSetValues — about 10x faster to fill, same values; it applies to
   /// MATSEQAIJ / MATMPIAIJ (other types chosen with -mat_type use MatSetValues) and to owned rows
   /// (zero-communication mode, or one rank).
+  ///
+  /// `coupled_components` (per node, 0 … dofs_per_node − 1; empty: all) restricts the structure:
+  /// the listed components couple as the pattern says, every other one keeps only its diagonal
+  /// entry, and assemblies into the matrix skip the blocks of the others (their kernels' component
+  /// blocks are not contracted, their entries not inserted). For Newton matrices whose other
+  /// components are held fixed wholesale (one group of a staggered solve: MatZeroRowsColumns
+  /// turns their rows and columns into the identity anyway), the factorization then costs what
+  /// the coupled components' system costs. See coupled_components().
   enum class MatrixInsertion { Direct, SetValues };
-  [[nodiscard]] PetscMatrix create_matrix(MatrixInsertion insertion = MatrixInsertion::Direct);
+  [[nodiscard]] PetscMatrix create_matrix(MatrixInsertion insertion = MatrixInsertion::Direct,
+                                          std::span<const int> coupled_components = {});
 
   /// Energy or constraint value (summed over ranks).
   [[nodiscard]] double value(Vec u);
@@ -120,7 +129,8 @@ class Assembler {
   void add_matrix_terms(Vec u, std::span<const MatrixTerm> terms, Mat out);
   /// The terms' element blocks over one domain, each summed and handed to insert(nodes, block).
   template <class Insert>
-  void add_domain_matrix(const ElementSet& domain, Vec u, std::span<const MatrixTerm> terms, Insert&& insert, double& kernel_seconds);
+  void add_domain_matrix(const ElementSet& domain, Vec u, std::span<const MatrixTerm> terms, const std::vector<unsigned char>* coupled,
+                         Insert&& insert, double& kernel_seconds);
   // out += scale * vector; with_value: also the value (summed over ranks), else 0.
   double vector_pass(Vec u, Vec out, double scale, bool with_value);
   void gather_ghosted(Vec source, Vec ghosted);
@@ -145,6 +155,8 @@ class Assembler {
   std::vector<PetscInt> cols_;
   std::vector<PetscInt> scalar_rows_;  // element dofs (node * block size + component)
   std::vector<PetscInt> scalar_cols_;
+  std::vector<std::size_t> coupled_local_;  // element-local dofs of the coupled components
+  std::vector<double> coupled_block_;       // the element block restricted to them
   LmeWorkspace lme_ws_;
   AssemblyTimes times_;
   AssemblyTimes totals_;
@@ -155,6 +167,11 @@ class Assembler {
 /// contribution (MatZeroRowsColumns). `dofs` are global (renumbered) dof indices owned by this
 /// rank; `x` holds the prescribed values at those dofs (other entries are ignored).
 void apply_dirichlet(Mat A, Vec b, Vec x, std::span<const PetscInt> dofs);
+
+/// The components (per node, of block_size) that have at least one dof outside `fixed` (owned,
+/// global dofs) on some rank, for create_matrix; empty when every component has (no restriction).
+/// Collective.
+[[nodiscard]] std::vector<int> coupled_components(const Discretization& disc, int block_size, std::span<const PetscInt> fixed);
 
 /// Owned dofs (renumbered, global) of the given original node indices, all components.
 [[nodiscard]] std::vector<PetscInt> owned_dofs_of_nodes(const Discretization& disc, std::span<const int> original_nodes,

@@ -119,7 +119,8 @@ class ConstrainedMinimizer {
                        ConstrainedMinimizerOptions options = {});
 
   /// Dofs held at their current values in u (owned, global, renumbered).
-  void set_fixed_dofs(std::vector<PetscInt> dofs) { fixed_ = std::move(dofs); }
+  /// Components whose dofs are all fixed keep only their diagonal in the Hessian (create_matrix).
+  void set_fixed_dofs(std::vector<PetscInt> dofs);
   /// Changes the target c_i of constraint i (a prescribed history such as a deflation).
   void set_target(std::size_t i, double target) { constraints_.at(i).target = target; }
   /// Adds (s/2) (u − c)ᵀ K (u − c) to the objective (see ProximalTerm); {} removes it.

@@ -50,7 +50,7 @@
 
 namespace lmeform::kernel {
 
-inline constexpr int kContractVersion = 6;
+inline constexpr int kContractVersion = 7;
 
 /// Number of jet slots of a scalar field for dimension d and derivative order k (0, 1, 2).
 constexpr int jet_size(int dim, int order) noexcept {
@@ -129,6 +129,10 @@ struct CellInputs {
   /// [nq] the local node spacing at each point, which is a node: its distance to the nearest other
   /// node (point kernels with FormKernels::reads_spacing, i.e. requirements; else null).
   const double* spacing = nullptr;
+  /// [dofs_per_node] 1 for the components whose matrix blocks are wanted, or null (all): matrix
+  /// kernels skip the component blocks (r, c) with r or c not wanted (the runtime holds those
+  /// components fixed, so their entries would be discarded).
+  const unsigned char* coupled_components = nullptr;
 };
 
 using ValueKernel = double (*)(const CellInputs&);
@@ -320,6 +324,14 @@ inline void contract_vector(const CellInputs& in, int n, int nq, int n_slots, in
 /// local_matrix += Σ_q Bs_qᵀ D_q^{rc} Bs_q per block: the runtime's routine, else plain loops.
 inline void contract_matrix(const CellInputs& in, int n, int nq, int n_slots, int R, int C, const double* Bs,
                             const double* D, const MatrixBlock* blocks, int n_blocks, double* work, double* local_matrix) {
+  MatrixBlock wanted[64];
+  if (in.coupled_components != nullptr && n_blocks <= 64) {
+    int kept = 0;
+    for (int b = 0; b < n_blocks; ++b)
+      if (in.coupled_components[blocks[b].row] != 0 && in.coupled_components[blocks[b].col] != 0) wanted[kept++] = blocks[b];
+    blocks = wanted;
+    n_blocks = kept;
+  }
   if (in.contractions != nullptr) in.contractions->matrix(n, nq, n_slots, R, C, Bs, D, blocks, n_blocks, work, local_matrix);
   else plain_contract_matrix(n, nq, n_slots, R, C, Bs, D, blocks, n_blocks, work, local_matrix);
 }

@@ -23,6 +23,34 @@ const char* order_name(int order) {
   return order == 0 ? "values" : order == 1 ? "gradients" : "Hessians";
 }
 
+// Which components a matrix from create_matrix couples (1) or keeps diagonal (0), attached to
+// the Mat so that every Assembler adding into it skips the others' blocks.
+constexpr const char* kCoupledKey = "lmeform_coupled_components";
+
+PetscErrorCode destroy_coupled(void* pointer) {
+  delete static_cast<std::vector<unsigned char>*>(pointer);
+  return 0;
+}
+
+void attach_coupled(Mat A, std::vector<unsigned char> mask) {
+  PetscContainer container = nullptr;
+  LMEFORM_PETSC_CHECK(PetscContainerCreate(PetscObjectComm(reinterpret_cast<PetscObject>(A)), &container));
+  LMEFORM_PETSC_CHECK(PetscContainerSetPointer(container, new std::vector<unsigned char>(std::move(mask))));
+  LMEFORM_PETSC_CHECK(PetscContainerSetUserDestroy(container, destroy_coupled));
+  LMEFORM_PETSC_CHECK(PetscObjectCompose(reinterpret_cast<PetscObject>(A), kCoupledKey, reinterpret_cast<PetscObject>(container)));
+  LMEFORM_PETSC_CHECK(PetscContainerDestroy(&container));  // A holds the reference now
+}
+
+/// The mask of a matrix whose structure couples only some components, or null (all coupled).
+const std::vector<unsigned char>* coupled_mask(Mat A) {
+  PetscObject object = nullptr;
+  LMEFORM_PETSC_CHECK(PetscObjectQuery(reinterpret_cast<PetscObject>(A), kCoupledKey, &object));
+  if (object == nullptr) return nullptr;
+  void* pointer = nullptr;
+  LMEFORM_PETSC_CHECK(PetscContainerGetPointer(reinterpret_cast<PetscContainer>(object), &pointer));
+  return static_cast<const std::vector<unsigned char>*>(pointer);
+}
+
 }  // namespace
 
 namespace {
@@ -182,9 +210,20 @@ PetscVector Assembler::create_coefficient_vector() const {
   return v;
 }
 
-PetscMatrix Assembler::create_matrix(MatrixInsertion insertion) {
+PetscMatrix Assembler::create_matrix(MatrixInsertion insertion, std::span<const int> coupled_components) {
   const Stopwatch clock;
   const int bs = form_->dofs_per_node;
+  std::vector<unsigned char> coupled;  // empty: every component couples
+  if (!coupled_components.empty()) {
+    coupled.assign(static_cast<std::size_t>(bs), 0);
+    for (const int c : coupled_components) {
+      if (c < 0 || c >= bs)
+        throw std::invalid_argument(describe() + ": create_matrix: coupled component " + std::to_string(c) + " outside 0 … " +
+                                    std::to_string(bs - 1));
+      coupled[static_cast<std::size_t>(c)] = 1;
+    }
+    if (std::all_of(coupled.begin(), coupled.end(), [](unsigned char on) { return on != 0; })) coupled.clear();
+  }
   const SparsityPattern& pattern = disc_->pattern();
   PetscMatrix A;
   LMEFORM_PETSC_CHECK(MatCreate(disc_->comm(), A.out()));
@@ -208,13 +247,18 @@ PetscMatrix Assembler::create_matrix(MatrixInsertion insertion) {
       const auto row = pattern.row(i);
       columns.clear();
       for (const int b : row) {
-        for (int d = 0; d < bs; ++d) columns.push_back(static_cast<PetscInt>(b) * bs + d);
+        for (int d = 0; d < bs; ++d)
+          if (coupled.empty() || coupled[static_cast<std::size_t>(d)] != 0) columns.push_back(static_cast<PetscInt>(b) * bs + d);
       }
-      zeros.assign(columns.size(), 0.0);
+      zeros.assign(std::max<std::size_t>(columns.size(), 1), 0.0);
       for (int c = 0; c < bs; ++c) {
         const PetscInt r = static_cast<PetscInt>(pattern.row_begin + i) * bs + c;
-        LMEFORM_PETSC_CHECK(MatSetValues(A, 1, &r, static_cast<PetscInt>(columns.size()), columns.data(), zeros.data(),
-                                         INSERT_VALUES));
+        if (coupled.empty() || coupled[static_cast<std::size_t>(c)] != 0) {
+          LMEFORM_PETSC_CHECK(MatSetValues(A, 1, &r, static_cast<PetscInt>(columns.size()), columns.data(), zeros.data(),
+                                           INSERT_VALUES));
+        } else {
+          LMEFORM_PETSC_CHECK(MatSetValues(A, 1, &r, 1, &r, zeros.data(), INSERT_VALUES));  // the diagonal alone
+        }
       }
     }
   }
@@ -225,6 +269,7 @@ PetscMatrix Assembler::create_matrix(MatrixInsertion insertion) {
   if (insertion == MatrixInsertion::Direct && (zero_communication || disc_->ranks() == 1)) {
     (void)detail::AijDirectAdd::attach(A);
   }
+  if (!coupled.empty()) attach_coupled(A, std::move(coupled));
   times_.create_matrix = clock.seconds();
   totals_.create_matrix += times_.create_matrix;
   return A;
@@ -404,7 +449,8 @@ void Assembler::matrix_sum(Vec u, std::span<const MatrixTerm> terms, Mat out) {
 }
 
 template <class Insert>
-void Assembler::add_domain_matrix(const ElementSet& domain, Vec u, std::span<const MatrixTerm> terms, Insert&& insert, double& kernel_seconds) {
+void Assembler::add_domain_matrix(const ElementSet& domain, Vec u, std::span<const MatrixTerm> terms,
+                                  const std::vector<unsigned char>* coupled, Insert&& insert, double& kernel_seconds) {
   const bool zero_communication = disc_->options().off_process == OffProcessMode::ZeroCommunication;
   const int bs = form_->dofs_per_node;
   // The terms' integrals over this domain, and the tabulation order they need.
@@ -418,6 +464,7 @@ void Assembler::add_domain_matrix(const ElementSet& domain, Vec u, std::span<con
       }
   element_loop(domain, u, /*owned_only=*/!zero_communication, order, [&](int e, kernel::CellInputs& in) {
     const Stopwatch kernel_clock;
+    in.coupled_components = coupled != nullptr ? coupled->data() : nullptr;
     const auto nodes = domain.element_nodes(e);
     const std::size_t m = nodes.size() * static_cast<std::size_t>(bs);
     std::fill_n(local_.begin(), m * m, 0.0);
@@ -496,8 +543,34 @@ void Assembler::add_matrix_terms(Vec u, std::span<const MatrixTerm> all_terms, M
   std::optional<detail::AijDirectAdd::Fill> fill;
   if (direct != nullptr) fill.emplace(*direct, out);
   const int bs = form_->dofs_per_node;
+  const std::vector<unsigned char>* coupled = coupled_mask(out);
   auto insert = [&](std::span<const int> nodes, const double* block) {
     const std::size_t m = nodes.size() * static_cast<std::size_t>(bs);
+    if (coupled != nullptr) {
+      // Only the coupled components' rows and columns exist: the block restricted to them.
+      coupled_local_.clear();
+      for (std::size_t a = 0; a < nodes.size(); ++a) {
+        const bool mine = !zero_communication || disc_->owns(nodes[a]);
+        for (int c = 0; c < bs; ++c) {
+          if ((*coupled)[static_cast<std::size_t>(c)] == 0) continue;
+          const PetscInt dof = static_cast<PetscInt>(nodes[a]) * bs + c;
+          scalar_cols_[coupled_local_.size()] = dof;
+          scalar_rows_[coupled_local_.size()] = mine ? dof : -1;
+          coupled_local_.push_back(a * static_cast<std::size_t>(bs) + static_cast<std::size_t>(c));
+        }
+      }
+      const std::size_t k = coupled_local_.size();
+      coupled_block_.resize(k * k);
+      for (std::size_t i = 0; i < k; ++i)
+        for (std::size_t j = 0; j < k; ++j) coupled_block_[i * k + j] = block[coupled_local_[i] * m + coupled_local_[j]];
+      if (fill) {
+        fill->add({scalar_rows_.data(), k}, {scalar_cols_.data(), k}, coupled_block_.data(), 1.0);
+      } else {
+        LMEFORM_PETSC_CHECK(MatSetValues(out, static_cast<PetscInt>(k), scalar_rows_.data(), static_cast<PetscInt>(k), scalar_cols_.data(),
+                                         coupled_block_.data(), ADD_VALUES));
+      }
+      return;
+    }
     if (fill) {
       for (std::size_t a = 0; a < nodes.size(); ++a) {
         const bool mine = !zero_communication || disc_->owns(nodes[a]);
@@ -517,7 +590,7 @@ void Assembler::add_matrix_terms(Vec u, std::span<const MatrixTerm> all_terms, M
     const auto count = static_cast<PetscInt>(nodes.size());
     LMEFORM_PETSC_CHECK(MatSetValuesBlocked(out, count, rows_.data(), count, cols_.data(), block, ADD_VALUES));
   };
-  for (const ElementSet* domain : domains) add_domain_matrix(*domain, u, terms, insert, kernel_seconds);
+  for (const ElementSet* domain : domains) add_domain_matrix(*domain, u, terms, coupled, insert, kernel_seconds);
   if (fill) {
     fill->finish();
   } else {
@@ -568,6 +641,25 @@ void set_from_original(const Discretization& disc, std::span<const double> origi
       out[(b - disc.owned_begin()) * block_size + c] = original_values[old * static_cast<std::size_t>(block_size) + static_cast<std::size_t>(c)];
     }
   }
+}
+
+std::vector<int> coupled_components(const Discretization& disc, int block_size, std::span<const PetscInt> fixed) {
+  // Fixed dofs per component on this rank, against the owned nodes: a component is free where
+  // its count falls short on any rank.
+  const PetscInt first = static_cast<PetscInt>(disc.owned_begin()) * block_size;
+  const auto n_owned = static_cast<std::size_t>(disc.n_owned()) * static_cast<std::size_t>(block_size);
+  std::vector<unsigned char> held(n_owned, 0);
+  for (const PetscInt dof : fixed)
+    if (dof >= first && static_cast<std::size_t>(dof - first) < n_owned) held[static_cast<std::size_t>(dof - first)] = 1;
+  std::vector<int> free(static_cast<std::size_t>(block_size), 0);
+  for (std::size_t i = 0; i < n_owned; ++i)
+    if (held[i] == 0) free[i % static_cast<std::size_t>(block_size)] = 1;
+  MPI_Allreduce(MPI_IN_PLACE, free.data(), block_size, MPI_INT, MPI_MAX, disc.comm());
+  std::vector<int> coupled;
+  for (int c = 0; c < block_size; ++c)
+    if (free[static_cast<std::size_t>(c)] != 0) coupled.push_back(c);
+  if (static_cast<int>(coupled.size()) == block_size) coupled.clear();
+  return coupled;
 }
 
 OwnedRows owned_original(const Discretization& disc, Vec v, int block_size) {

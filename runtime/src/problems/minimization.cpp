@@ -11,7 +11,9 @@ namespace {
 
 /// Minimization under bounds: ∇E = 0 as a variational inequality with the Hessian as Jacobian.
 void solve_bounded_minimization(MPI_Comm comm, const BoundScene& b, ProblemSpace& space, Vec u, ProblemResult& result) {
-  PetscMatrix J = space.primary->create_matrix();
+  // Unknowns held fixed wholesale (the other groups of a staggered solve) keep only their diagonal.
+  PetscMatrix J = space.primary->create_matrix(Assembler::MatrixInsertion::Direct,
+                                               coupled_components(*space.disc, space.primary->block_size(), space.fixed));
   const auto gradient = [&](Vec x, Vec F) {
     LMEFORM_PETSC_CHECK(VecZeroEntries(F));
     for (Assembler* term : space.energy_terms) term->add_vector(x, F, 1.0);

@@ -22,7 +22,8 @@ class ResidualDriver final : public StationaryDriver {
     return r;
   }
   void solve(MPI_Comm comm, const BoundScene& b, ProblemSpace& space, const ProblemInput&, Vec u, ProblemResult& result) const override {
-    PetscMatrix J = space.residual->create_matrix();
+    PetscMatrix J = space.residual->create_matrix(Assembler::MatrixInsertion::Direct,
+                                                  coupled_components(*space.disc, space.residual->block_size(), space.fixed));
     take_nonlinear_solve(solve_nonlinear(comm, space, u, b.scene->solver, [&](Vec x, Vec F) { space.residual->vector(x, F); },
                                          [&](Vec x, Mat A) { space.residual->matrix(x, A); }, J),
                          result);

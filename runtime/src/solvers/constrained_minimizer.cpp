@@ -69,6 +69,13 @@ ConstrainedMinimizer::ConstrainedMinimizer(std::vector<Assembler*> energy_terms,
   factorization_.set_log(options_.log);
 }
 
+void ConstrainedMinimizer::set_fixed_dofs(std::vector<PetscInt> dofs) {
+  fixed_ = std::move(dofs);
+  if (energy_ == nullptr) return;
+  const std::vector<int> coupled = coupled_components(energy_->discretization(), energy_->block_size(), fixed_);
+  if (!coupled.empty()) hessian_ = energy_->create_matrix(Assembler::MatrixInsertion::Direct, coupled);
+}
+
 void ConstrainedMinimizer::zero_fixed(Vec v) {
   if (fixed_.empty()) return;
   std::vector<PetscScalar> zeros(fixed_.size(), 0.0);
