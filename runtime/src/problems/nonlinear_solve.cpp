@@ -62,23 +62,44 @@ std::pair<long, long> active_set(const ProblemSpace& space, Vec u) {
   return {at[0], at[1]};
 }
 
+/// Whether a free (not fixed) dof has a finite bound on some rank: a solve whose bounds all fall on
+/// fixed dofs (the held groups of a staggered solve) is a plain Newton solve.
+bool free_dofs_bounded(const ProblemSpace& space) {
+  if (!space.bounded()) return false;
+  const VecReadView lo(space.lower_bound), hi(space.upper_bound);
+  PetscInt first = 0, end = 0;
+  LMEFORM_PETSC_CHECK(VecGetOwnershipRange(space.lower_bound, &first, &end));
+  std::vector<unsigned char> fixed(static_cast<std::size_t>(lo.size()), 0);
+  for (const PetscInt dof : space.fixed)
+    if (dof >= first && dof < end) fixed[static_cast<std::size_t>(dof - first)] = 1;
+  int bounded = 0;
+  for (PetscInt i = 0; i < lo.size() && bounded == 0; ++i)
+    if (fixed[static_cast<std::size_t>(i)] == 0 && (lo[i] > PETSC_NINFINITY || hi[i] < PETSC_INFINITY)) bounded = 1;
+  MPI_Allreduce(MPI_IN_PLACE, &bounded, 1, MPI_INT, MPI_MAX, space.disc->comm());
+  return bounded != 0;
+}
+
 }  // namespace
 
 NonlinearSolve solve_nonlinear(MPI_Comm comm, ProblemSpace& space, Vec u, const SceneSolver& solver,
-                               const std::function<void(Vec, Vec)>& residual, const std::function<void(Vec, Mat)>& jacobian, Mat J) {
+                               const std::function<void(Vec, Vec)>& residual, const std::function<void(Vec, Mat)>& jacobian, Mat J,
+                               MatrixSymmetry symmetry) {
   SnesContext ctx{&residual, &jacobian, &space.fixed};
   PetscNonlinearSolver snes;
   LMEFORM_PETSC_CHECK(SNESCreate(comm, snes.out()));
   PetscVector r = space.primary->create_vector();
   LMEFORM_PETSC_CHECK(SNESSetFunction(snes, r, snes_residual, &ctx));
   LMEFORM_PETSC_CHECK(SNESSetJacobian(snes, J, J, snes_jacobian, &ctx));
-  if (space.bounded()) {
+  // The VI solver factors a new reduced matrix at every step (its inactive set): only where a free
+  // dof has a bound. Otherwise the Jacobian keeps its structure and MUMPS its analysis.
+  const bool variational_inequality = free_dofs_bounded(space);
+  if (variational_inequality) {
     LMEFORM_PETSC_CHECK(SNESSetType(snes, SNESVINEWTONRSLS));
     LMEFORM_PETSC_CHECK(SNESVISetVariableBounds(snes, space.lower_bound, space.upper_bound));
   }
   KSP ksp = nullptr;
   LMEFORM_PETSC_CHECK(SNESGetKSP(snes, &ksp));
-  configure_direct_solver(ksp);
+  configure_direct_solver(ksp, symmetry);
   LMEFORM_PETSC_CHECK(SNESSetTolerances(snes, 1e-12, solver.newton_tolerance, 1e-14, solver.max_newton_iterations, 10000));
   LMEFORM_PETSC_CHECK(SNESSetFromOptions(snes));
   LMEFORM_PETSC_CHECK(SNESSolve(snes, nullptr, u));
@@ -94,7 +115,7 @@ NonlinearSolve solve_nonlinear(MPI_Comm comm, ProblemSpace& space, Vec u, const 
   // SNES leaves the norm unset (0) when the residual is not finite: say so rather than print 0.
   if (reason == SNES_DIVERGED_FNORM_NAN) norm = std::numeric_limits<double>::quiet_NaN();
   out.residual_norm = norm;
-  out.message = fmt::format("SNES {}{} after {} Newton steps, |R| = {:.3e}", space.bounded() ? "VI " : "", SNESConvergedReasons[reason], its, norm);
+  out.message = fmt::format("SNES {}{} after {} Newton steps, |R| = {:.3e}", variational_inequality ? "VI " : "", SNESConvergedReasons[reason], its, norm);
   if (space.bounded()) {
     std::tie(out.active_lower, out.active_upper) = active_set(space, u);
     out.message += fmt::format("; active set: {} dofs at the lower bound, {} at the upper", out.active_lower, out.active_upper);

@@ -13,6 +13,7 @@
 #include "lmeform/petsc.hpp"
 #include "lmeform/scene.hpp"
 #include "problem_space.hpp"
+#include "toolkit.hpp"
 
 namespace lmeform::problems {
 
@@ -26,8 +27,9 @@ struct NonlinearSolve {
 
 /// Solves from u (Dirichlet values imposed), the fixed dofs held, under space's bounds if it has
 /// them. `residual(u, F)` and `jacobian(u, J)` assemble the problem without boundary conditions;
-/// J is their matrix.
+/// J is their matrix; `symmetry` Symmetric (a Hessian) factors it by LDLᵀ.
 [[nodiscard]] NonlinearSolve solve_nonlinear(MPI_Comm comm, ProblemSpace& space, Vec u, const SceneSolver& solver,
-                                         const std::function<void(Vec, Vec)>& residual, const std::function<void(Vec, Mat)>& jacobian, Mat J);
+                                         const std::function<void(Vec, Vec)>& residual, const std::function<void(Vec, Mat)>& jacobian, Mat J,
+                                         MatrixSymmetry symmetry = MatrixSymmetry::General);
 
 }  // namespace lmeform::problems

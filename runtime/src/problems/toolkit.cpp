@@ -96,11 +96,11 @@ ScopedPetscOptions::~ScopedPetscOptions() {
   for (const auto& key : set_) PetscOptionsClearValue(nullptr, key.c_str());
 }
 
-void configure_direct_solver(KSP ksp) {
+void configure_direct_solver(KSP ksp, MatrixSymmetry symmetry) {
   LMEFORM_PETSC_CHECK(KSPSetType(ksp, KSPPREONLY));
   PC pc = nullptr;
   LMEFORM_PETSC_CHECK(KSPGetPC(ksp, &pc));
-  LMEFORM_PETSC_CHECK(PCSetType(pc, PCLU));
+  LMEFORM_PETSC_CHECK(PCSetType(pc, symmetry == MatrixSymmetry::Symmetric ? PCCHOLESKY : PCLU));
   LMEFORM_PETSC_CHECK(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
 }
 

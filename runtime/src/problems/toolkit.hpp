@@ -64,8 +64,10 @@ class ScopedPetscOptions {
 };
 
 /// MUMPS LU: direct and robust for the indefinite saddle points of mixed problems; the options
-/// database overrides it (-ksp_type gmres -pc_type fieldsplit ...).
-void configure_direct_solver(KSP ksp);
+/// database overrides it (-ksp_type gmres -pc_type fieldsplit ...). A symmetric matrix (a Hessian)
+/// takes MUMPS's LDLᵀ, which pivots for indefinite matrices and costs about half the LU.
+enum class MatrixSymmetry { General, Symmetric };
+void configure_direct_solver(KSP ksp, MatrixSymmetry symmetry = MatrixSymmetry::General);
 
 /// "; did you mean 'x'?" for the candidate closest to a misspelt name, else "".
 [[nodiscard]] std::string did_you_mean(std::string_view name, const std::vector<std::string>& candidates);
