@@ -93,6 +93,23 @@ TEST(SymmetricFactorization, AFailedFactorizationDoesNotSkipTheNextOne) {
   EXPECT_LT(relative_solve_error(factorization, A), 1e-12);
 }
 
+TEST(SymmetricFactorization, AForgottenMatrixIsAnalysedAfresh) {
+  // A constrained minimizer whose fixed components change builds another Hessian, which may take
+  // the address of the destroyed one: after forget_matrix the next factor starts from nothing.
+  SymmetricFactorization factorization(PETSC_COMM_WORLD, "test_forget_");
+  {
+    PetscMatrix A = grid_laplacian(6, 0.0);
+    ASSERT_TRUE(factorization.factor(A));
+    EXPECT_EQ(factorization.negative_eigenvalues(), 0);
+  }
+  factorization.forget_matrix();
+  PetscMatrix B = grid_laplacian(7, -2.5);  // another size and inertia
+  ASSERT_TRUE(factorization.factor(B)) << factorization.failure();
+  EXPECT_EQ(factorization.negative_eigenvalues(), negative_eigenvalues_of_shifted_laplacian(7, -2.5));
+  EXPECT_GT(factorization.negative_eigenvalues(), 0);
+  EXPECT_LT(relative_solve_error(factorization, B), 1e-10);
+}
+
 TEST(SymmetricFactorization, AWorkspaceFailureIsRetriedWithMoreWorkspace) {
   // A grid Laplacian with tiny diagonal entries of both signs: the analysis sees a regular pattern,
   // the numerical factorization rejects most 1×1 pivots and delays them, needing more workspace

@@ -168,6 +168,7 @@ class ConstrainedMinimizer {
   std::vector<ScalarConstraint> constraints_;
   ConstrainedMinimizerOptions options_;
   std::vector<PetscInt> fixed_;
+  std::vector<int> coupled_;  ///< the Hessian's coupled components (empty: all)
   ProximalTerm proximal_;
   PetscVector proximal_difference_, proximal_product_;
   ConstrainedResult* counters_ = nullptr;  // the result being filled (evaluation counts and times)

@@ -38,6 +38,9 @@ class SymmetricFactorization {
   void set_workspace_percent(PetscInt percent);
   /// Where the workspace retries are reported (rank 0 of the communicator only); nullptr: silent.
   void set_log(std::ostream* log) noexcept { log_ = log; }
+  /// Forgets the last matrix: the next factor() analyses afresh (a new matrix may reuse the
+  /// address of a destroyed one).
+  void forget_matrix();
 
  private:
   MPI_Comm comm_;

@@ -72,8 +72,12 @@ ConstrainedMinimizer::ConstrainedMinimizer(std::vector<Assembler*> energy_terms,
 void ConstrainedMinimizer::set_fixed_dofs(std::vector<PetscInt> dofs) {
   fixed_ = std::move(dofs);
   if (energy_ == nullptr) return;
-  const std::vector<int> coupled = coupled_components(energy_->discretization(), energy_->block_size(), fixed_);
-  if (!coupled.empty()) hessian_ = energy_->create_matrix(Assembler::MatrixInsertion::Direct, coupled);
+  std::vector<int> coupled = coupled_components(energy_->discretization(), energy_->block_size(), fixed_);
+  if (coupled == coupled_) return;
+  // Another structure (fewer components, or all again): a new matrix, analysed afresh.
+  coupled_ = std::move(coupled);
+  factorization_.forget_matrix();
+  hessian_ = energy_->create_matrix(Assembler::MatrixInsertion::Direct, coupled_);
 }
 
 void ConstrainedMinimizer::zero_fixed(Vec v) {

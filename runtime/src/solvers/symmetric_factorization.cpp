@@ -100,6 +100,12 @@ void SymmetricFactorization::set_workspace_percent(PetscInt percent) {
   configured_ = false;
 }
 
+void SymmetricFactorization::forget_matrix() {
+  LMEFORM_PETSC_CHECK(KSPReset(ksp_));
+  configured_ = false;
+  matrix_ = nullptr;
+}
+
 void SymmetricFactorization::solve(Vec b, Vec x) {
   if (failed_) throw std::runtime_error("symmetric factorization: the factorization failed (" + failure_ + ")");
   LMEFORM_PETSC_CHECK(KSPSolve(ksp_, b, x));
