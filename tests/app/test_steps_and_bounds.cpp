@@ -148,9 +148,9 @@ TEST(Dirichlet, TwoEntriesThatDisagreeAtACornerAreRefused) {
   }
 }
 
-std::string two_fields(const std::string& extra) {
+std::string two_fields(const std::string& extra, const std::string& model = "") {
   return "[scene]\nname = \"two\"\ncoordinates = \"cartesian\"\n[domain]\nlower = [0.0, 0.0]\nupper = [1.0, 1.0]\n"
-         "[nodes]\nspacing = 0.1\n[model]\nforms = [\"two_fields.form\"]\n"
+         "[nodes]\nspacing = 0.1\n[model]\nforms = [\"two_fields.form\"]\n" + model +
          "[[dirichlet]]\nboundary = [\"hull\"]\nunknown = \"u\"\nvalue = 0.0\n"
          "[[dirichlet]]\nboundary = [\"hull\"]\nunknown = \"v\"\nvalue = 0.0\n"
          "[quantities]\nmean_v = { integral = \"v\" }\n" + extra;
@@ -169,6 +169,34 @@ TEST(Staggered, AlternateMinimizationReachesTheMonolithicMinimizer) {
   } catch (const SceneError& e) {
     EXPECT_NE(std::string(e.what()).find("'w' is no unknown"), std::string::npos) << e.what();
   }
+}
+
+/// How many times PETSc has run `event` so far (logging started by the caller).
+int petsc_event_count(const char* event) {
+  PetscLogEvent id = 0;
+  LMEFORM_PETSC_CHECK(PetscLogEventGetId(event, &id));
+  PetscEventPerfInfo info{};
+  LMEFORM_PETSC_CHECK(PetscLogEventGetPerfInfo(PETSC_DETERMINE, id, &info));
+  return info.count;
+}
+
+// Every group of a staggered solve is solved again each round: its Newton solver (matrix
+// structure, SNES, the direct solver's analysis) is kept in the problem space, so a residual
+// problem with two groups analyses two matrices however many rounds it takes, and gets the
+// monolithic solution.
+TEST(Staggered, EachGroupAnalysesItsMatrixOnceOverAllRounds) {
+  const problems::RunReport mono = run("residual_mono.toml", two_fields("", "residual = \"R\"\n"), "");
+  LMEFORM_PETSC_CHECK(PetscLogDefaultBegin());
+  const int analyses_before = petsc_event_count("MatLUFactorSym");
+  const problems::RunReport alternate =
+      run("residual_alternate.toml", two_fields("[staggered]\ngroups = [[\"u\"], [\"v\"]]\ntolerance = 1e-10\n", "residual = \"R\"\n"), "");
+  const int analyses = petsc_event_count("MatLUFactorSym") - analyses_before;
+  ASSERT_TRUE(alternate.success) << alternate.status;
+  const int alternations = alternate.json["staggered"]["alternations"].get<int>();
+  EXPECT_GT(alternations, 5);
+  EXPECT_EQ(analyses, 2) << "after " << alternations << " rounds";
+  ASSERT_TRUE(mono.success) << mono.status;
+  EXPECT_NEAR(alternate.json["quantities"]["mean_v"].get<double>(), mono.json["quantities"]["mean_v"].get<double>(), 1e-8);
 }
 
 // A staggered group's Hessian couples only its own components: the generated kernel skips the

@@ -1,6 +1,8 @@
 #include "lmeform/sparsity_pattern.hpp"
 
 #include <algorithm>
+#include <bit>
+#include <cstdint>
 #include <stdexcept>
 #include <string>
 
@@ -26,23 +28,59 @@ SparsityPattern build_sparsity_pattern(std::span<const int> element_offsets, std
   p.diagonal_counts.assign(static_cast<std::size_t>(n_rows), 0);
   p.off_diagonal_counts.assign(static_cast<std::size_t>(n_rows), 0);
 
-  // Marker array: marker[b] == a means column b is already in row a. One pass per row over the
-  // elements containing it; no search per entry, no per-row set.
-  std::vector<int> marker(static_cast<std::size_t>(n_nodes), -1);
+  // One bit per node marks the columns of the current row (a set bit is only read: an
+  // unconditional OR would chain every visit on the store before it), and a row's columns come out
+  // sorted by scanning the words between its smallest and largest column, cleared on the way. The nodes of an
+  // element are visited once per row it holds, tens of times per column, so this per-visit cost is
+  // the pattern's cost. A row whose column range spans more words than it had visits (an ordering
+  // that scatters neighbours) collects its columns from the visits and sorts them instead.
+  std::vector<std::uint64_t> bits((static_cast<std::size_t>(n_nodes) + 63) / 64, 0);
   std::vector<int> row_columns;
   for (int a = row_begin; a < row_end; ++a) {
     row_columns.clear();
-    for (int k = node_offsets[static_cast<std::size_t>(a)]; k < node_offsets[static_cast<std::size_t>(a) + 1]; ++k) {
-      const int e = node_elements[static_cast<std::size_t>(k)];
-      for (int m = element_offsets[static_cast<std::size_t>(e)]; m < element_offsets[static_cast<std::size_t>(e) + 1]; ++m) {
-        const int b = element_nodes[static_cast<std::size_t>(m)];
-        if (marker[static_cast<std::size_t>(b)] != a) {
-          marker[static_cast<std::size_t>(b)] = a;
-          row_columns.push_back(b);
+    int lowest = n_nodes, highest = -1;
+    std::size_t visits = 0;
+    const auto dual_begin = static_cast<std::size_t>(node_offsets[static_cast<std::size_t>(a)]);
+    const auto dual_end = static_cast<std::size_t>(node_offsets[static_cast<std::size_t>(a) + 1]);
+    for (std::size_t k = dual_begin; k < dual_end; ++k) {
+      const auto e = static_cast<std::size_t>(node_elements[k]);
+      const auto first = static_cast<std::size_t>(element_offsets[e]), last = static_cast<std::size_t>(element_offsets[e + 1]);
+      visits += last - first;
+      for (std::size_t m = first; m < last; ++m) {
+        const int b = element_nodes[m];
+        std::uint64_t& word = bits[static_cast<std::size_t>(b) >> 6];
+        const std::uint64_t mask = std::uint64_t{1} << (b & 63);
+        if ((word & mask) == 0) {  // rarely taken: most visits find the bit set, and loads do not wait on stores
+          word |= mask;
+          lowest = std::min(lowest, b);
+          highest = std::max(highest, b);
         }
       }
     }
-    std::sort(row_columns.begin(), row_columns.end());
+    if (highest >= 0) {
+      const std::size_t word_begin = static_cast<std::size_t>(lowest) >> 6, word_end = (static_cast<std::size_t>(highest) >> 6) + 1;
+      if (word_end - word_begin <= visits) {
+        for (std::size_t w = word_begin; w < word_end; ++w) {
+          for (std::uint64_t word = bits[w]; word != 0; word &= word - 1)
+            row_columns.push_back(static_cast<int>(w * 64 + static_cast<std::size_t>(std::countr_zero(word))));
+          bits[w] = 0;
+        }
+      } else {
+        for (std::size_t k = dual_begin; k < dual_end; ++k) {
+          const auto e = static_cast<std::size_t>(node_elements[k]);
+          for (auto m = static_cast<std::size_t>(element_offsets[e]); m < static_cast<std::size_t>(element_offsets[e + 1]); ++m) {
+            const int b = element_nodes[m];
+            std::uint64_t& word = bits[static_cast<std::size_t>(b) >> 6];
+            const std::uint64_t mask = std::uint64_t{1} << (b & 63);
+            if ((word & mask) != 0) {
+              word &= ~mask;
+              row_columns.push_back(b);
+            }
+          }
+        }
+        std::sort(row_columns.begin(), row_columns.end());
+      }
+    }
     const auto r = static_cast<std::size_t>(a - row_begin);
     for (const int b : row_columns) {
       if (b >= row_begin && b < row_end) {

@@ -68,13 +68,14 @@ class LinearDriver final : public StationaryDriver {
     if (space.bounded()) {
       if (!b.zero_mean.empty()) throw SceneError(fmt::format("{}: [bounds] and model.zero_mean together are not supported", b.source));
       // A bounded linear problem is a linear complementarity problem: F = A u − b, Jacobian A.
-      PetscMatrix J = space.bilinear->create_matrix();
       const auto residual = [&](Vec y, Vec F) {
         LMEFORM_PETSC_CHECK(MatMult(A, y, F));
         LMEFORM_PETSC_CHECK(VecAXPY(F, -1.0, rhs));
       };
       const auto jacobian = [&](Vec, Mat M) { LMEFORM_PETSC_CHECK(MatCopy(A, M, SAME_NONZERO_PATTERN)); };
-      take_nonlinear_solve(solve_nonlinear(comm, space, u, b.scene->solver, residual, jacobian, J), result);
+      // The whole structure: the fixed dofs' columns carry the prescribed values into A u − b.
+      const JacobianSpec spec{"bilinear", [&space] { return space.bilinear->create_matrix(); }};
+      take_nonlinear_solve(solve_nonlinear(comm, space, u, b.scene->solver, residual, jacobian, spec), result);
       result.energy = std::numeric_limits<double>::quiet_NaN();
       return;
     }

@@ -11,9 +11,6 @@ namespace {
 
 /// Minimization under bounds: ∇E = 0 as a variational inequality with the Hessian as Jacobian.
 void solve_bounded_minimization(MPI_Comm comm, const BoundScene& b, ProblemSpace& space, Vec u, ProblemResult& result) {
-  // Unknowns held fixed wholesale (the other groups of a staggered solve) keep only their diagonal.
-  PetscMatrix J = space.primary->create_matrix(Assembler::MatrixInsertion::Direct,
-                                               coupled_components(*space.disc, space.primary->block_size(), space.fixed));
   const auto gradient = [&](Vec x, Vec F) {
     LMEFORM_PETSC_CHECK(VecZeroEntries(F));
     for (Assembler* term : space.energy_terms) term->add_vector(x, F, 1.0);
@@ -25,7 +22,14 @@ void solve_bounded_minimization(MPI_Comm comm, const BoundScene& b, ProblemSpace
   };
   // The Hessian and its principal submatrices (the VI's inactive set) are symmetric: LDLᵀ, which
   // made the SENT of sent_fast.toml 5-10 % faster on 2 ranks with the same forces to 1e-15.
-  take_nonlinear_solve(solve_nonlinear(comm, space, u, b.scene->solver, gradient, hessian, J, MatrixSymmetry::Symmetric), result);
+  // Unknowns held fixed wholesale (the other groups of a staggered solve) keep only their diagonal.
+  const JacobianSpec spec{"hessian",
+                          [&space] {
+                            return space.primary->create_matrix(Assembler::MatrixInsertion::Direct,
+                                                                coupled_components(*space.disc, space.primary->block_size(), space.fixed));
+                          },
+                          MatrixSymmetry::Symmetric};
+  take_nonlinear_solve(solve_nonlinear(comm, space, u, b.scene->solver, gradient, hessian, spec), result);
   result.energy = space.energy(u);
   result.minimization.energy = result.energy;
   result.minimization.converged = result.converged;

@@ -2,6 +2,7 @@
 
 #include <petscsnes.h>
 
+#include <algorithm>
 #include <limits>
 
 #include <fmt/format.h>
@@ -79,29 +80,59 @@ bool free_dofs_bounded(const ProblemSpace& space) {
   return bounded != 0;
 }
 
+/// The kept solver for `spec` with the space's fixed dofs, or a new one (the oldest dropped
+/// beyond a few). A kept SNES keeps its KSP, whose factorization sees the same matrix with the
+/// same nonzero structure and so repeats only the numeric phase.
+ProblemSpace::KeptNewtonSolver& kept_solver(MPI_Comm comm, ProblemSpace& space, const JacobianSpec& spec, bool variational_inequality,
+                                            const SceneSolver& solver) {
+  constexpr std::size_t kMostKept = 4;
+  auto& kept = space.kept_newton_solvers;
+  const auto found = std::find_if(kept.begin(), kept.end(), [&](const ProblemSpace::KeptNewtonSolver& k) {
+    return k.jacobian == spec.name && k.variational_inequality == variational_inequality && k.fixed == space.fixed;
+  });
+  // Each rank compares its own fixed dofs; the SNES objects are collective, so the lists change in
+  // step on every rank: a solver is reused only where every rank found the same one.
+  int index[2] = {found == kept.end() ? -1 : static_cast<int>(found - kept.begin()), 0};
+  index[1] = -index[0];
+  MPI_Allreduce(MPI_IN_PLACE, index, 2, MPI_INT, MPI_MIN, comm);
+  if (index[0] >= 0 && index[0] == -index[1]) {
+    const auto same = kept.begin() + index[0];
+    std::rotate(same, same + 1, kept.end());  // most recently used last
+    return kept.back();
+  }
+  if (kept.size() >= kMostKept) kept.erase(kept.begin());
+  ProblemSpace::KeptNewtonSolver k;
+  k.jacobian = spec.name;
+  k.fixed = space.fixed;
+  k.variational_inequality = variational_inequality;
+  k.matrix = spec.create();
+  k.residual = space.primary->create_vector();
+  LMEFORM_PETSC_CHECK(SNESCreate(comm, k.snes.out()));
+  if (variational_inequality) LMEFORM_PETSC_CHECK(SNESSetType(k.snes, SNESVINEWTONRSLS));
+  KSP ksp = nullptr;
+  LMEFORM_PETSC_CHECK(SNESGetKSP(k.snes, &ksp));
+  configure_direct_solver(ksp, spec.symmetry);
+  LMEFORM_PETSC_CHECK(SNESSetTolerances(k.snes, 1e-12, solver.newton_tolerance, 1e-14, solver.max_newton_iterations, 10000));
+  LMEFORM_PETSC_CHECK(SNESSetFromOptions(k.snes));
+  kept.push_back(std::move(k));
+  return kept.back();
+}
+
 }  // namespace
 
 NonlinearSolve solve_nonlinear(MPI_Comm comm, ProblemSpace& space, Vec u, const SceneSolver& solver,
-                               const std::function<void(Vec, Vec)>& residual, const std::function<void(Vec, Mat)>& jacobian, Mat J,
-                               MatrixSymmetry symmetry) {
+                               const std::function<void(Vec, Vec)>& residual, const std::function<void(Vec, Mat)>& jacobian,
+                               const JacobianSpec& spec) {
   SnesContext ctx{&residual, &jacobian, &space.fixed};
-  PetscNonlinearSolver snes;
-  LMEFORM_PETSC_CHECK(SNESCreate(comm, snes.out()));
-  PetscVector r = space.primary->create_vector();
-  LMEFORM_PETSC_CHECK(SNESSetFunction(snes, r, snes_residual, &ctx));
-  LMEFORM_PETSC_CHECK(SNESSetJacobian(snes, J, J, snes_jacobian, &ctx));
   // The VI solver factors a new reduced matrix at every step (its inactive set): only where a free
   // dof has a bound. Otherwise the Jacobian keeps its structure and MUMPS its analysis.
   const bool variational_inequality = free_dofs_bounded(space);
-  if (variational_inequality) {
-    LMEFORM_PETSC_CHECK(SNESSetType(snes, SNESVINEWTONRSLS));
-    LMEFORM_PETSC_CHECK(SNESVISetVariableBounds(snes, space.lower_bound, space.upper_bound));
-  }
-  KSP ksp = nullptr;
-  LMEFORM_PETSC_CHECK(SNESGetKSP(snes, &ksp));
-  configure_direct_solver(ksp, symmetry);
-  LMEFORM_PETSC_CHECK(SNESSetTolerances(snes, 1e-12, solver.newton_tolerance, 1e-14, solver.max_newton_iterations, 10000));
-  LMEFORM_PETSC_CHECK(SNESSetFromOptions(snes));
+  ProblemSpace::KeptNewtonSolver& kept = kept_solver(comm, space, spec, variational_inequality, solver);
+  SNES snes = kept.snes;
+  // The callbacks' context lives for this solve only: set again every time.
+  LMEFORM_PETSC_CHECK(SNESSetFunction(snes, kept.residual, snes_residual, &ctx));
+  LMEFORM_PETSC_CHECK(SNESSetJacobian(snes, kept.matrix, kept.matrix, snes_jacobian, &ctx));
+  if (variational_inequality) LMEFORM_PETSC_CHECK(SNESVISetVariableBounds(snes, space.lower_bound, space.upper_bound));
   LMEFORM_PETSC_CHECK(SNESSolve(snes, nullptr, u));
   SNESConvergedReason reason = SNES_CONVERGED_ITERATING;
   PetscInt its = 0;

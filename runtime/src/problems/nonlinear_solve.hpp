@@ -25,11 +25,22 @@ struct NonlinearSolve {
   long active_lower = -1, active_upper = -1;  ///< bounded: free dofs at their lower / upper bound at the end
 };
 
+/// What solve_nonlinear's Jacobian is: its name (solvers are kept per name and fixed dofs), a
+/// function that creates its matrix for the space's fixed dofs, and whether it is symmetric
+/// (a Hessian: factored by LDLᵀ).
+struct JacobianSpec {
+  std::string name;
+  std::function<PetscMatrix()> create;
+  MatrixSymmetry symmetry = MatrixSymmetry::General;
+};
+
 /// Solves from u (Dirichlet values imposed), the fixed dofs held, under space's bounds if it has
-/// them. `residual(u, F)` and `jacobian(u, J)` assemble the problem without boundary conditions;
-/// J is their matrix; `symmetry` Symmetric (a Hessian) factors it by LDLᵀ.
+/// them. `residual(u, F)` and `jacobian(u, J)` assemble the problem without boundary conditions.
+/// The SNES, its matrix and the direct solver's analysis are kept in the space
+/// (ProblemSpace::kept_newton_solvers) and reused by the next solve of the same Jacobian with
+/// the same fixed dofs.
 [[nodiscard]] NonlinearSolve solve_nonlinear(MPI_Comm comm, ProblemSpace& space, Vec u, const SceneSolver& solver,
-                                         const std::function<void(Vec, Vec)>& residual, const std::function<void(Vec, Mat)>& jacobian, Mat J,
-                                         MatrixSymmetry symmetry = MatrixSymmetry::General);
+                                         const std::function<void(Vec, Vec)>& residual, const std::function<void(Vec, Mat)>& jacobian,
+                                         const JacobianSpec& spec);
 
 }  // namespace lmeform::problems

@@ -86,6 +86,18 @@ struct ProblemSpace {
   PetscVector lower_bound, upper_bound;
 
   [[nodiscard]] bool bounded() const noexcept { return static_cast<Vec>(lower_bound) != nullptr; }
+  /// A Newton solver kept for the next solve of the same Jacobian with the same fixed dofs: the
+  /// groups of a staggered solve are solved again every round of every load step, and so build
+  /// their matrix structure and the direct solver's analysis once (solve_nonlinear).
+  struct KeptNewtonSolver {
+    std::string jacobian;          ///< which Jacobian (the driver's name for it)
+    std::vector<PetscInt> fixed;   ///< the fixed dofs it was built for
+    bool variational_inequality = false;
+    PetscMatrix matrix;
+    PetscVector residual;
+    PetscNonlinearSolver snes;
+  };
+  std::vector<KeptNewtonSolver> kept_newton_solvers;  ///< the most recently used last
   /// The bounds given as "previous" become the state u (after a converged load step).
   void update_previous_bounds(const BoundScene& b, Vec u);
 

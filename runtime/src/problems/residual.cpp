@@ -22,10 +22,12 @@ class ResidualDriver final : public StationaryDriver {
     return r;
   }
   void solve(MPI_Comm comm, const BoundScene& b, ProblemSpace& space, const ProblemInput&, Vec u, ProblemResult& result) const override {
-    PetscMatrix J = space.residual->create_matrix(Assembler::MatrixInsertion::Direct,
-                                                  coupled_components(*space.disc, space.residual->block_size(), space.fixed));
+    const JacobianSpec spec{"residual", [&space] {
+                              return space.residual->create_matrix(Assembler::MatrixInsertion::Direct,
+                                                                   coupled_components(*space.disc, space.residual->block_size(), space.fixed));
+                            }};
     take_nonlinear_solve(solve_nonlinear(comm, space, u, b.scene->solver, [&](Vec x, Vec F) { space.residual->vector(x, F); },
-                                         [&](Vec x, Mat A) { space.residual->matrix(x, A); }, J),
+                                         [&](Vec x, Mat A) { space.residual->matrix(x, A); }, spec),
                          result);
     result.energy = std::numeric_limits<double>::quiet_NaN();
   }

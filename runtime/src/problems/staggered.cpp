@@ -103,6 +103,7 @@ class StaggeredDriver final : public StationaryDriver {
   void describe(const BoundScene& b, const ProblemResult& r, RunReport& report) const override {
     basic_stationary_driver_for(*b.scene).describe(b, r, report);
     report.row("staggered", r.message);
+    for (const auto& [name, value] : r.solver_figures) report.json["staggered"][name] = json_number(value);
   }
   void check(const DriverContext& ctx) const override {
     const StaggeredSettings s = read_staggered(*ctx.scene);
