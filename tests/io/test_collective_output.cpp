@@ -1,7 +1,8 @@
 // Collective field files (3 ranks): every rank writes the rows it owns through MPI-IO, and the file
 // read back equals the one the serial writer makes from the gathered data, bit for bit; a rank that
 // owns no rows takes part; a part that does not add up is refused on every rank and leaves nothing
-// behind; a time series written collectively lists its steps.
+// behind; a time series written collectively lists its steps; fields every rank holds whole are
+// written by blocks of rows and give the same file.
 #include <gtest/gtest.h>
 #include <mpi.h>
 
@@ -139,6 +140,34 @@ TEST(CollectiveOutput, EqualsTheSerialFileIn2DAnd3D) {
   if (rank_of_world() == 0) {
     for (const auto& e : fs::directory_iterator(dir)) EXPECT_NE(e.path().extension(), ".tmp") << e.path();
   }
+}
+
+// Ranks that hold the whole fields (gathered arrays) write a block each; fewer nodes than ranks
+// leave a rank with none.
+TEST(CollectiveOutput, ReplicatedFieldsWrittenByBlocksEqualTheSerialFile) {
+  const fs::path dir = scratch("replicated");
+  for (const int dim : {2, 3}) {
+    const Sample s = make_sample(dim);
+    const FieldViews whole{{"phi", {s.phi}}, {"grad_phi", {s.grad, dim}}};
+    const ReplicatedShare share(MPI_COMM_WORLD, s.nodes.size(), whole);
+    const DistributedFields part = share.part();
+    long long mine = static_cast<long long>(part.rows.size()), all = 0;
+    MPI_Allreduce(&mine, &all, 1, MPI_LONG_LONG, MPI_SUM, MPI_COMM_WORLD);
+    EXPECT_EQ(all, static_cast<long long>(s.nodes.size()));
+    EXPECT_LE(mine, static_cast<long long>(s.nodes.size() / static_cast<std::size_t>(ranks_of_world()) + 1));
+    const std::string stem = "replicated_" + std::to_string(dim) + "d";
+    write_field_hdf5(MPI_COMM_WORLD, dir / (stem + ".h5"), s.nodes, s.cells, part, kAttributes);
+    if (rank_of_world() == 0) write_field_hdf5(dir / (stem + "_serial.h5"), s.nodes, s.cells, whole, kAttributes);
+    MPI_Barrier(MPI_COMM_WORLD);
+    if (rank_of_world() == 0) expect_same_file(dir / (stem + ".h5"), dir / (stem + "_serial.h5"));
+  }
+  const NodeSet two(2, {0.0, 0.0, 1.0, 0.0});
+  const std::vector<double> values{1.5, 2.5};
+  const ReplicatedShare tiny(MPI_COMM_WORLD, two.size(), {{"phi", {values}}});
+  long long mine = static_cast<long long>(tiny.part().rows.size()), all = 0;
+  MPI_Allreduce(&mine, &all, 1, MPI_LONG_LONG, MPI_SUM, MPI_COMM_WORLD);
+  EXPECT_EQ(all, 2);
+  EXPECT_THROW(ReplicatedShare(MPI_COMM_WORLD, 3, {{"phi", {values}}}), std::invalid_argument);
 }
 
 TEST(CollectiveOutput, ARankWithoutRowsTakesPart) {

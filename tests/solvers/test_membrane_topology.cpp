@@ -43,7 +43,7 @@ LevelSetTopology lme_topology(const Profile& distance) {
   const BackgroundCells cells = delaunay(nodes);
   LmeOptions lme;
   lme.mirror_axis = 0;  // the axisymmetric basis, mirrored across r = 0
-  return problems::field_topology(nodes, cells, tanh_profile(nodes, distance, 0.05), 0.8, lme, LevelSetGeometry::axisymmetric);
+  return problems::field_topology(MPI_COMM_WORLD, nodes, cells, tanh_profile(nodes, distance, 0.05), 0.8, lme, LevelSetGeometry::axisymmetric);
 }
 
 const Profile sphere = [](double r, double z) { return 0.3 - std::hypot(r, z - 0.6); };

@@ -68,6 +68,19 @@ struct DistributedFields {
 void write_field_hdf5(MPI_Comm comm, const std::filesystem::path& path, const NodeSet& nodes, const BackgroundCells& cells,
                       const DistributedFields& local, const OutputAttributes& attributes = {});
 
+/// A rank's share of fields that every rank of comm holds whole (arrays gathered on all ranks):
+/// its contiguous block of the rows [0, nodes) and views of the fields there, for the collective
+/// writers. The views point into the whole fields, which must outlive the share.
+class ReplicatedShare {
+ public:
+  ReplicatedShare(MPI_Comm comm, std::size_t nodes, const FieldViews& whole);
+  [[nodiscard]] DistributedFields part() const { return {rows_, fields_}; }
+
+ private:
+  std::vector<int> rows_;
+  FieldViews fields_;
+};
+
 /// The XDMF sidecar's path for an HDF5 path: "out/state.h5" -> "out/state.xmf".
 [[nodiscard]] std::filesystem::path xdmf_sidecar_path(const std::filesystem::path& h5_path);
 

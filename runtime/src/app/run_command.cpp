@@ -79,6 +79,7 @@ Scene load_with_settings(const RunOptions& options) {
 }
 
 /// The final state as <out>/<scene>.h5 (+ .xmf) and, where the scene asks, a figure of it.
+/// Collective: every rank holds the whole fields and writes its block of rows into the file.
 void write_fields(const Scene& scene, const fs::path& out_dir, RunReport& report) {
   const problems::ReportFields& f = *report.fields;
   FieldViews views;
@@ -88,10 +89,11 @@ void write_fields(const Scene& scene, const fs::path& out_dir, RunReport& report
   attributes.emplace("status", report.status);
   attributes.emplace("scene", scene.source);
   const fs::path h5 = out_dir / (scene.name + ".h5");
-  write_field_hdf5(h5, f.nodes, f.cells, views, attributes);
+  const ReplicatedShare share(PETSC_COMM_WORLD, f.nodes.size(), views);
+  write_field_hdf5(PETSC_COMM_WORLD, h5, f.nodes, f.cells, share.part(), attributes);
   report.files.emplace_back("fields", h5.string() + " (+ .xmf for ParaView)");
   const bool figure = scene.output && scene.output->png;
-  if (!figure) return;
+  if (!figure || PetscSession::rank() != 0) return;
   if (f.figure_field.empty() || scene.dim() != 2) {
     std::cerr << "lmeform: warning: no figure: [output] png draws the first unknown of a 2D scene when it is scalar\n";
     return;
@@ -161,8 +163,8 @@ int run_command(const RunOptions& options) {
   if (writes_files) ctx.output_directory = out_dir;
 
   RunReport report = driver.run(ctx);
+  if (report.fields && writes_files) write_fields(scene, out_dir, report);
   if (rank == 0) {
-    if (report.fields && writes_files) write_fields(scene, out_dir, report);
     const double total_s = clock.seconds();
     print_report(scene, report, total_s);
     for (const auto& warning : report.warnings) std::cerr << "lmeform: warning: " << warning << "\n";

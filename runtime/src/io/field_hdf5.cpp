@@ -482,6 +482,23 @@ void write_field_hdf5(MPI_Comm comm, const std::filesystem::path& path, const No
     throw std::runtime_error(!failure.empty() ? failure : context + ": the file could not be written (the message is on rank 0)");
 }
 
+ReplicatedShare::ReplicatedShare(MPI_Comm comm, std::size_t nodes, const FieldViews& whole) {
+  int rank = 0, size = 1;
+  MPI_Comm_rank(comm, &rank);
+  MPI_Comm_size(comm, &size);
+  const std::size_t begin = nodes * static_cast<std::size_t>(rank) / static_cast<std::size_t>(size);
+  const std::size_t end = nodes * static_cast<std::size_t>(rank + 1) / static_cast<std::size_t>(size);
+  rows_.resize(end - begin);
+  for (std::size_t i = 0; i < rows_.size(); ++i) rows_[i] = static_cast<int>(begin + i);
+  for (const auto& [name, view] : whole) {
+    const auto components = static_cast<std::size_t>(std::max(view.components, 1));
+    if (view.values.size() != nodes * components)
+      throw std::invalid_argument("ReplicatedShare: field '" + name + "' has " + std::to_string(view.values.size()) + " values, expected " +
+                                  std::to_string(nodes) + " x " + std::to_string(components));
+    fields_.emplace(name, FieldView{view.values.subspan(begin * components, (end - begin) * components), view.components});
+  }
+}
+
 FieldFile read_field_hdf5(const std::filesystem::path& path) {
   const std::string context = "read_field_hdf5: " + path.string();
   const QuietHdf5Errors quiet;

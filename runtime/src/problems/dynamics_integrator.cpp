@@ -474,7 +474,7 @@ const std::vector<double>* DynamicsIntegrator::topology_values() const {
 std::optional<LevelSetTopology> DynamicsIntegrator::membrane_topology(const NodeSet& nodes, const BackgroundCells& cells,
                                                                       const std::vector<double>& field) const {
   try {
-    return field_topology(nodes, cells, field, bound_.discretization.gamma, bound_.lme(AxisParity::even), level_set_geometry(dim_, scene_.axisymmetric()));
+    return field_topology(comm_, nodes, cells, field, bound_.discretization.gamma, bound_.lme(AxisParity::even), level_set_geometry(dim_, scene_.axisymmetric()));
   } catch (const std::exception& e) {
     if (out_ != nullptr) *out_ << "the membrane's topology could not be evaluated: " << e.what() << "\n";
     return std::nullopt;

@@ -48,8 +48,8 @@ void DynamicsIntegrator::record(Vec state, double energy, int newton, int reject
 
 void DynamicsIntegrator::write_series(Vec state) {
   if (output_ == nullptr) return;
+  // Every rank holds the gathered state and writes its block of rows (collective HDF5).
   const std::vector<double> y = to_original(*ref_->space.disc, state, bs_);
-  if (rank_ != 0) return;
   const auto d = std::size_t(dim_);
   std::vector<double> positions(n_nodes_ * d), displacement(n_nodes_ * d), v(n_nodes_ * d);
   for (std::size_t a = 0; a < n_nodes_; ++a)
@@ -63,7 +63,8 @@ void DynamicsIntegrator::write_series(Vec state) {
   fields.emplace("displacement", FieldView{displacement, dim_});
   fields.emplace("velocity", FieldView{v, dim_});
   for (const auto& [name, values] : scalar_fields_) fields.emplace(name, FieldView{values, 1});
-  series_->write(t_, step_, NodeSet(dim_, positions), run_.cells, fields,
+  const ReplicatedShare share(comm_, n_nodes_, fields);
+  series_->write(comm_, t_, step_, NodeSet(dim_, positions), run_.cells, share.part(),
                  {{"t_star", t_}, {"step", static_cast<std::int64_t>(step_)}, {"energy", run_.history.back().energy}});
 }
 
@@ -99,7 +100,6 @@ nlohmann::json DynamicsIntegrator::history_json() const {
 void DynamicsIntegrator::write_checkpoint() {
   if (output_ == nullptr) return;
   const std::vector<double> y = to_original(*ref_->space.disc, ref_->u, bs_);
-  if (rank_ != 0) return;
   const auto count = [](int v) { return static_cast<std::int64_t>(v); };
   OutputAttributes attributes{{"step", count(step_)},
                               {"t_star", t_},
@@ -128,14 +128,16 @@ void DynamicsIntegrator::write_checkpoint() {
     BackgroundCells none;
     none.dim = dim_;
     none.vertices_per_cell = dim_ + 1;
-    write_field_hdf5(quadrature_path_, NodeSet(dim_, quad.points), none, qfields,
+    const ReplicatedShare quadrature_share(comm_, quad.size(), qfields);
+    write_field_hdf5(comm_, quadrature_path_, NodeSet(dim_, quad.points), none, quadrature_share.part(),
                      {{"step", count(step_)}, {"points_per_cell", static_cast<std::int64_t>(quad.points_per_cell)}});
   }
-  write_text_atomically(history_path_, history_json().dump(1) + "\n");
+  if (rank_ == 0) write_text_atomically(history_path_, history_json().dump(1) + "\n");
   // After a re-mesh the material nodes, their triangulation and the projected nodal fields are new.
   FieldViews fields{{"state", FieldView{y, bs_}}, {"velocity", FieldView{velocity_, bs_}}, {"material_nodes", FieldView{material_nodes_.coords, dim_}}};
   for (const auto& [name, values] : scalar_fields_) fields.emplace("field_" + name, FieldView{values, 1});
-  write_field_hdf5(checkpoint_path_, ref_->nodes, run_.cells, fields, attributes);
+  const ReplicatedShare share(comm_, n_nodes_, fields);
+  write_field_hdf5(comm_, checkpoint_path_, ref_->nodes, run_.cells, share.part(), attributes);
 }
 
 namespace {

@@ -622,7 +622,7 @@ void FlowStepper::write_history() const {
 
 void FlowStepper::write_outputs(int step) {
   if (ctx_.output_directory.empty()) return;
-  if (rank_ != 0) return;
+  // Every rank holds the gathered state and writes its block of rows (collective HDF5).
   const BackgroundCells cells = delaunay(input_.nodes);
   std::vector<std::vector<double>> values;
   values.reserve(bound_.layout.fields.size() + input_.part_nodes.size());  // the views below point into it
@@ -632,8 +632,9 @@ void FlowStepper::write_outputs(int step) {
     fields.emplace(f.name, FieldView{values.back(), f.components});
   }
   const OutputAttributes attributes{{"step", static_cast<std::int64_t>(step)}, {"time", time_}};
-  series_->write(time_, step, input_.nodes, cells, fields, attributes);
-  write_history();
+  const ReplicatedShare share(ctx_.comm, input_.nodes.size(), fields);
+  series_->write(ctx_.comm, time_, step, input_.nodes, cells, share.part(), attributes);
+  if (rank_ == 0) write_history();
   if (settings_.checkpoint_every == 0 || (step % settings_.checkpoint_every != 0 && step != settings_.until)) return;
   // The checkpoint: the moved nodes, the state, each followed part as a 0/1 field, the plates.
   FieldViews checkpoint{{"state", FieldView{state_, bound_.layout.dofs_per_node}}};
@@ -648,7 +649,8 @@ void FlowStepper::write_outputs(int step) {
   cp.emplace("redistributions", static_cast<std::int64_t>(redistributions_));
   cp.emplace("initial_spacing", initial_spacing_);
   cp.emplace("anisotropy", anisotropy_);
-  write_field_hdf5(path("_checkpoint.h5"), input_.nodes, cells, checkpoint, cp);
+  const ReplicatedShare checkpoint_share(ctx_.comm, input_.nodes.size(), checkpoint);
+  write_field_hdf5(ctx_.comm, path("_checkpoint.h5"), input_.nodes, cells, checkpoint_share.part(), cp);
 }
 
 void FlowStepper::resume() {

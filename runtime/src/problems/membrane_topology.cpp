@@ -1,6 +1,7 @@
 #include "membrane_topology.hpp"
 
 #include <stdexcept>
+#include <string>
 
 #include <fmt/format.h>
 
@@ -14,36 +15,56 @@ LevelSetGeometry level_set_geometry(int dim, bool axisymmetric) {
   return axisymmetric ? LevelSetGeometry::axisymmetric : LevelSetGeometry::planar;
 }
 
-std::vector<double> lme_values_at_nodes(const LmeBasis& basis, std::span<const double> coefficients) {
+std::vector<double> lme_values_at_nodes(MPI_Comm comm, const LmeBasis& basis, std::span<const double> coefficients) {
   const NodeSet& nodes = basis.nodes();
   if (coefficients.size() != nodes.size())
     throw std::invalid_argument(fmt::format("lme_values_at_nodes: {} coefficients for {} nodes", coefficients.size(), nodes.size()));
+  // Each rank evaluates a block of the nodes; the blocks are then shared. A rank whose block throws
+  // makes every rank throw, so that none waits in the exchange.
+  int rank = 0, size = 1;
+  MPI_Comm_rank(comm, &rank);
+  MPI_Comm_size(comm, &size);
+  const auto block_start = [&](int r) { return static_cast<int>(nodes.size() * static_cast<std::size_t>(r) / static_cast<std::size_t>(size)); };
   std::vector<double> values(nodes.size());
-  for (std::size_t a = 0; a < nodes.size(); ++a) {
-    const auto x = nodes.point(a);
-    const std::vector<int> list = basis.neighbours(x);
-    try {
-      const std::vector<double> p = basis.evaluate(x, list, 0);
-      double v = 0;
-      for (std::size_t m = 0; m < list.size(); ++m) v += p[m] * coefficients[std::size_t(list[m])];
-      values[a] = v;
-    } catch (const LmeEvaluationError&) {
-      values[a] = coefficients[a];
+  std::string failure;
+  try {
+    for (int a = block_start(rank); a < block_start(rank + 1); ++a) {
+      const auto x = nodes.point(std::size_t(a));
+      const std::vector<int> list = basis.neighbours(x);
+      try {
+        const std::vector<double> p = basis.evaluate(x, list, 0);
+        double v = 0;
+        for (std::size_t m = 0; m < list.size(); ++m) v += p[m] * coefficients[std::size_t(list[m])];
+        values[std::size_t(a)] = v;
+      } catch (const LmeEvaluationError&) {
+        values[std::size_t(a)] = coefficients[std::size_t(a)];
+      }
     }
+  } catch (const std::exception& e) {
+    failure = e.what();
   }
+  int failed = failure.empty() ? 0 : 1;
+  MPI_Allreduce(MPI_IN_PLACE, &failed, 1, MPI_INT, MPI_MAX, comm);
+  if (failed != 0) throw std::runtime_error(failure.empty() ? "lme_values_at_nodes: another rank failed" : failure);
+  std::vector<int> counts(static_cast<std::size_t>(size)), starts(static_cast<std::size_t>(size));
+  for (int r = 0; r < size; ++r) {
+    starts[std::size_t(r)] = block_start(r);
+    counts[std::size_t(r)] = block_start(r + 1) - block_start(r);
+  }
+  MPI_Allgatherv(MPI_IN_PLACE, 0, MPI_DATATYPE_NULL, values.data(), counts.data(), starts.data(), MPI_DOUBLE, comm);
   return values;
 }
 
 LevelSetTopology field_topology(const Discretization& disc, std::span<const double> coefficients, LevelSetGeometry geometry) {
   const std::vector<double> renumbered = renumbered_state(disc, coefficients, 1);
-  return level_set_topology(disc.nodes(), disc.cells(), lme_values_at_nodes(disc.basis(), renumbered), geometry);
+  return level_set_topology(disc.nodes(), disc.cells(), lme_values_at_nodes(disc.comm(), disc.basis(), renumbered), geometry);
 }
 
-LevelSetTopology field_topology(const NodeSet& nodes, const BackgroundCells& cells, std::span<const double> coefficients, double gamma,
-                                const LmeOptions& lme, LevelSetGeometry geometry) {
+LevelSetTopology field_topology(MPI_Comm comm, const NodeSet& nodes, const BackgroundCells& cells, std::span<const double> coefficients,
+                                double gamma, const LmeOptions& lme, LevelSetGeometry geometry) {
   const std::vector<double> gammas(nodes.size(), gamma);
   const LmeBasis basis(nodes, gammas, lme);
-  return level_set_topology(nodes, cells, lme_values_at_nodes(basis, coefficients), geometry);
+  return level_set_topology(nodes, cells, lme_values_at_nodes(comm, basis, coefficients), geometry);
 }
 
 nlohmann::json topology_json(const LevelSetTopology& topology) {

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include <mpi.h>
 #include <nlohmann/json.hpp>
 
 #include "lmeform/discretization.hpp"
@@ -26,16 +27,17 @@ namespace lmeform::problems {
 
 /// The field of `coefficients` (in the basis' node order) at the basis' own nodes. Where the basis
 /// cannot be evaluated at a node (a vertex of its neighbours' hull: a corner of the box, where the
-/// LME basis function is the node's own), the value is the node's coefficient.
-[[nodiscard]] std::vector<double> lme_values_at_nodes(const LmeBasis& basis, std::span<const double> coefficients);
+/// LME basis function is the node's own), the value is the node's coefficient. Collective: each rank
+/// of comm evaluates a block of the nodes, and all receive every value.
+[[nodiscard]] std::vector<double> lme_values_at_nodes(MPI_Comm comm, const LmeBasis& basis, std::span<const double> coefficients);
 
 /// The topology of φ = 0 for the scalar coefficients of a solve's discretization (original node
-/// order, one per node).
+/// order, one per node). Collective over the discretization's communicator.
 [[nodiscard]] LevelSetTopology field_topology(const Discretization& disc, std::span<const double> coefficients,
                                               LevelSetGeometry geometry);
 
-/// The same on nodes with their cells and a basis built for them (γ, options).
-[[nodiscard]] LevelSetTopology field_topology(const NodeSet& nodes, const BackgroundCells& cells, std::span<const double> coefficients,
+/// The same on nodes with their cells and a basis built for them (γ, options), collective over comm.
+[[nodiscard]] LevelSetTopology field_topology(MPI_Comm comm, const NodeSet& nodes, const BackgroundCells& cells, std::span<const double> coefficients,
                                               double gamma, const LmeOptions& lme, LevelSetGeometry geometry);
 
 /// {"components": n, "closed": [...], "genus": [...] (null for an open surface; surfaces only),
