@@ -40,7 +40,7 @@ DiscretizationOptions options_of(const Setting& s) {
   o.strategy = s.strategy;
   o.partition = s.partition;
   o.lme.consistency = s.consistency;
-  if (s.mirrored) o.lme.mirror_axis = 0;
+  if (s.mirrored) o.lme.mirrors = {MirrorPlane{0, 0.0}};
   return o;
 }
 

@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <iostream>
 #include <random>
@@ -479,8 +480,7 @@ namespace {
 // axisymmetric problem).
 LmeBasis mirrored_basis(const NodeSet& nodes, double gamma = 0.8) {
   LmeOptions o;
-  o.mirror_axis = 0;
-  o.mirror_position = 0.0;
+  o.mirrors = {MirrorPlane{0, 0.0}};
   return LmeBasis(nodes, std::vector<double>{gamma}, o);
 }
 
@@ -553,6 +553,55 @@ TEST(MirrorSymmetry, NodesOnBothSidesAreRefused) {
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("one side of the plane"), std::string::npos) << e.what();
   }
+}
+
+// Three planes of symmetry: the octant's basis at x is the basis of the whole symmetric node set
+// at x with each node's images added to it (the same LME problem on the same nodes), for the
+// values, gradients and Hessians, at points near one, two and three planes.
+void expect_octant_equals_folded_full_basis(LmeConsistency consistency, double gamma) {
+  const int m = 6;
+  const double h = 0.1;
+  std::vector<double> octant, full;
+  std::vector<std::size_t> folded;  // full node -> octant node
+  for (int k = -m; k <= m; ++k)
+    for (int j = -m; j <= m; ++j)
+      for (int i = -m; i <= m; ++i) {
+        full.insert(full.end(), {i * h, j * h, k * h});
+        folded.push_back(std::size_t((std::abs(k) * (m + 1) + std::abs(j)) * (m + 1) + std::abs(i)));
+      }
+  for (int k = 0; k <= m; ++k)
+    for (int j = 0; j <= m; ++j)
+      for (int i = 0; i <= m; ++i) octant.insert(octant.end(), {i * h, j * h, k * h});
+  LmeOptions o;
+  o.consistency = consistency;
+  const LmeBasis whole(NodeSet(3, full), std::vector<double>{gamma}, std::vector<double>(full.size() / 3, h), o);
+  o.mirrors = {MirrorPlane{0, 0.0}, MirrorPlane{1, 0.0}, MirrorPlane{2, 0.0}};
+  const LmeBasis part(NodeSet(3, octant), std::vector<double>{gamma}, std::vector<double>(octant.size() / 3, h), o);
+  ASSERT_GT(part.image_count(), 0u);
+  const int rows = 1 + 3 + 6;
+  for (const std::array<double, 3> x : {std::array<double, 3>{0.013, 0.21, 0.33}, {0.02, 0.031, 0.25}, {0.011, 0.024, 0.017},
+                                        {0.0, 0.0, 0.0}, {0.27, 0.31, 0.29}}) {
+    const auto nf = whole.neighbours(x), np = part.neighbours(x);
+    const auto jf = whole.evaluate(x, nf, 2), jp = part.evaluate(x, np, 2);
+    std::vector<double> expected(std::size_t(rows) * np.size(), 0.0);
+    for (std::size_t b = 0; b < nf.size(); ++b) {
+      const auto a = std::find(np.begin(), np.end(), int(folded[std::size_t(nf[b])]));
+      ASSERT_NE(a, np.end()) << "a full-grid neighbour's octant node is no neighbour of the mirrored basis";
+      for (int r = 0; r < rows; ++r) expected[std::size_t(r) * np.size() + std::size_t(a - np.begin())] += jf[std::size_t(r) * nf.size() + b];
+    }
+    EXPECT_LE(test::rel_err(jp, expected), 1e-9) << "at (" << x[0] << ", " << x[1] << ", " << x[2] << ")";
+  }
+}
+
+TEST(MirrorSymmetry, ThreePlanesGiveTheFoldedBasisOfTheWholeSymmetricNodeSet) {
+  expect_octant_equals_folded_full_basis(LmeConsistency::first, 0.8);
+  expect_octant_equals_folded_full_basis(LmeConsistency::second, 0.8);
+}
+
+TEST(MirrorSymmetry, TwoPlanesOnOneAxisAreRefused) {
+  LmeOptions o;
+  o.mirrors = {MirrorPlane{0, 0.0}, MirrorPlane{0, 0.0}};
+  EXPECT_THROW((void)LmeBasis(test::grid(2, 6, 1.0), std::vector<double>{0.8}, o), std::invalid_argument);
 }
 
 TEST(SpacingSmoothing, ConstantSpacingIsKeptAndScatterIsDamped) {

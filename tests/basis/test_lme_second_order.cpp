@@ -26,7 +26,7 @@ using kernel::jet_size;
 LmeBasis second_order(const NodeSet& nodes, double gamma, bool mirrored = false) {
   LmeOptions o;
   o.consistency = LmeConsistency::second;
-  if (mirrored) o.mirror_axis = 0;
+  if (mirrored) o.mirrors = {MirrorPlane{0, 0.0}};
   return LmeBasis(nodes, std::vector<double>{gamma}, o);
 }
 

@@ -644,13 +644,14 @@ TEST(VesicleScene, ResolutionAgainstTheUniformGrid) {
 TEST(VesicleScene, LmeOptionsAndRescaling) {
   const Scene axi = load(kVesicle);
   const LmeOptions o = problems::lme_options(axi, problems::AxisParity::even);
-  EXPECT_EQ(o.mirror_axis, 0);
-  EXPECT_EQ(o.mirror_position, 0.0);
+  ASSERT_EQ(o.mirrors.size(), 1u);
+  EXPECT_EQ(o.mirrors[0].axis, 0);
+  EXPECT_EQ(o.mirrors[0].position, 0.0);
   EXPECT_EQ(o.spacing_smoothing, 5);
   const LmeOptions p = problems::lme_options(load(kPlanar), problems::AxisParity::even);
-  EXPECT_EQ(p.mirror_axis, -1);
+  EXPECT_TRUE(p.mirrors.empty());
   // A motion's radial component is odd in r: no mirror.
-  EXPECT_EQ(problems::lme_options(axi, problems::AxisParity::odd).mirror_axis, -1);
+  EXPECT_TRUE(problems::lme_options(axi, problems::AxisParity::odd).mirrors.empty());
   // tanh(d / (sqrt2 eps_from)) re-profiled to eps_to is tanh(d / (sqrt2 eps_to)).
   std::vector<double> phi, expected;
   for (const double d : {-0.1, -0.02, 0.0, 0.01, 0.05}) {
@@ -729,3 +730,31 @@ TEST(VesicleScene, TopologyGuardKeyAndTheDemosOfBothRoutes) {
     EXPECT_EQ(m->adaptivity->stages.back().eps, 0.01);
   }
 }
+
+namespace lmeform {
+namespace {
+
+// Planes of symmetry: the box sides become mirror planes of the basis, the [vesicle] targets are
+// those of the part of the body in the box, and the shape must be centred on the planes.
+TEST(VesicleScene, PlanesOfSymmetryHalveTheTargetsPerPlane) {
+  const std::string half = edit(edit(kPlanar, "lower = [-1.0, -1.0]", "lower = [0.0, -1.0]\nmirror = [\"x_min\"]"), "counts = [41, 41]",
+                                "counts = [21, 41]");
+  const Scene s = load(half);
+  ASSERT_EQ(s.mirrors.size(), 1u);
+  EXPECT_EQ(s.mirrors[0].axis, 0);
+  EXPECT_EQ(s.mirrors[0].position, 0.0);
+  const auto m = vesicle_of(half);
+  const Scene whole = problems::with_vesicle_targets(load(edit(kPlanar, "[vesicle]", "[constraints]\narea = {}\nvolume = {}\n[vesicle]")), m);
+  const Scene part = problems::with_vesicle_targets(load(edit(half, "[vesicle]", "[constraints]\narea = {}\nvolume = {}\n[vesicle]")), m);
+  for (std::size_t c = 0; c < 2; ++c) {
+    ASSERT_TRUE(whole.constraints[c].target && part.constraints[c].target);
+    EXPECT_DOUBLE_EQ(*part.constraints[c].target, *whole.constraints[c].target / 2);
+  }
+  expect_error(edit(half, "center = [0.0, 0.0]", "center = [0.1, 0.0]"), {"center", "plane of symmetry x[0] = 0"});
+  expect_error(edit(half, "mirror = [\"x_min\"]", "mirror = [\"x_min\", \"x_max\"]"), {"domain.mirror", "two sides on axis 0"});
+  expect_error(edit(half, "mirror = [\"x_min\"]", "mirror = [\"w_min\"]"), {"domain.mirror", "no side of the box"});
+  expect_error(edit(kVesicle, "upper = [1.5, 2.0]", "upper = [1.5, 2.0]\nmirror = [\"axis\"]"), {"only z_min or z_max"});
+}
+
+}  // namespace
+}  // namespace lmeform

@@ -42,7 +42,7 @@ LevelSetTopology lme_topology(const Profile& distance) {
   const NodeSet nodes = half_plane_grid(0.04);
   const BackgroundCells cells = delaunay(nodes);
   LmeOptions lme;
-  lme.mirror_axis = 0;  // the axisymmetric basis, mirrored across r = 0
+  lme.mirrors = {MirrorPlane{0, 0.0}};  // the axisymmetric basis, mirrored across r = 0
   return problems::field_topology(MPI_COMM_WORLD, nodes, cells, tanh_profile(nodes, distance, 0.05), 0.8, lme, LevelSetGeometry::axisymmetric);
 }
 

@@ -44,7 +44,7 @@ struct Feature {
 struct GeometryOptions {
   int dim = 2;
   /// Axisymmetric: the box starts at r = x[0] = 0, the feature is centred on the axis and the LME
-  /// basis is mirrored across it (LmeOptions::mirror_axis), as the runtime does for bodies of revolution.
+  /// basis is mirrored across it (LmeOptions::mirrors), as the runtime does for bodies of revolution.
   Coordinates coordinates = Coordinates::cartesian;
   double h_min = 0.0;        ///< spacing on the feature; 0: 0.04 (1D), 0.03 (2D), 0.07 (3D)
   double h_max = 0.0;        ///< spacing away from it; 0: 4 h_min (2D), 3 h_min (1D, 3D)

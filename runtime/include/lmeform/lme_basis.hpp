@@ -59,6 +59,12 @@ enum class LmeConsistency {
 /// 13 at 1.2, 123 at 1.6; none at 0.8 and below).
 inline constexpr double lme_second_order_max_gamma = 1.0;
 
+/// A coordinate plane x[axis] = position across which a basis is mirrored (LmeOptions::mirrors).
+struct MirrorPlane {
+  int axis = 0;
+  double position = 0.0;
+};
+
 struct LmeOptions {
   /// Cutoff on the Gaussian factor of p_a: node a is a neighbour of x iff
   /// exp(-beta_a |x - x_a|^2) >= tol0, i.e. |x - x_a| <= r_a = sqrt(-ln(tol0)/beta_a).
@@ -79,14 +85,15 @@ struct LmeOptions {
   /// Smoothing passes applied to that spacing (smooth_spacing); 0: none. Used by the constructor
   /// that computes h_a, not by the one given h_a.
   int spacing_smoothing = 0;
-  /// Mirror symmetry (axisymmetric problems: axis 0 at r = 0). With mirror_axis >= 0 the basis is
-  /// even under the reflection x_axis -> 2 mirror_position - x_axis: every node a whose support
-  /// crosses the plane gets an image a' (same h, beta, support), the LME problem at x is solved on
-  /// its neighbours and their images, and p_a := p_a + p_a'. Then d phi_h / dx_axis = 0 on the plane
-  /// exactly (the symmetry condition of a body of revolution, which keeps phi_r / r finite), and
-  /// the plane is no longer a convex-hull boundary. Nodes must lie on one side of the plane (or on it).
-  int mirror_axis = -1;
-  double mirror_position = 0.0;
+  /// Mirror symmetry (axisymmetric problems: axis 0 at r = 0; a symmetric 3D body: up to three
+  /// coordinate planes). The basis is even under each reflection x_axis -> 2 position - x_axis:
+  /// every node a gets an image a' across each non-empty subset S of the planes that its support
+  /// reaches (its distance to their intersection below its support radius; same h, beta,
+  /// support), the LME problem at x is solved on its neighbours and their images, and
+  /// p_a := p_a + Σ p_a'. Then d phi_h / dx_axis = 0 on each plane exactly (for a body of
+  /// revolution the condition that keeps phi_r / r finite), and the planes are no longer convex-hull
+  /// boundaries. Nodes must lie on one side of each plane (or on it); the axes must differ.
+  std::vector<MirrorPlane> mirrors;
   /// first (default): the LME basis. second: second-order max-ent, whose Hessians converge under
   /// refinement at fixed gamma (see LmeConsistency).
   LmeConsistency consistency = LmeConsistency::first;
@@ -200,8 +207,8 @@ class LmeBasis {
   /// Doubles of one compressed record of this basis (lme_record_size or lme_second_order_record_size).
   [[nodiscard]] int record_size(int order) const noexcept;
 
-  /// Images of nodes across the mirror plane (LmeOptions::mirror_axis): how many, and the node
-  /// each image belongs to. Empty without mirror symmetry.
+  /// Images of nodes across the mirror planes (LmeOptions::mirrors): how many, and the node each
+  /// image belongs to. Empty without mirror symmetry.
   [[nodiscard]] std::size_t image_count() const noexcept { return image_source_.size(); }
   [[nodiscard]] std::span<const int> image_sources() const noexcept { return image_source_; }
 
@@ -242,6 +249,7 @@ class LmeBasis {
  private:
   void init(std::span<const double> gamma, std::vector<double> spacing);
   void init_mirror();
+  void check_mirrors() const;
   void init_gaps();
   void check_order(int order, const char* who) const;
   // The first-order kernels over `list` (with mirror symmetry: nodes and images, unfolded).
@@ -253,7 +261,7 @@ class LmeBasis {
   /// Mirror symmetry: fills ws.extended with `nbrs` followed by the images within reach of x;
   /// returns the extended size.
   std::size_t extend(std::span<const double> x, std::span<const int> nbrs, LmeWorkspace& ws) const;
-  [[nodiscard]] bool mirrored() const noexcept { return options_.mirror_axis >= 0; }
+  [[nodiscard]] bool mirrored() const noexcept { return !options_.mirrors.empty(); }
   // Coordinates and beta of every index a list may hold (with mirror symmetry: nodes then images).
   [[nodiscard]] const double* coords_data() const noexcept { return mirrored() ? all_coords_.data() : nodes_.coords.data(); }
   [[nodiscard]] const double* beta_data() const noexcept { return mirrored() ? all_beta_.data() : beta_.data(); }
@@ -267,7 +275,7 @@ class LmeBasis {
   std::vector<double> gap_;  // second order: packed G_a per node
   // Mirror symmetry: nodes then images (coordinates, beta, radius) and the image -> node map.
   std::vector<int> image_source_;
-  std::vector<int> image_of_;  // node -> image index, -1 without one
+  std::vector<int> image_offsets_;  // node a's images are image_offsets_[a] .. image_offsets_[a + 1]
   std::vector<double> all_coords_, all_beta_, all_radius_, all_gap_;
   std::optional<KdTree> all_tree_;
 };

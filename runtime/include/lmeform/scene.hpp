@@ -268,6 +268,12 @@ struct Scene {
   /// The domain with its named boundary parts: the box (sides x_min, x_max, ...), a convex
   /// polygon or a convex polyhedron.
   Domain geometry;
+  /// [domain] mirror: sides of the box that are planes of symmetry. The basis is even across each
+  /// (LmeOptions::mirrors), so the scene solves the part of a symmetric body in the box; its
+  /// integrals are those of the part. Empty: none (the axis of an axisymmetric scene is mirrored
+  /// anyway).
+  std::vector<MirrorPlane> mirrors;
+  std::string mirror_where;            ///< "FILE:LINE: key 'domain.mirror'" for messages
   SceneNodes nodes;
   SceneModel model;
   std::map<std::string, double, std::less<>> constants;  ///< [constants], by name

@@ -249,7 +249,7 @@ std::vector<char> Discretization::cells_reaching_owned_nodes() const {
   const KdTree tree(NodeSet(dim(), std::move(owned)));
   const auto radius = basis_->support_radii();
   const double largest = *std::max_element(radius.begin() + begin, radius.begin() + end);
-  const int mirror = options_.lme.mirror_axis;
+  const auto& mirrors = options_.lme.mirrors;
   std::vector<int> near;
   std::array<double, 3> centroid{}, image{};
   for (std::size_t c = 0; c < cells_.size(); ++c) {
@@ -274,9 +274,11 @@ std::vector<char> Discretization::cells_reaching_owned_nodes() const {
       return false;
     };
     bool hit = reaches(centroid);
-    if (!hit && mirror >= 0) {
+    // Its images across every subset of the mirror planes reach the owned nodes' images.
+    for (std::size_t mask = 1; !hit && mask < (std::size_t(1) << mirrors.size()); ++mask) {
       image = centroid;
-      image[std::size_t(mirror)] = 2 * options_.lme.mirror_position - centroid[std::size_t(mirror)];
+      for (std::size_t p = 0; p < mirrors.size(); ++p)
+        if (mask & (std::size_t(1) << p)) image[std::size_t(mirrors[p].axis)] = 2 * mirrors[p].position - centroid[std::size_t(mirrors[p].axis)];
       hit = reaches(image);
     }
     searched[c] = hit ? 1 : 0;

@@ -328,68 +328,102 @@ void LmeBasis::init_gaps() {
     }
   }
   const std::size_t n = nodes_.size(), d = static_cast<std::size_t>(dim());
-  if (!mirrored() || options_.mirror_axis >= dim()) {
+  if (!mirrored()) {
     gap_ = detail::second_order_gaps(nodes_, spacing_, gamma_, nodes_);
     return;
   }
-  // With mirror symmetry the plane is no hull boundary: the hull is that of the nodes and their reflections.
-  std::vector<double> both = nodes_.coords;
-  const auto axis = static_cast<std::size_t>(options_.mirror_axis);
-  for (std::size_t a = 0; a < n; ++a)
-    for (std::size_t i = 0; i < d; ++i) {
-      const double c = nodes_.coords[a * d + i];
-      both.push_back(i == axis ? 2.0 * options_.mirror_position - c : c);
+  check_mirrors();
+  // With mirror symmetry the planes are no hull boundaries: the hull is that of the nodes and their
+  // reflections across every subset of the planes.
+  std::vector<double> all = nodes_.coords;
+  const std::size_t subsets = std::size_t(1) << options_.mirrors.size();
+  for (std::size_t mask = 1; mask < subsets; ++mask)
+    for (std::size_t a = 0; a < n; ++a) {
+      std::array<double, 3> x{};
+      for (std::size_t i = 0; i < d; ++i) x[i] = nodes_.coords[a * d + i];
+      for (std::size_t p = 0; p < options_.mirrors.size(); ++p)
+        if (mask & (std::size_t(1) << p)) {
+          const auto axis = std::size_t(options_.mirrors[p].axis);
+          x[axis] = 2.0 * options_.mirrors[p].position - x[axis];
+        }
+      all.insert(all.end(), x.begin(), x.begin() + std::ptrdiff_t(d));
     }
-  gap_ = detail::second_order_gaps(nodes_, spacing_, gamma_, NodeSet(dim(), std::move(both)));
+  gap_ = detail::second_order_gaps(nodes_, spacing_, gamma_, NodeSet(dim(), std::move(all)));
+}
+
+void LmeBasis::check_mirrors() const {
+  const std::size_t n = nodes_.size(), d = static_cast<std::size_t>(dim());
+  std::vector<int> axes;
+  for (const MirrorPlane& m : options_.mirrors) {
+    if (m.axis < 0 || m.axis >= dim())
+      throw std::invalid_argument("LmeBasis: a mirror plane on axis " + std::to_string(m.axis) + " in dimension " + std::to_string(dim()));
+    if (std::find(axes.begin(), axes.end(), m.axis) != axes.end())
+      throw std::invalid_argument("LmeBasis: two mirror planes on axis " + std::to_string(m.axis));
+    axes.push_back(m.axis);
+    double extent = 0.0, lo = 0.0, hi = 0.0;
+    for (std::size_t a = 0; a < n; ++a) {
+      const double delta = nodes_.coords[a * d + std::size_t(m.axis)] - m.position;
+      extent = std::max(extent, std::abs(delta));
+      lo = std::min(lo, delta);
+      hi = std::max(hi, delta);
+    }
+    // Every node on the same side: the reflection of one side is the other.
+    const double on_plane = 1e-12 * std::max(extent, 1e-300);
+    if (lo < -on_plane && hi > on_plane) {
+      throw std::invalid_argument("LmeBasis: mirror symmetry about x[" + std::to_string(m.axis) + "] = " + std::to_string(m.position) +
+                                  " needs every node on one side of the plane (they span " + std::to_string(m.position + lo) + " .. " +
+                                  std::to_string(m.position + hi) + ")");
+    }
+  }
 }
 
 void LmeBasis::init_mirror() {
-  const int axis = options_.mirror_axis;
-  if (axis >= dim()) {
-    throw std::invalid_argument("LmeBasis: mirror_axis = " + std::to_string(axis) + " in dimension " +
-                                std::to_string(dim()));
-  }
-  const std::size_t n = nodes_.size(), d = static_cast<std::size_t>(dim());
-  const double plane = options_.mirror_position;
-  double extent = 0.0;
-  for (std::size_t a = 0; a < n; ++a) extent = std::max(extent, std::abs(nodes_.coords[a * d + std::size_t(axis)] - plane));
-  const double on_plane = 1e-12 * std::max(extent, 1e-300);
-  // Every node on the same side: the reflection of one side is the other.
-  double lo = 0.0, hi = 0.0;
-  for (std::size_t a = 0; a < n; ++a) {
-    const double delta = nodes_.coords[a * d + std::size_t(axis)] - plane;
-    lo = std::min(lo, delta);
-    hi = std::max(hi, delta);
-  }
-  if (lo < -on_plane && hi > on_plane) {
-    throw std::invalid_argument("LmeBasis: mirror symmetry about x[" + std::to_string(axis) + "] = " +
-                                std::to_string(plane) + " needs every node on one side of the plane (they span " +
-                                std::to_string(plane + lo) + " .. " + std::to_string(plane + hi) + ")");
+  check_mirrors();
+  const std::size_t n = nodes_.size(), d = static_cast<std::size_t>(dim()), planes = options_.mirrors.size();
+  std::vector<double> on_plane(planes);
+  for (std::size_t p = 0; p < planes; ++p) {
+    double extent = 0.0;
+    for (std::size_t a = 0; a < n; ++a) extent = std::max(extent, std::abs(nodes_.coords[a * d + std::size_t(options_.mirrors[p].axis)] - options_.mirrors[p].position));
+    on_plane[p] = 1e-12 * std::max(extent, 1e-300);
   }
   all_coords_ = nodes_.coords;
   all_beta_ = beta_;
   all_radius_ = radius_;
   all_gap_ = gap_;
   const std::size_t s = second_order() ? d * (d + 1) / 2 : 0;
-  image_of_.assign(n, -1);
+  image_offsets_.assign(n + 1, 0);
   for (std::size_t a = 0; a < n; ++a) {
-    const double delta = nodes_.coords[a * d + std::size_t(axis)] - plane;
-    // Nodes on the plane are their own image; others get one where their support crosses it.
-    if (std::abs(delta) <= on_plane || std::abs(delta) >= radius_[a]) continue;
-    image_of_[a] = static_cast<int>(image_source_.size());
-    image_source_.push_back(static_cast<int>(a));
-    for (std::size_t i = 0; i < d; ++i) {
-      const double c = nodes_.coords[a * d + i];
-      all_coords_.push_back(i == std::size_t(axis) ? plane - delta : c);
-    }
-    all_beta_.push_back(beta_[a]);
-    all_radius_.push_back(radius_[a]);
-    // The reflected gap: entries coupling the axis with another direction change sign.
-    for (std::size_t i = 0; i < d && s > 0; ++i)
-      for (std::size_t j = i; j < d; ++j) {
-        const double g = gap_[a * s + static_cast<std::size_t>(kernel::hessian_slot(int(i), int(j), dim()) - 1 - dim())];
-        all_gap_.push_back((i == std::size_t(axis)) != (j == std::size_t(axis)) ? -g : g);
+    // Across each subset of the planes its support reaches (the distance to their intersection
+    // below the radius); a node on a plane is its own image across it.
+    for (std::size_t mask = 1; mask < (std::size_t(1) << planes); ++mask) {
+      double reach2 = 0.0;
+      bool image = true;
+      std::array<bool, 3> flipped{};
+      for (std::size_t p = 0; p < planes && image; ++p) {
+        if (!(mask & (std::size_t(1) << p))) continue;
+        const double delta = nodes_.coords[a * d + std::size_t(options_.mirrors[p].axis)] - options_.mirrors[p].position;
+        image = std::abs(delta) > on_plane[p];
+        reach2 += delta * delta;
+        flipped[std::size_t(options_.mirrors[p].axis)] = true;
       }
+      if (!image || reach2 >= radius_[a] * radius_[a]) continue;
+      image_source_.push_back(static_cast<int>(a));
+      for (std::size_t i = 0; i < d; ++i) all_coords_.push_back(nodes_.coords[a * d + i]);
+      for (std::size_t p = 0; p < planes; ++p)
+        if (mask & (std::size_t(1) << p)) {
+          double& c = all_coords_[all_coords_.size() - d + std::size_t(options_.mirrors[p].axis)];
+          c = 2.0 * options_.mirrors[p].position - c;
+        }
+      all_beta_.push_back(beta_[a]);
+      all_radius_.push_back(radius_[a]);
+      // The reflected gap: entries coupling a reflected axis with one that is not change sign.
+      for (std::size_t i = 0; i < d && s > 0; ++i)
+        for (std::size_t j = i; j < d; ++j) {
+          const double g = gap_[a * s + static_cast<std::size_t>(kernel::hessian_slot(int(i), int(j), dim()) - 1 - dim())];
+          all_gap_.push_back(flipped[i] != flipped[j] ? -g : g);
+        }
+    }
+    image_offsets_[a + 1] = static_cast<int>(image_source_.size());
   }
   all_tree_.emplace(NodeSet(dim(), all_coords_));
 }
@@ -399,17 +433,18 @@ std::size_t LmeBasis::extend(std::span<const double> x, std::span<const int> nbr
   ws.extended.assign(nbrs.begin(), nbrs.end());
   ws.mirror_fold.clear();
   for (std::size_t k = 0; k < nbrs.size(); ++k) {
-    const int image = image_of_[static_cast<std::size_t>(nbrs[k])];
-    if (image < 0) continue;
-    const std::size_t e = n + static_cast<std::size_t>(image);
-    double r2 = 0.0;
-    for (std::size_t i = 0; i < d; ++i) {
-      const double t = x[i] - all_coords_[e * d + i];
-      r2 += t * t;
+    const auto a = static_cast<std::size_t>(nbrs[k]);
+    for (int image = image_offsets_[a]; image < image_offsets_[a + 1]; ++image) {
+      const std::size_t e = n + static_cast<std::size_t>(image);
+      double r2 = 0.0;
+      for (std::size_t i = 0; i < d; ++i) {
+        const double t = x[i] - all_coords_[e * d + i];
+        r2 += t * t;
+      }
+      if (r2 > all_radius_[e] * all_radius_[e]) continue;
+      ws.extended.push_back(static_cast<int>(e));
+      ws.mirror_fold.push_back(static_cast<int>(k));
     }
-    if (r2 > all_radius_[e] * all_radius_[e]) continue;
-    ws.extended.push_back(static_cast<int>(e));
-    ws.mirror_fold.push_back(static_cast<int>(k));
   }
   return ws.extended.size();
 }

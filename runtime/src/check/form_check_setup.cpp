@@ -148,8 +148,7 @@ CheckGeometry::CheckGeometry(const GeometryOptions& o) : coordinates_(o.coordina
   lme.consistency = o.basis;
   if (axi) {
     // Bodies of revolution: the basis is even across the axis, as in the runtime's axisymmetric runs.
-    lme.mirror_axis = 0;
-    lme.mirror_position = 0.0;
+    lme.mirrors = {MirrorPlane{0, 0.0}};
   }
   const double gamma = o.gamma > 0 ? o.gamma : d == 3 && o.basis == LmeConsistency::first ? 1.8 : 0.8;
   basis_ = std::make_shared<const LmeBasis>(nodes_, std::span<const double>(&gamma, 1), lme);

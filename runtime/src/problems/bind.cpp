@@ -643,7 +643,15 @@ std::vector<const BoundOutput*> BoundScene::outputs() const {
 }
 
 LmeOptions BoundScene::lme(AxisParity parity) const {
-  return lme_options(discretization.spacing_smoothing, axisymmetric, parity, discretization.basis, discretization.support_tolerance);
+  LmeOptions o = lme_options(discretization.spacing_smoothing, axisymmetric, parity, discretization.basis, discretization.support_tolerance);
+  if (!discretization.mirrors.empty()) {
+    if (parity == AxisParity::odd)
+      throw SceneError(fmt::format("{}: this problem moves the nodes or solves for a velocity, whose normal component is odd across a plane "
+                                   "of symmetry; leave out [domain] mirror",
+                                   source));
+    o.mirrors.insert(o.mirrors.end(), discretization.mirrors.begin(), discretization.mirrors.end());
+  }
+  return o;
 }
 
 BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, const StationaryDriver& solver, const OutputRoles& extra) {
@@ -656,7 +664,7 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
   b.geometry = scene.geometry;
   b.boundary_points = scene.nodes.boundary_points;
   b.discretization = {scene.nodes.gamma, scene.nodes.quadrature_points, scene.nodes.spacing_smoothing, scene.nodes.consistent_integration,
-                      scene.nodes.basis, scene.nodes.partition, scene.nodes.support_tolerance};
+                      scene.nodes.basis, scene.nodes.partition, scene.nodes.support_tolerance, scene.mirrors};
   b.solver = &solver;
   OutputRoles roles = solver.roles(scene);
   roles.auxiliary.insert(roles.auxiliary.end(), extra.auxiliary.begin(), extra.auxiliary.end());
@@ -665,6 +673,13 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
   load_modules(scene, comm, log, b);
   bind_outputs(scene, roles, b);
   bind_layout(scene, b);
+  // Only a scalar is even across a plane of symmetry; a vector's normal component is odd.
+  if (!scene.mirrors.empty())
+    for (const auto& f : b.layout.fields)
+      if (f.components != 1)
+        throw SceneError(fmt::format("{}: planes of symmetry need scalar unknowns (the basis is even across them); '{}' has {} components, "
+                                     "whose normal one is odd across the plane",
+                                     scene.mirror_where, f.name, f.components));
   bind_boundary_parts(scene, b);
   bind_constants(scene, roles, b);
   bind_constraint_targets(scene, roles, b);

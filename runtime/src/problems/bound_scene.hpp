@@ -143,6 +143,7 @@ struct DiscretizationSettings {
   LmeConsistency basis = LmeConsistency::first;  ///< first- or second-order max-ent basis
   PartitionMethod partition = PartitionMethod::Metis;  ///< how the nodes are split among ranks
   double support_tolerance = 1e-6;  ///< LmeOptions::tol0: the Gaussian weight at the support's edge
+  std::vector<MirrorPlane> mirrors;  ///< [domain] mirror: planes the fields are even across
 };
 
 /// A scene with its forms loaded and every name checked against them.

@@ -153,11 +153,10 @@ std::vector<double> QuadratureData::field_jets(const BoundQdata& source, const E
   const auto given = input_.coefficient_values.find(source.field);
   const std::vector<double> field =
       given != input_.coefficient_values.end() ? given->second : coefficient_values(bound_, source.field, 1, input_.nodes);
-  const bool mirror_fields = bound_.axisymmetric && input_.lme.mirror_axis < 0;
+  const bool mirror_fields = bound_.axisymmetric && input_.lme.mirrors.empty();
   if (mirror_fields && !field_basis_) {
     LmeOptions lme = input_.lme;
-    lme.mirror_axis = 0;
-    lme.mirror_position = 0.0;
+    lme.mirrors = {MirrorPlane{0, 0.0}};
     field_basis_.emplace(input_.nodes, std::vector<double>{bound_.discretization.gamma}, lme);
   }
   values = interpolated_field_qdata(disc_, domain, field, source.derivative, field_basis_ ? &*field_basis_ : nullptr);

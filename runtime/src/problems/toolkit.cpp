@@ -43,8 +43,7 @@ LmeOptions lme_options(int spacing_smoothing, bool axisymmetric, AxisParity pari
   if (axisymmetric && parity == AxisParity::even) {
     // Without the mirror φ_r(0, z) ≠ 0, and a bending density ε² φ_r² / r grows without bound as
     // quadrature points approach the axis.
-    o.mirror_axis = 0;
-    o.mirror_position = 0.0;
+    o.mirrors = {MirrorPlane{0, 0.0}};
   }
   return o;
 }

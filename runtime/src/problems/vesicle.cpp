@@ -74,6 +74,13 @@ void read_initial_shape(const Scene& s, const SceneTable& t, VesicleModel& m) {
     t.fail_key("center", "must lie on the axis (r = 0) in an axisymmetric scene, got r = " + format_number(m.center[0]));
   for (int i = 0; i < s.dim(); ++i) {
     const auto k = std::size_t(i);
+    // The shape must be symmetric about a plane of symmetry, so it crosses the plane.
+    if (std::any_of(s.mirrors.begin(), s.mirrors.end(), [&](const MirrorPlane& mp) { return mp.axis == i; })) {
+      const auto& mp = *std::find_if(s.mirrors.begin(), s.mirrors.end(), [&](const MirrorPlane& q) { return q.axis == i; });
+      if (m.center[k] != mp.position)
+        t.fail_key("center", fmt::format("must lie on the plane of symmetry x[{}] = {} ([domain] mirror), got {}", i, mp.position, m.center[k]));
+      continue;
+    }
     const std::string key = m.shape == VesicleModel::Shape::ellipsoid ? "semi_axes" : "radius";
     const double lo = m.center[k] - m.semi_axes[k], hi = m.center[k] + m.semi_axes[k];
     if (hi > s.domain.hi[k])
@@ -138,11 +145,14 @@ void read_adaptivity(const SceneTable& t, VesicleModel& m) {
   m.adaptivity = std::move(a);
 }
 
-/// The measure of the domain (axisymmetric: the volume of revolution).
+/// The number of copies of the domain that make the symmetric body: 2 per plane of symmetry.
+double symmetric_copies(const Scene& s) { return double(1 << s.mirrors.size()); }
+
+/// The measure of the domain (axisymmetric: the volume of revolution), with its mirror images.
 double domain_measure(const Scene& s) {
   const Box& b = s.domain;
-  if (s.axisymmetric()) return std::numbers::pi * b.hi[0] * b.hi[0] * (b.hi[1] - b.lo[1]);
-  double m = 1;
+  if (s.axisymmetric()) return symmetric_copies(s) * std::numbers::pi * b.hi[0] * b.hi[0] * (b.hi[1] - b.lo[1]);
+  double m = symmetric_copies(s);
   for (int i = 0; i < s.dim(); ++i) m *= b.hi[std::size_t(i)] - b.lo[std::size_t(i)];
   return m;
 }
@@ -455,6 +465,8 @@ std::vector<double> first_start(const BoundScene& bound, const VesicleModel& mod
 std::optional<LevelSetTopology> topology_or_none(const ProblemResult& solved, std::span<const double> coefficients, const BoundScene& bound,
                                                  std::ostream* log) {
   if (!solved.discretization) return std::nullopt;
+  // The level set of one part of a symmetric body is a surface with boundary on the planes.
+  if (!bound.discretization.mirrors.empty()) return std::nullopt;
   try {
     return field_topology(*solved.discretization, coefficients, level_set_geometry(bound.dim, bound.axisymmetric));
   } catch (const std::exception& e) {
@@ -519,9 +531,10 @@ StageRecord run_vesicle_stage(MPI_Comm comm, const BoundScene& bound, const Vesi
 Scene with_vesicle_targets(const Scene& scene, const VesicleModel& model) {
   Scene completed = scene;
   for (auto& c : completed.constraints) {
-    if (c.name == "area" && model.area) c.target = *model.area;
-    if (c.name == "volume" && model.volume) c.target = *model.volume;
-    if (c.name == "moment" && model.volume && !c.scale) c.scale = std::abs(*model.volume);
+    // With planes of symmetry the forms integrate over one part of the body.
+    if (c.name == "area" && model.area) c.target = *model.area / symmetric_copies(scene);
+    if (c.name == "volume" && model.volume) c.target = *model.volume / symmetric_copies(scene);
+    if (c.name == "moment" && model.volume && !c.scale) c.scale = std::abs(*model.volume) / symmetric_copies(scene);
   }
   return completed;
 }

@@ -119,10 +119,29 @@ void read_box(const SceneTable& t, Scene& s) {
     t.fail_key("lower", "must have r >= 0 in an axisymmetric scene (r is the distance to the axis), got r = " + format_number(lo[0]));
 }
 
+/// The sides of the box that are planes of symmetry.
+void read_mirrors(const SceneTable& t, Scene& s) {
+  static const char* sides[3][2] = {{"x_min", "x_max"}, {"y_min", "y_max"}, {"z_min", "z_max"}};
+  s.mirror_where = t.where("mirror");
+  for (const std::string& name : strings_of(t, "mirror")) {
+    int axis = -1, side = 0;
+    for (int i = 0; i < s.dim(); ++i)
+      for (int k = 0; k < 2; ++k)
+        if (name == sides[i][k] || (s.axisymmetric() && name == (k == 0 ? (i == 0 ? "axis" : "z_min") : (i == 0 ? "r_max" : "z_max")))) axis = i, side = k;
+    if (axis < 0) t.fail_key("mirror", "names '" + name + "', no side of the box (x_min, x_max, y_min, ...)");
+    if (s.axisymmetric() && axis == 0)
+      t.fail_key("mirror", "names '" + name + "': in an axisymmetric scene only z_min or z_max can be a plane of symmetry (the axis is one already)");
+    for (const MirrorPlane& m : s.mirrors)
+      if (m.axis == axis) t.fail_key("mirror", "names two sides on axis " + std::to_string(axis) + ": a box has one plane of symmetry per axis here");
+    s.mirrors.push_back({axis, side == 0 ? s.domain.lo[std::size_t(axis)] : s.domain.hi[std::size_t(axis)]});
+  }
+}
+
 }  // namespace
 
 void read_domain(const SceneTable& root, Scene& s) {
-  const SceneTable t = root.table("domain", {"lower", "upper", "polygon", "polyhedron", "parts"});
+  const SceneTable t = root.table("domain", {"lower", "upper", "polygon", "polyhedron", "parts", "mirror"});
+  if (t.has("mirror") && !(t.has("lower") || t.has("upper"))) t.fail_key("mirror", "names sides of a box: give [domain] lower and upper");
   const int shapes = int(t.has("lower") || t.has("upper")) + int(t.has("polygon")) + int(t.has("polyhedron"));
   if (shapes == 0) t.fail_key("lower", "is missing: [domain] is a box (lower, upper), a 'polygon' or a 'polyhedron'");
   if (shapes > 1) t.fail_key(t.has("polygon") ? "polygon" : "polyhedron", "cannot be combined with another shape: [domain] is a box, a polygon or a polyhedron");
@@ -135,6 +154,7 @@ void read_domain(const SceneTable& root, Scene& s) {
     if (t.has("parts")) t.fail_key("parts", "names the faces of a polygon or polyhedron; a box's sides are x_min, x_max, ...");
     read_box(t, s);
     s.geometry = Domain::box(s.domain, s.axisymmetric());
+    if (t.has("mirror")) read_mirrors(t, s);
     return;
   }
   s.domain = s.geometry.bounds();
