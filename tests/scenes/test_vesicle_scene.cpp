@@ -751,6 +751,9 @@ TEST(VesicleScene, PlanesOfSymmetryHalveTheTargetsPerPlane) {
     EXPECT_DOUBLE_EQ(*part.constraints[c].target, *whole.constraints[c].target / 2);
   }
   expect_error(edit(half, "center = [0.0, 0.0]", "center = [0.1, 0.0]"), {"center", "plane of symmetry x[0] = 0"});
+  // The side away from the plane is still checked.
+  expect_error(edit(edit(half, "upper = [1.0, 1.0]", "upper = [0.4, 1.0]"), "counts = [21, 41]", "counts = [9, 41]"),
+               {"outside the domain", "upper bound 0.4"});
   expect_error(edit(half, "mirror = [\"x_min\"]", "mirror = [\"x_min\", \"x_max\"]"), {"domain.mirror", "two sides on axis 0"});
   expect_error(edit(half, "mirror = [\"x_min\"]", "mirror = [\"w_min\"]"), {"domain.mirror", "no side of the box"});
   expect_error(edit(kVesicle, "upper = [1.5, 2.0]", "upper = [1.5, 2.0]\nmirror = [\"axis\"]"), {"only z_min or z_max"});

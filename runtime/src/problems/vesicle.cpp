@@ -74,19 +74,18 @@ void read_initial_shape(const Scene& s, const SceneTable& t, VesicleModel& m) {
     t.fail_key("center", "must lie on the axis (r = 0) in an axisymmetric scene, got r = " + format_number(m.center[0]));
   for (int i = 0; i < s.dim(); ++i) {
     const auto k = std::size_t(i);
-    // The shape must be symmetric about a plane of symmetry, so it crosses the plane.
-    if (std::any_of(s.mirrors.begin(), s.mirrors.end(), [&](const MirrorPlane& mp) { return mp.axis == i; })) {
-      const auto& mp = *std::find_if(s.mirrors.begin(), s.mirrors.end(), [&](const MirrorPlane& q) { return q.axis == i; });
-      if (m.center[k] != mp.position)
-        t.fail_key("center", fmt::format("must lie on the plane of symmetry x[{}] = {} ([domain] mirror), got {}", i, mp.position, m.center[k]));
-      continue;
-    }
+    // The shape must be symmetric about a plane of symmetry: centred on it, and it crosses it.
+    const auto plane = std::find_if(s.mirrors.begin(), s.mirrors.end(), [&](const MirrorPlane& q) { return q.axis == i; });
+    if (plane != s.mirrors.end() && m.center[k] != plane->position)
+      t.fail_key("center", fmt::format("must lie on the plane of symmetry x[{}] = {} ([domain] mirror), got {}", i, plane->position, m.center[k]));
+    const bool open_below = (s.axisymmetric() && i == 0) || (plane != s.mirrors.end() && plane->position == s.domain.lo[k]);
+    const bool open_above = plane != s.mirrors.end() && plane->position == s.domain.hi[k];
     const std::string key = m.shape == VesicleModel::Shape::ellipsoid ? "semi_axes" : "radius";
     const double lo = m.center[k] - m.semi_axes[k], hi = m.center[k] + m.semi_axes[k];
-    if (hi > s.domain.hi[k])
+    if (!open_above && hi > s.domain.hi[k])
       t.fail_key(key, fmt::format("puts the initial shape outside the domain: it reaches {} on axis {} > upper bound {}", hi, i,
                                   s.domain.hi[k]));
-    if (!(s.axisymmetric() && i == 0) && lo < s.domain.lo[k])
+    if (!open_below && lo < s.domain.lo[k])
       t.fail_key(key, fmt::format("puts the initial shape outside the domain: it reaches {} on axis {} < lower bound {}", lo, i,
                                   s.domain.lo[k]));
   }
