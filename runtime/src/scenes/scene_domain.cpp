@@ -119,21 +119,21 @@ void read_box(const SceneTable& t, Scene& s) {
     t.fail_key("lower", "must have r >= 0 in an axisymmetric scene (r is the distance to the axis), got r = " + format_number(lo[0]));
 }
 
-/// The sides of the box that are planes of symmetry.
+/// The sides of the box that are planes of symmetry (box face names and their axisymmetric aliases,
+/// as the box's Domain names them).
 void read_mirrors(const SceneTable& t, Scene& s) {
-  static const char* sides[3][2] = {{"x_min", "x_max"}, {"y_min", "y_max"}, {"z_min", "z_max"}};
   s.mirror_where = t.where("mirror");
   for (const std::string& name : strings_of(t, "mirror")) {
-    int axis = -1, side = 0;
-    for (int i = 0; i < s.dim(); ++i)
-      for (int k = 0; k < 2; ++k)
-        if (name == sides[i][k] || (s.axisymmetric() && name == (k == 0 ? (i == 0 ? "axis" : "z_min") : (i == 0 ? "r_max" : "z_max")))) axis = i, side = k;
-    if (axis < 0) t.fail_key("mirror", "names '" + name + "', no side of the box (x_min, x_max, y_min, ...)");
+    const std::vector<int> faces = name.empty() || name == "hull" ? std::vector<int>{} : s.geometry.faces_of(name);
+    if (faces.size() != 1) t.fail_key("mirror", "names '" + name + "', no side of the box (x_min, x_max, y_min, ...)");
+    const DomainFace& face = s.geometry.faces()[std::size_t(faces[0])];
+    const auto along = std::find_if(face.normal.begin(), face.normal.end(), [](double n) { return n != 0.0; });
+    const int axis = int(along - face.normal.begin());
     if (s.axisymmetric() && axis == 0)
       t.fail_key("mirror", "names '" + name + "': in an axisymmetric scene only z_min or z_max can be a plane of symmetry (the axis is one already)");
     for (const MirrorPlane& m : s.mirrors)
       if (m.axis == axis) t.fail_key("mirror", "names two sides on axis " + std::to_string(axis) + ": a box has one plane of symmetry per axis here");
-    s.mirrors.push_back({axis, side == 0 ? s.domain.lo[std::size_t(axis)] : s.domain.hi[std::size_t(axis)]});
+    s.mirrors.push_back({axis, *along * face.offset});  // the face is normal · x = offset, normal = ±e_axis
   }
 }
 
