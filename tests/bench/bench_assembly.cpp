@@ -73,6 +73,9 @@ struct StrategyRun {
   double mean_neighbours = 0, mean_element_nodes = 0;
   long long pattern_nonzeros = 0;
   long long elements = 0;
+  // Node pairs of all elements, sum |e|^2: the visits of the pattern's construction and the
+  // entries the fill adds, so the per-point / cell ratio of this sum bounds the structure ratio.
+  long long element_pairs = 0;
   // cell-based only
   double union_lists = 0;  // seed Algorithm 2's union of the points' lists (inside neighbour_search)
   double rhs = 0, dirichlet = 0, solve = 0, t_max = 0;
@@ -121,6 +124,11 @@ StrategyRun run_strategy(const NodeSet& nodes, double gamma, int points, Neighbo
   run.mean_neighbours = disc.mean_point_neighbours();
   run.mean_element_nodes = disc.element_lists().mean_size();
   run.elements = disc.n_elements();
+  for (std::size_t e = 0; e < disc.element_lists().size(); ++e) {
+    const auto size = static_cast<long long>(disc.element_lists()[e].size());
+    run.element_pairs += size * size;
+  }
+  MPI_Allreduce(MPI_IN_PLACE, &run.element_pairs, 1, MPI_LONG_LONG, MPI_MAX, PETSC_COMM_WORLD);
   long long nnz = disc.pattern().nonzeros();
   MPI_Allreduce(MPI_IN_PLACE, &nnz, 1, MPI_LONG_LONG, MPI_SUM, PETSC_COMM_WORLD);
   run.pattern_nonzeros = nnz;
@@ -226,7 +234,7 @@ std::vector<JsonRecord> heat_benchmark(bool quick, const SweepFilter& filter, Js
   say("\nheat problem -Lap T = 2y: per-point (pt) vs cell-based (cell) neighbourhoods; times in s\n");
   say("%6s %4s %3s %6s %6s | %8s %8s %6s | %8s %8s %6s | %6s | %7s %7s %7s %7s %7s | %8s %6s %6s\n", "nodes", "gam", "nq",
       "nbrs", "cellN", "str_pt", "str_cell", "x", "fill_pt", "fill_cl", "x", "nnz_x", "search", "basis", "struct", "fill",
-      "solve", "fill_set", "x", "set_x");
+      "solve", "fill_set", "x", "set_x", "pairs_x");
   for (const int n : grids) {
     const NodeSet nodes = uniform_grid(Box::unit(2), {n, n, 1});
     for (const double gamma : gammas) {
@@ -286,15 +294,19 @@ std::vector<JsonRecord> heat_benchmark(bool quick, const SweepFilter& filter, Js
             .set("elements_point", pt.elements)
             .set("elements_cell", cell.elements)
             .set("pattern_nonzeros_point", pt.pattern_nonzeros)
-            .set("pattern_nonzeros_cell", cell.pattern_nonzeros);
+            .set("pattern_nonzeros_cell", cell.pattern_nonzeros)
+            .set("element_pairs_point", pt.element_pairs)
+            .set("element_pairs_cell", cell.element_pairs)
+            .set("element_pairs_ratio", static_cast<double>(pt.element_pairs) / static_cast<double>(cell.element_pairs));
         records.push_back(std::move(r));
         say("%6d %4.1f %3d %6.1f %6.1f | %8.4f %8.4f %6.1f | %8.4f %8.4f %6.1f | %6.2f | %7.3f %7.3f %7.3f %7.3f %7.3f | "
-            "%8.4f %6.1f %6.1f\n",
+            "%8.4f %6.1f %6.1f %7.1f\n",
             n * n, gamma, points, cell.mean_neighbours, cell.mean_element_nodes, s_pt, s_cell, s_pt / s_cell, pt.fill,
             cell.fill, pt.fill / cell.fill,
             static_cast<double>(cell.pattern_nonzeros) / static_cast<double>(pt.pattern_nonzeros),
             cell.neighbour_search, cell.basis, s_cell, cell.fill, cell.solve, cell.fill_setvalues,
-            cell.fill_setvalues / cell.fill, pt.fill_setvalues / cell.fill_setvalues);
+            cell.fill_setvalues / cell.fill, pt.fill_setvalues / cell.fill_setvalues,
+            static_cast<double>(pt.element_pairs) / static_cast<double>(cell.element_pairs));
       }
     }
   }

@@ -103,6 +103,12 @@ struct ConstrainedResult {
   int inertia_corrections = 0;          ///< extra factorizations of H + δ·|diag H| (wrong inertia)
   int corrected_steps = 0;              ///< Newton steps taken with a shifted Hessian
   int constraint_corrections = 0;       ///< second-order corrections of steps that raised |c|
+  /// Negative eigenvalues of the Lagrangian's Hessian on the constraints' tangent space, from the
+  /// inertia of the last KKT Newton Hessian before any shift (the Hessian at the last iterate but
+  /// one): 0 where the result is a minimum, > 0 at a saddle (a start that has the symmetry of the
+  /// domain keeps it, and can converge to the symmetric saddle); -1 unknown (no KKT step, or no
+  /// inertia from the factorization).
+  int negative_curvature_directions = -1;
   double seconds_hessian = 0;           ///< of the total: Hessian assembly
   double seconds_factor = 0;            ///< of the total: factorizations and solves
   std::vector<ConstrainedIterate> history;
@@ -136,7 +142,7 @@ class ConstrainedMinimizer {
   void evaluate(Vec u, const std::vector<double>& sigma, bool with_matrix, Evaluation& ev);
   void assemble_hessian(Vec u, const std::vector<double>& sigma);
   void factor(Mat A);
-  double factor_with_inertia_correction(const std::function<bool()>& inertia_acceptable);
+  double factor_with_inertia_correction(const std::function<bool(bool shifted)>& inertia_acceptable);
   void solve(Vec b, Vec x);
   void zero_fixed(Vec v);
   void log_iterate(const ConstrainedIterate& it);

@@ -82,6 +82,27 @@ class MinimizationDriver final : public StationaryDriver {
 
 }  // namespace
 
+namespace {
+
+/// Whether the minimizer's result is a minimum, from the inertia of its last Newton Hessian.
+void describe_second_order(const ConstrainedResult& m, RunReport& report) {
+  report.json["negative_curvature_directions"] = m.negative_curvature_directions;
+  if (m.negative_curvature_directions < 0) return;
+  if (m.negative_curvature_directions == 0) {
+    report.row("second-order check", "a minimum (the Hessian is positive definite along the constraints)");
+    return;
+  }
+  const std::string what = fmt::format("{} direction{} of negative curvature along the constraints", m.negative_curvature_directions,
+                                       m.negative_curvature_directions == 1 ? "" : "s");
+  report.row("second-order check", "NOT a minimum: " + what);
+  report.warnings.push_back("the result is a stationary point with " + what +
+                            " (a saddle, not a minimum). A start with the symmetry of the domain and the nodes keeps "
+                            "that symmetry and can converge to its symmetric saddle: start from a perturbed shape "
+                            "(e.g. an ellipsoid with slightly unequal semi-axes instead of a sphere)");
+}
+
+}  // namespace
+
 void describe_minimization(const std::optional<double>& reference, const ProblemResult& r, RunReport& report,
                            const MultiplierMeanings& meanings) {
   const double relative = reference ? (r.energy - *reference) / *reference : std::nan("");
@@ -106,6 +127,7 @@ void describe_minimization(const std::optional<double>& reference, const Problem
     report.json["constraint_residuals"][c] = json_number(m.relative_residuals[i]);
   }
   report.row("Newton iterations", fmt::format("{} augmented Lagrangian + {} KKT", m.augmented_iterations, m.newton_iterations));
+  describe_second_order(m, report);
   if (report.fields) report.fields->attributes.emplace("energy", r.energy);
 }
 

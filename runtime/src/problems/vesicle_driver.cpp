@@ -47,6 +47,7 @@ void describe_stages(const VesicleRun& run, const VesicleModel& model, const std
                                      {"shifted_steps", m.corrected_steps},
                                      {"inertia_corrections", m.inertia_corrections},
                                      {"constraint_corrections", m.constraint_corrections},
+                                     {"negative_curvature_directions", m.negative_curvature_directions},
                                      {"adapt_s", json_number(s.adapt_s)},
                                      {"setup_s", json_number(s.result.seconds_setup)},
                                      {"hessian_s", json_number(m.seconds_hessian)},

@@ -153,9 +153,12 @@ void ConstrainedMinimizer::factor(Mat A) {
   if (counters_ != nullptr) counters_->seconds_factor += MPI_Wtime() - t0;
 }
 
-double ConstrainedMinimizer::factor_with_inertia_correction(const std::function<bool()>& inertia_acceptable) {
+double ConstrainedMinimizer::factor_with_inertia_correction(const std::function<bool(bool shifted)>& inertia_acceptable) {
   // A factorization that failed (an exactly singular H) is shifted like one of the wrong inertia.
-  auto acceptable = [&] { return !factorization_.failed() && (factorization_.negative_eigenvalues() < 0 || inertia_acceptable()); };
+  bool shifted = false;
+  auto acceptable = [&] {
+    return !factorization_.failed() && (factorization_.negative_eigenvalues() < 0 || inertia_acceptable(shifted));
+  };
   factor(hessian_);
   if (!options_.inertia_correction || acceptable()) return 0;
   // The shift follows the diagonal (Marquardt's scaling): the Hessian's diagonal spans orders of
@@ -175,6 +178,7 @@ double ConstrainedMinimizer::factor_with_inertia_correction(const std::function<
     LMEFORM_PETSC_CHECK(VecRestoreArray(shift_scale_, &d));
   }
   PetscVector increment = energy_->create_vector();
+  shifted = true;
   double delta = last_shift_ > 0 ? std::max(1e-8, last_shift_ / 4) : 1e-4, applied = 0;
   for (int attempt = 0; attempt < 16; ++attempt, delta *= 10) {
     LMEFORM_PETSC_CHECK(VecCopy(shift_scale_, increment));
@@ -327,7 +331,7 @@ bool ConstrainedMinimizer::augmented_newton_step(Run& run) {
   // step minimizes L_A only when neg(M) = neg(H).
   Eigen::MatrixXd M;
   bool capacitance_current = false;
-  auto capacitance = [&] {
+  auto capacitance = [&](bool /*shifted*/ = true) {
     M = Eigen::MatrixXd::Identity(index(k), index(k)) + inverse_gram(ev.gradients, run.Z) / run.mu;
     capacitance_current = true;
     return negative_count(M) == factorization_.negative_eigenvalues();
@@ -605,14 +609,18 @@ ConstrainedMinimizer::KktOutcome ConstrainedMinimizer::kkt_stage(Run& run) {
     // that is k.
     Eigen::MatrixXd S(index(k), index(k));
     bool schur_current = false;
-    auto schur = [&] {
+    auto schur = [&](bool shifted = true) {
       S = inverse_gram(ev.gradients, run.Z);
       schur_current = true;
-      return factorization_.negative_eigenvalues() + (static_cast<PetscInt>(k) - negative_count(S)) == static_cast<PetscInt>(k);
+      // neg(H) − neg(S) is the number of negative eigenvalues of H on the constraints' tangent space.
+      const PetscInt tangent_negative = factorization_.negative_eigenvalues() - negative_count(S);
+      if (!shifted) run.result.negative_curvature_directions = static_cast<int>(std::max<PetscInt>(tangent_negative, 0));
+      return tangent_negative == 0;
     };
     double shift = 0;
     if (!kkt.have_factor || kkt.stale_failed || options_.refresh_hessian_every_iteration) {
       assemble_hessian(run.u, run.nu);
+      run.result.negative_curvature_directions = -1;  // unknown unless the factorization counts its pivots
       shift = factor_with_inertia_correction(schur);
       kkt.have_factor = kkt.hessian_current = true;
       kkt.stale_failed = false;
