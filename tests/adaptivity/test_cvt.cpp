@@ -325,12 +325,12 @@ Box box_2d(double lx, double ly) {
   return box;
 }
 
-SpacingField constant_spacing(double h) {
+SpacingFunction constant_spacing(double h) {
   return {[h](std::span<const double>) { return h; }, h};
 }
 
 // h = h0 on the line x = c, growing by `slope` per unit distance from it, up to 8 h0.
-SpacingField graded_spacing(double h0, double c, double slope) {
+SpacingFunction graded_spacing(double h0, double c, double slope) {
   return {[=](std::span<const double> x) { return std::min(8.0 * h0, h0 + slope * std::abs(x[0] - c)); }, h0};
 }
 
@@ -370,7 +370,7 @@ double mean_spacing_in(const NodeSet& nodes, const std::vector<double>& h, doubl
 TEST(CvtForSpacing, UniformSpacingCountsAndGrid) {
   const Box box = box_2d(1.5, 2.0);
   const double h = 0.05;
-  const SpacingField field = constant_spacing(h);
+  const SpacingFunction field = constant_spacing(h);
   const SpacingNodeCount count = count_nodes_for_spacing(box, field);
   const double area_nodes = 1.5 * 2.0 * 2.0 / (std::sqrt(3.0) * h * h);  // 1385.6
   std::size_t on_edges = 4;
@@ -403,7 +403,7 @@ TEST(CvtForSpacing, UniformSpacingCountsAndGrid) {
 TEST(CvtForSpacing, GradedSpacingFollowsTheField) {
   const Box box = box_2d(2.0, 1.0);
   const double h0 = 0.02, c = 0.6, slope = 0.2;
-  const SpacingField field = graded_spacing(h0, c, slope);
+  const SpacingFunction field = graded_spacing(h0, c, slope);
   const SpacingNodeCount count = count_nodes_for_spacing(box, field);
   const NodeSet nodes = cvt_for_spacing(box, field, count.total);
   ASSERT_EQ(nodes.size(), count.total);
@@ -443,7 +443,7 @@ TEST(CvtForSpacing, GradedSpacingFollowsTheField) {
 
 TEST(CvtForSpacing, RefusesBadInput) {
   const Box box = box_2d(1.5, 2.0);
-  const SpacingField field = constant_spacing(0.05);
+  const SpacingFunction field = constant_spacing(0.05);
   const std::size_t budget = count_nodes_for_spacing(box, field).total;  // 1456
   EXPECT_NO_THROW((void)count_nodes_for_spacing(box, field));
   try {
@@ -455,10 +455,10 @@ TEST(CvtForSpacing, RefusesBadInput) {
     EXPECT_NE(msg.find("limit of " + std::to_string(budget - 1)), std::string::npos) << msg;
   }
   // A spacing that is not positive and finite somewhere.
-  const SpacingField zero{[](std::span<const double> x) { return x[0] > 0.75 ? 0.0 : 0.05; }, 0.05};
-  const SpacingField nan{[](std::span<const double> x) { return x[1] > 1.0 ? std::nan("") : 0.05; }, 0.05};
-  const SpacingField negative{[](std::span<const double>) { return -0.05; }, 0.05};
-  for (const SpacingField* bad : {&zero, &nan, &negative}) {
+  const SpacingFunction zero{[](std::span<const double> x) { return x[0] > 0.75 ? 0.0 : 0.05; }, 0.05};
+  const SpacingFunction nan{[](std::span<const double> x) { return x[1] > 1.0 ? std::nan("") : 0.05; }, 0.05};
+  const SpacingFunction negative{[](std::span<const double>) { return -0.05; }, 0.05};
+  for (const SpacingFunction* bad : {&zero, &nan, &negative}) {
     EXPECT_THROW((void)count_nodes_for_spacing(box, *bad), std::invalid_argument);
     EXPECT_THROW((void)cvt_for_spacing(box, *bad, 100000), std::invalid_argument);
   }
@@ -468,8 +468,8 @@ TEST(CvtForSpacing, RefusesBadInput) {
     EXPECT_NE(std::string(e.what()).find("the spacing must be positive and finite, got 0"), std::string::npos) << e.what();
   }
   // No spacing function, a bad h_min, a 3D box.
-  EXPECT_THROW((void)count_nodes_for_spacing(box, SpacingField{}), std::invalid_argument);
-  EXPECT_THROW((void)count_nodes_for_spacing(box, SpacingField{field.h, 0.0}), std::invalid_argument);
+  EXPECT_THROW((void)count_nodes_for_spacing(box, SpacingFunction{}), std::invalid_argument);
+  EXPECT_THROW((void)count_nodes_for_spacing(box, SpacingFunction{field.h, 0.0}), std::invalid_argument);
   EXPECT_THROW((void)count_nodes_for_spacing(Box::unit(3), constant_spacing(0.2)), std::invalid_argument);
   EXPECT_THROW((void)cvt_for_spacing(Box::unit(3), constant_spacing(0.2), 100000), std::invalid_argument);
 }

@@ -538,7 +538,7 @@ TEST(VesicleScene, InterfaceSpacing) {
   r.band = 2.5;        // 0.075 from the interface at h_i,
   r.grading = 0.3;     // then growing by 0.3 per unit distance,
   r.coarsening = 5.0;  // up to 0.075 (reached at 0.075 + 0.06 / 0.3 = 0.275).
-  const SpacingField field = problems::interface_spacing(nodes, phi, eps, h_i, r);
+  const SpacingFunction field = problems::interface_spacing(nodes, phi, eps, h_i, r);
   EXPECT_EQ(field.h_min, h_i);
   ASSERT_TRUE(field.h);
   // The crossings sample the circle at about the grid step: the distance to the nearest one

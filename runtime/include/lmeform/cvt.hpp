@@ -13,6 +13,7 @@
 #include <string_view>
 #include <vector>
 
+#include "lmeform/domain.hpp"
 #include "lmeform/node_set.hpp"
 #include "lmeform/node_sets.hpp"
 
@@ -99,12 +100,8 @@ struct CvtReport {
 [[nodiscard]] NodeSet uniform_cvt(const Box& box, std::size_t count, const CvtOptions& options = {},
                                   CvtReport* report = nullptr);
 
-/// A target node spacing h(x) > 0 on a box, with its smallest value (which sets the resolution of
-/// the integrals over h). A CVT whose density is h^-(dim+2) has spacing proportional to h.
-struct SpacingField {
-  std::function<double(std::span<const double>)> h;
-  double h_min = 0.0;
-};
+// A target spacing is a SpacingFunction (domain.hpp): a CVT whose density is h^-(dim+2) has spacing
+// proportional to h, and h_min sets the resolution of the integrals over h.
 
 /// The number of nodes a CVT with spacing h needs: interior nodes at the density of a hexagonal
 /// lattice of spacing h(x) (2 / (sqrt(3) h^2) per unit area), edge nodes at 1 / h(x) per unit length.
@@ -113,13 +110,13 @@ struct SpacingNodeCount {
   std::size_t interior = 0;
   std::array<std::size_t, 4> edges{};   ///< edge nodes without the corners: bottom, right, top, left
 };
-[[nodiscard]] SpacingNodeCount count_nodes_for_spacing(const Box& box, const SpacingField& spacing);
+[[nodiscard]] SpacingNodeCount count_nodes_for_spacing(const Box& box, const SpacingFunction& spacing);
 
 /// A node set of a 2D box whose spacing follows h(x): the node budget from count_nodes_for_spacing,
 /// placed by the density h^-4 (CvtStart::density is implied) and relaxed by options.iterations Lloyd
 /// iterations. Throws std::invalid_argument for a box that is not 2D, a spacing that is not positive
 /// and finite, or a budget above max_nodes (the message gives the budget).
-[[nodiscard]] NodeSet cvt_for_spacing(const Box& box, const SpacingField& spacing, std::size_t max_nodes,
+[[nodiscard]] NodeSet cvt_for_spacing(const Box& box, const SpacingFunction& spacing, std::size_t max_nodes,
                                       const CvtOptions& options = {}, CvtReport* report = nullptr);
 
 /// rho(x) = 1 + f * grad_norm(x) (seed Section 3.13). f >= 0; grad_norm(x) must be >= 0.

@@ -594,7 +594,7 @@ NodeSet uniform_cvt(const Box& box, std::size_t count, const CvtOptions& options
 // Node sets for a spacing field
 
 namespace {
-double checked_spacing(const SpacingField& spacing, std::span<const double> x, const char* who) {
+double checked_spacing(const SpacingFunction& spacing, std::span<const double> x, const char* who) {
   const double h = spacing.h(x);
   if (!(h > 0.0) || !std::isfinite(h)) {
     throw std::invalid_argument(std::string(who) + ": the spacing must be positive and finite, got " + fmt(h) + " at (" +
@@ -619,7 +619,7 @@ std::array<double, 2> halton(std::size_t k) {
 }
 }  // namespace
 
-SpacingNodeCount count_nodes_for_spacing(const Box& box, const SpacingField& spacing) {
+SpacingNodeCount count_nodes_for_spacing(const Box& box, const SpacingFunction& spacing) {
   const char* who = "count_nodes_for_spacing";
   box.validate(who);
   if (box.dim != 2) throw std::invalid_argument(std::string(who) + ": 2D boxes only, got dimension " + std::to_string(box.dim));
@@ -668,7 +668,7 @@ SpacingNodeCount count_nodes_for_spacing(const Box& box, const SpacingField& spa
   return count;
 }
 
-NodeSet cvt_for_spacing(const Box& box, const SpacingField& spacing, std::size_t max_nodes, const CvtOptions& options,
+NodeSet cvt_for_spacing(const Box& box, const SpacingFunction& spacing, std::size_t max_nodes, const CvtOptions& options,
                         CvtReport* report) {
   const char* who = "cvt_for_spacing";
   const SpacingNodeCount count = count_nodes_for_spacing(box, spacing);

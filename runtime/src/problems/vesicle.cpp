@@ -617,7 +617,7 @@ VesicleRun run_vesicle(MPI_Comm comm, const Scene& scene, const VesicleModel& mo
   return run;
 }
 
-SpacingField interface_spacing(const NodeSet& nodes, std::span<const double> phi, double eps_resolve, double h_interface,
+SpacingFunction interface_spacing(const NodeSet& nodes, std::span<const double> phi, double eps_resolve, double h_interface,
                                const InterfaceResolution& resolution) {
   if (phi.size() != nodes.size())
     throw std::invalid_argument(fmt::format("interface_spacing: {} values for {} nodes", phi.size(), nodes.size()));
@@ -648,7 +648,7 @@ SpacingField interface_spacing(const NodeSet& nodes, std::span<const double> phi
   };
   auto interface = std::make_shared<const Interface>(NodeSet(nodes.dim, std::move(crossings)));
   const double band = resolution.band * eps_resolve, grading = resolution.grading, h_far = resolution.coarsening * h_interface;
-  SpacingField field;
+  SpacingFunction field;
   field.h_min = h_interface;
   field.h = [interface, band, grading, h_interface, h_far](std::span<const double> x) {
     thread_local std::vector<int> nearest;
@@ -664,7 +664,7 @@ NodeSet resolve_interface(const NodeSet& sampled, std::span<const double> phi, c
   const Stopwatch clock;
   double h_interface = eps_resolve / resolution_factor;
   for (int attempt = 0;; ++attempt) {
-    const SpacingField field = interface_spacing(sampled, phi, eps_resolve, h_interface, resolution);
+    const SpacingFunction field = interface_spacing(sampled, phi, eps_resolve, h_interface, resolution);
     CvtReport report;
     NodeSet nodes = cvt_for_spacing(box, field, resolution.max_nodes, cvt, &report);
     const SpacingSummary spacing = spacing_summary(nodes);

@@ -190,7 +190,7 @@ struct VesicleRun {
 /// h_interface + grading · max(0, d(x) − band · eps_resolve)), d the distance to the zero level set
 /// of the nodal values phi (found on the Delaunay edges of `nodes`). Throws std::invalid_argument
 /// when phi has no sign change.
-[[nodiscard]] SpacingField interface_spacing(const NodeSet& nodes, std::span<const double> phi, double eps_resolve,
+[[nodiscard]] SpacingFunction interface_spacing(const NodeSet& nodes, std::span<const double> phi, double eps_resolve,
                                              double h_interface, const InterfaceResolution& resolution);
 
 /// A grid that resolves the interface of the nodal values phi on `nodes` (a solution, or the
