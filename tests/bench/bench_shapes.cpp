@@ -167,13 +167,14 @@ int main(int argc, char** argv) {
                        {"constraint_rise", constraint_rise(m)},
                        {"shifted_steps", m.corrected_steps},
                        {"constraint_corrections", m.constraint_corrections},
+                       {"negative_curvature_directions", m.negative_curvature_directions},
                        {"wall_s", st.wall_s},
                        {"cumulative_wall_s", cumulative}};
       if (std::isfinite(reference)) r["relative_error_sharp"] = (st.result.energy - reference) / reference;
-      std::printf("%-7s v %.2f  stage %2d %-6s %5d nodes  h_min %.4f  eps %.4f  E %.5f  AL %3d  KKT %2d  rise %.2f  %6.1f s%s\n",
+      std::printf("%-7s v %.2f  stage %2d %-6s %5d nodes  h_min %.4f  eps %.4f  E %.5f  AL %3d  KKT %2d  rise %.2f  %6.1f s%s%s\n",
                   shape.branch.c_str(), shape.v, st.stage, st.grid.c_str(), st.nodes, st.h_min, st.eps, st.result.energy,
                   m.augmented_iterations, m.newton_iterations, constraint_rise(m), st.wall_s,
-                  st.result.converged ? "" : "  NOT CONVERGED");
+                  st.result.converged ? "" : "  NOT CONVERGED", m.negative_curvature_directions > 0 ? "  SADDLE" : "");
       records.push_back(std::move(r));
     }
     if (!run.failure.empty()) std::printf("%s v %.2f stopped: %s\n", shape.branch.c_str(), shape.v, run.failure.c_str());

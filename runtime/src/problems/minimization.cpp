@@ -85,7 +85,7 @@ class MinimizationDriver final : public StationaryDriver {
 namespace {
 
 /// Whether the minimizer's result is a minimum, from the inertia of its last Newton Hessian.
-void describe_second_order(const ConstrainedResult& m, RunReport& report) {
+void describe_second_order(const ConstrainedResult& m, RunReport& report, std::string_view perturbation) {
   report.json["negative_curvature_directions"] = m.negative_curvature_directions;
   if (m.negative_curvature_directions < 0) return;
   if (m.negative_curvature_directions == 0) {
@@ -97,14 +97,14 @@ void describe_second_order(const ConstrainedResult& m, RunReport& report) {
   report.row("second-order check", "NOT a minimum: " + what);
   report.warnings.push_back("the result is a stationary point with " + what +
                             " (a saddle, not a minimum). A start with the symmetry of the domain and the nodes keeps "
-                            "that symmetry and can converge to its symmetric saddle: start from a perturbed shape "
-                            "(e.g. an ellipsoid with slightly unequal semi-axes instead of a sphere)");
+                            "that symmetry and can converge to its symmetric saddle: start from a state perturbed off it" +
+                            (perturbation.empty() ? std::string() : " (" + std::string(perturbation) + ")"));
 }
 
 }  // namespace
 
 void describe_minimization(const std::optional<double>& reference, const ProblemResult& r, RunReport& report,
-                           const MultiplierMeanings& meanings) {
+                           const MultiplierMeanings& meanings, std::string_view perturbation) {
   const double relative = reference ? (r.energy - *reference) / *reference : std::nan("");
   report.row("energy", fmt::format("{:.6f}", r.energy));
   if (reference) report.row("reference energy", fmt::format("{:.6f} (relative error {:+.3f} %)", *reference, 100 * relative));
@@ -127,7 +127,7 @@ void describe_minimization(const std::optional<double>& reference, const Problem
     report.json["constraint_residuals"][c] = json_number(m.relative_residuals[i]);
   }
   report.row("Newton iterations", fmt::format("{} augmented Lagrangian + {} KKT", m.augmented_iterations, m.newton_iterations));
-  describe_second_order(m, report);
+  describe_second_order(m, report, perturbation);
   if (report.fields) report.fields->attributes.emplace("energy", r.energy);
 }
 

@@ -5,6 +5,7 @@
 #include <map>
 #include <optional>
 #include <string>
+#include <string_view>
 
 #include "problem_registry.hpp"
 #include "stationary.hpp"
@@ -15,9 +16,10 @@ namespace lmeform::problems {
 using MultiplierMeanings = std::map<std::string, std::string, std::less<>>;
 
 /// The closing rows and JSON keys of a minimization: energy against the reference, constraints with
-/// their multipliers, Newton iterations.
+/// their multipliers, Newton iterations, and whether the result is a minimum (a warning at a
+/// saddle, which ends with `perturbation`: how a start of this model is moved off its symmetry).
 void describe_minimization(const std::optional<double>& reference_energy, const ProblemResult& result, RunReport& report,
-                           const MultiplierMeanings& meanings = {});
+                           const MultiplierMeanings& meanings = {}, std::string_view perturbation = {});
 
 [[nodiscard]] const StationaryDriver& minimization_driver();
 

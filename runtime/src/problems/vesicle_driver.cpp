@@ -98,7 +98,8 @@ class VesicleDriver final : public ProblemDriver {
     report.fields = state_fields(run.layout, scene.axisymmetric(), r);
     report.fields->attributes.emplace(model.width, last.eps);
     // The area multiplier is the membrane tension, the volume multiplier the pressure difference.
-    describe_minimization(scene.reference.energy, r, report, {{"area", "tension"}, {"volume", "pressure"}});
+    describe_minimization(scene.reference.energy, r, report, {{"area", "tension"}, {"volume", "pressure"}},
+                          "[vesicle.initial]: an ellipsoid with slightly unequal semi-axes instead of a sphere");
     describe_errors(r, report);
     describe_quantities(r.quantities, report);
     report.row("nodes", fmt::format("{} (h_min {:.4g}, h_mean {:.4g})", last.nodes, r.h_min, r.h_mean));
