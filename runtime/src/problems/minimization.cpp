@@ -80,10 +80,6 @@ class MinimizationDriver final : public StationaryDriver {
   }
 };
 
-}  // namespace
-
-namespace {
-
 /// Whether the minimizer's result is a minimum, from the inertia of its last Newton Hessian.
 void describe_second_order(const ConstrainedResult& m, RunReport& report, std::string_view perturbation) {
   report.json["negative_curvature_directions"] = m.negative_curvature_directions;
