@@ -280,6 +280,9 @@ TEST(Vesicle, InertiaControlLeavesTheSaddlePlainNewtonConvergesTo) {
   EXPECT_GT(a.minimization.corrected_steps, 0);
   EXPECT_EQ(b.minimization.corrected_steps, 0);
   EXPECT_LT(a.energy, b.energy * (1 - 1e-3));
+  // The second-order check tells the two apart: plain Newton's result is the saddle.
+  EXPECT_EQ(a.minimization.negative_curvature_directions, 0);
+  EXPECT_GE(b.minimization.negative_curvature_directions, 1);
   // The augmented Lagrangian's inner Newton checks the inertia of H + U Uᵀ through the Woodbury
   // capacitance: it also leaves the saddle (for either wall: the box is symmetric about z = 0.6).
   s.inertia_correction = true;
@@ -291,6 +294,7 @@ TEST(Vesicle, InertiaControlLeavesTheSaddlePlainNewtonConvergesTo) {
               c.minimization.augmented_iterations, c.minimization.corrected_steps);
   EXPECT_GT(c.minimization.augmented_iterations, 0);
   EXPECT_NEAR(c.energy, a.energy, 1e-6 * a.energy);
+  EXPECT_EQ(c.minimization.negative_curvature_directions, 0);
 }
 
 }  // namespace

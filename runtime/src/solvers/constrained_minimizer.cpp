@@ -160,7 +160,13 @@ double ConstrainedMinimizer::factor_with_inertia_correction(const std::function<
     return !factorization_.failed() && (factorization_.negative_eigenvalues() < 0 || inertia_acceptable(shifted));
   };
   factor(hessian_);
-  if (!options_.inertia_correction || acceptable()) return 0;
+  // Without the correction the inertia is still judged: the predicate reports it (a plain
+  // Newton iteration that converges to a saddle says so) and its product is needed for the step.
+  if (!options_.inertia_correction) {
+    (void)acceptable();
+    return 0;
+  }
+  if (acceptable()) return 0;
   // The shift follows the diagonal (Marquardt's scaling): the Hessian's diagonal spans orders of
   // magnitude (ε/h⁴ on fine cells, 1/r near the axis), so a multiple of the identity would either
   // not reach the fine cells or swamp the coarse ones.
