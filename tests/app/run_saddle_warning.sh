@@ -70,4 +70,21 @@ assert elongated["status"] == "converged", elongated["status"]
 assert elongated["energy"] < 0.8 * circle["energy"], (elongated["energy"], circle["energy"])
 print("saddle", circle["energy"], "minimum", elongated["energy"])
 PY
+
+# Two stages on a finer grid, where the circle's stage converges on its saddle and the next stage
+# starts from it: the earlier stage is warned of by number as well.
+sed -e 's/^spacing = 0.05$/spacing = 0.025/' -e 's/^eps = 0.1$/eps = 0.05/' -e "s|$out/circle\"|$out/staged\"|" \
+  -e 's/^reduced_volume = 0.9$/reduced_volume = 0.9\nresolution_factor = 1.6/' \
+  "$out/circle.toml" > "$out/staged.toml"
+printf '[vesicle.adaptivity]\nstages = [{ eps = 0.045, lloyd_iterations = 0 }]\n' >> "$out/staged.toml"
+"$lmeform" run "$out/staged.toml" --json "$out/staged.json" > "$out/staged.log" 2> "$out/staged.err" ||
+  fail "the staged run failed: $(cat "$out/staged.err")"
+cat "$out/staged.err"
+grep -q "lmeform: warning: stage 0 ended on a saddle (1 direction of negative curvature along the constraints)" "$out/staged.err" ||
+  fail "no warning for stage 0"
+/usr/bin/python3 - "$out/staged.json" <<'PY' || fail "the staged JSON"
+import json, sys
+r = json.load(open(sys.argv[1]))
+assert [s["negative_curvature_directions"] for s in r["stages"]] == [1, 1], r["stages"]
+PY
 echo "PASS"

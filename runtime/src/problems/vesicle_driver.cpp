@@ -20,10 +20,16 @@ void describe_stages(const VesicleRun& run, const VesicleModel& model, const std
   std::vector<const StageRecord*> stages;
   for (const auto& s : run.stages) stages.push_back(&s);
   if (run.rejected) stages.push_back(&*run.rejected);
+  const StageRecord* written = run.stages.empty() ? &*run.rejected : &run.stages.back();
   for (const StageRecord* stage : stages) {
     const StageRecord& s = *stage;
     const bool rejected = run.rejected && stage == &*run.rejected;
     const ConstrainedResult& m = s.result.minimization;
+    // The written stage's saddle is warned of by describe_minimization; an earlier one here.
+    if (m.negative_curvature_directions > 0 && stage != written && !rejected)
+      report.warnings.push_back(fmt::format("stage {} ended on a saddle ({} direction{} of negative curvature along the constraints); "
+                                            "the next stage started from it",
+                                            s.stage, m.negative_curvature_directions, m.negative_curvature_directions == 1 ? "" : "s"));
     table.rows.push_back({std::to_string(s.stage) + " " + s.grid + s.label + (rejected ? " (rejected)" : ""), std::to_string(s.nodes), fmt::format("{:g}", s.eps),
                           fmt::format("{:.4g}", s.h_min), fmt::format("{:.5f}", s.result.energy),
                           reference ? fmt::format("{:+.3f}%", 100 * rel_error(s.result.energy)) : "-",
