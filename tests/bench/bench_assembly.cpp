@@ -232,7 +232,7 @@ std::vector<JsonRecord> heat_benchmark(bool quick, const SweepFilter& filter, Js
 
   std::vector<JsonRecord> records;
   say("\nheat problem -Lap T = 2y: per-point (pt) vs cell-based (cell) neighbourhoods; times in s\n");
-  say("%6s %4s %3s %6s %6s | %8s %8s %6s | %8s %8s %6s | %6s | %7s %7s %7s %7s %7s | %8s %6s %6s\n", "nodes", "gam", "nq",
+  say("%6s %4s %3s %6s %6s | %8s %8s %6s | %8s %8s %6s | %6s | %7s %7s %7s %7s %7s | %8s %6s %6s %7s\n", "nodes", "gam", "nq",
       "nbrs", "cellN", "str_pt", "str_cell", "x", "fill_pt", "fill_cl", "x", "nnz_x", "search", "basis", "struct", "fill",
       "solve", "fill_set", "x", "set_x", "pairs_x");
   for (const int n : grids) {
