@@ -7,7 +7,9 @@
 // --fine goes on from eps = 0.01 to a fourth grid resolving eps = 0.005 (stages 0.0075, 0.005) and
 // writes DIR/shapes_fine.json, with one `extrapolation` record per shape: E(eps) = E0 + a eps +
 // b eps^2 fitted to the stages eps <= 0.02, E0 against the sharp-interface reference.
-//   bench_shapes [--quick | --fine] [--log] [--out DIR] [--nodes N] [--shape oblate:0.8 ...]
+// --basis second runs every grid with the second-order max-ent basis ([nodes] basis = "second")
+// and names the outputs shapes[_fine]_second.{json,png}.
+//   bench_shapes [--quick | --fine] [--basis first|second] [--log] [--out DIR] [--nodes N] [--shape oblate:0.8 ...]
 // --log prints the progress of every stage (the Newton iterates) as `lmeform run` does.
 #include <algorithm>
 #include <cmath>
@@ -52,13 +54,13 @@ double hex_spacing(int n) { return std::sqrt(2.0 * 1.5 * 2.0 / (std::sqrt(3.0) *
 // schedule of demos/shapes/: a uniform CVT of `nodes` at eps_0 = 2 h (the resolution rule), then a
 // grid that resolves eps >= 0.025 around the eps_0 solution (stages 0.04, 0.03, 0.025) and one that
 // resolves eps >= last_eps around the eps = 0.025 solution (stages 0.02, 0.015, ..., last_eps).
-std::string shape_scene(const Shape& shape, int nodes, double last_eps) {
+std::string shape_scene(const Shape& shape, int nodes, double last_eps, const std::string& basis) {
   const bool fine = last_eps < 0.01 - 1e-12;
   const double eps0 = std::max(0.05, std::ceil(1000.0 * 2.05 * hex_spacing(nodes)) / 1000.0);
   std::ostringstream s;
   s << "[scene]\nname = \"" << shape.branch << "_" << shape.v << "\"\ncoordinates = \"axisymmetric\"\n"
     << "[domain]\nlower = [0.0, 0.0]\nupper = [1.5, 2.0]\n"
-    << "[nodes]\ncount = " << nodes << "\ngamma = 0.5\nquadrature_points = 6\n"
+    << "[nodes]\ncount = " << nodes << "\ngamma = 0.5\nquadrature_points = 6\nbasis = \"" << basis << "\"\n"
     << "[model]\nforms = [\"helfrich_axisymmetric\", \"area_axisymmetric\", \"volume_axisymmetric\", \"moment_axisymmetric\"]\n"
     << "energy = \"bending\"\n"
     << "[constants]\nk = 1.0\neps = " << eps0 << "\nC0 = 0.0\nzc = 1.0\n"
@@ -96,6 +98,7 @@ double constraint_rise(const ConstrainedResult& r) {
 
 int main(int argc, char** argv) {
   bool quick = false, fine = false, log = false;
+  std::string basis = "first";
   std::filesystem::path out = "build/bench";
   int nodes = 0;
   std::vector<Shape> shapes;
@@ -104,6 +107,12 @@ int main(int argc, char** argv) {
       quick = true;
     } else if (std::strcmp(argv[i], "--fine") == 0) {
       fine = true;
+    } else if (std::strcmp(argv[i], "--basis") == 0 && i + 1 < argc) {
+      basis = argv[++i];
+      if (basis != "first" && basis != "second") {
+        std::fprintf(stderr, "bench_shapes: --basis takes first or second, got '%s'\n", basis.c_str());
+        return 2;
+      }
     } else if (std::strcmp(argv[i], "--log") == 0) {
       log = true;
     } else if (std::strcmp(argv[i], "--out") == 0 && i + 1 < argc) {
@@ -120,7 +129,7 @@ int main(int argc, char** argv) {
       }
       shapes.push_back({branch, std::atof(s.c_str() + colon + 1)});
     } else {
-      std::fprintf(stderr, "usage: bench_shapes [--quick | --fine] [--log] [--out DIR] [--nodes N] [--shape oblate:0.8 ...]\n");
+      std::fprintf(stderr, "usage: bench_shapes [--quick | --fine] [--basis first|second] [--log] [--out DIR] [--nodes N] [--shape oblate:0.8 ...]\n");
       return 2;
     }
   }
@@ -139,12 +148,12 @@ int main(int argc, char** argv) {
     return 2;
   }
   const double last_eps = quick ? 0.015 : fine ? 0.005 : 0.01;
-  const std::string name = fine ? "shapes_fine" : "shapes";
+  const std::string name = std::string(fine ? "shapes_fine" : "shapes") + (basis == "second" ? "_second" : "");
 
   nlohmann::json records = nlohmann::json::array();
   for (const Shape& shape : shapes) {
     std::printf("== %s start, v = %.2f, %d nodes\n", shape.branch.c_str(), shape.v, nodes);
-    const Scene scene = parse_scene(shape_scene(shape, nodes, last_eps), "bench_shapes " + shape.branch, problems::driver_tables());
+    const Scene scene = parse_scene(shape_scene(shape, nodes, last_eps, basis), "bench_shapes " + shape.branch, problems::driver_tables());
     const problems::VesicleRun run = problems::run_vesicle(PETSC_COMM_WORLD, scene, *problems::read_vesicle(scene), log ? &std::cout : nullptr);
     double cumulative = run.wall_s;
     for (const auto& st : run.stages) cumulative -= st.wall_s;  // the uniform CVT of the start
@@ -154,6 +163,7 @@ int main(int argc, char** argv) {
       const ConstrainedResult& m = st.result.minimization;
       nlohmann::json r{{"branch", shape.branch},
                        {"v", shape.v},
+                       {"basis", basis},
                        {"stage", st.stage},
                        {"grid", st.grid},
                        {"eps", st.eps},
@@ -193,7 +203,7 @@ int main(int argc, char** argv) {
         }
         const Eigen::VectorXd c = A.colPivHouseholderQr().solve(b);
         const double residual = (A * c - b).cwiseAbs().maxCoeff();
-        nlohmann::json r{{"branch", shape.branch}, {"v", shape.v}, {"record", "extrapolation"}, {"fit", "E0 + a eps + b eps^2"},
+        nlohmann::json r{{"branch", shape.branch}, {"v", shape.v}, {"basis", basis}, {"record", "extrapolation"}, {"fit", "E0 + a eps + b eps^2"},
                          {"eps_fitted", eps}, {"E0", c(0)}, {"a", c(1)}, {"b", c(2)}, {"max_fit_residual", residual}};
         if (std::isfinite(reference)) r["relative_error_sharp"] = (c(0) - reference) / reference;
         std::printf("%-7s v %.2f  extrapolated E0 = %.5f (fit over %zu stages, residual %.1e)%s\n", shape.branch.c_str(), shape.v, c(0), eps.size(),

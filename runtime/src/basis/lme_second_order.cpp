@@ -384,10 +384,33 @@ double plane_distance(const Plane& p, std::span<const double> x) {
   return dist;
 }
 
+// The hull planes a node lies on, and how many distinct directions they have (0: inside, 1: on a
+// face, dim: a vertex of the hull).
+struct FaceMembership {
+  std::vector<int> planes;
+  int directions = 0;
+};
+
+template <int D>
+FaceMembership face_membership(const std::vector<Plane>& planes, std::span<const double> x, double on_face) {
+  using V = Eigen::Matrix<double, D, 1>;
+  FaceMembership m;
+  std::vector<V> seen;
+  for (std::size_t k = 0; k < planes.size(); ++k) {
+    if (plane_distance<D>(planes[k], x) > on_face) continue;
+    m.planes.push_back(static_cast<int>(k));
+    const V n = Eigen::Map<const V>(planes[k].normal.data());
+    if (std::all_of(seen.begin(), seen.end(), [&](const V& s) { return std::abs(n.dot(s)) < kSameDirection; })) seen.push_back(n);
+  }
+  m.directions = static_cast<int>(seen.size());
+  return m;
+}
+
 // Gap of node a; `row` holds the nodes within kRowWindow h_a of it.
 template <int D>
 void node_gap(const NodeSet& nodes, std::size_t a, std::span<const int> row, double h, double gamma,
-              const std::vector<Plane>& planes, double on_face, double* out) {
+              const std::vector<Plane>& planes, double on_face, const NodeSet& hull_nodes,
+              std::span<const FaceMembership> faces, std::span<const int> face_row, double* out) {
   using V = Eigen::Matrix<double, D, 1>;
   using M = Eigen::Matrix<double, D, D>;
   const double g0 = h * h / (2.0 * gamma);
@@ -427,6 +450,47 @@ void node_gap(const NodeSet& nodes, std::size_t a, std::span<const int> row, dou
     gap += std::max(0.0, kWiden * dist * dist - g0) * n * n.transpose();
   }
   gap = proj * gap * proj;
+  // Along a face the face's nodes alone carry the weight of points on it, and at a node with more
+  // face directions (a hull vertex, in 3D also a hull edge) the gap vanishes along them. A point of
+  // the face at distance t from such a node, between it and node a at distance s, can then only
+  // meet the second moment if a's gap along the face towards it is at least s (s - t): the
+  // nodal spacing h_a of a graded set is often shorter than s (a corner node of a coarse CVT has its
+  // nearest neighbour inside), so the gap is widened to kWiden s^2 where it is below s^2.
+  // Between two nodes of the same face at distance s (neither with more face directions), a point
+  // at t from one needs (s - t) g_a + t g_b >= s t (s - t), which g_a, g_b >= s^2/4 guarantee; a
+  // ragged CVT row along a face leaves gaps between face nodes longer than 2 h. Only the face
+  // neighbours adjacent to a (no other face node within the ball on the segment) count, searched
+  // within kReach h_a (`face_row`).
+  const FaceMembership& mine = faces[a];
+  if (mine.directions > 0 && mine.directions < D) {
+    const V xa = Eigen::Map<const V>(x.data());
+    auto on_my_faces = [&](int b) {
+      const FaceMembership& other = faces[static_cast<std::size_t>(b)];
+      return static_cast<std::size_t>(b) != a &&
+             std::includes(other.planes.begin(), other.planes.end(), mine.planes.begin(), mine.planes.end());
+    };
+    auto widen_towards = [&](const V& xb, double fraction) {
+      V u = proj * (xb - xa);
+      const double s2 = u.squaredNorm();
+      if (!(s2 > 0.0)) return;
+      u /= std::sqrt(s2);
+      const double along = u.dot(gap * u), needed = fraction * s2;
+      if (along < needed) gap += (kWiden * needed - along) * u * u.transpose();
+    };
+    for (const int b : face_row) {
+      if (!on_my_faces(b)) continue;
+      const FaceMembership& other = faces[static_cast<std::size_t>(b)];
+      if (other.directions < mine.directions) continue;
+      const V xb = Eigen::Map<const V>(hull_nodes.point(static_cast<std::size_t>(b)).data());
+      const V centre = 0.5 * (xa + xb);
+      const double radius2 = 0.25 * (xb - xa).squaredNorm();
+      const bool adjacent = std::none_of(face_row.begin(), face_row.end(), [&](int c) {
+        return c != b && on_my_faces(c) &&
+               (Eigen::Map<const V>(hull_nodes.point(static_cast<std::size_t>(c)).data()) - centre).squaredNorm() < radius2 * (1.0 - 1e-12);
+      });
+      if (adjacent) widen_towards(xb, other.directions > mine.directions ? 1.0 : 0.25);
+    }
+  }
   for (int i = 0; i < D; ++i)
     for (int j = i; j < D; ++j) out[kernel::hessian_slot(i, j, D) - 1 - D] = gap(i, j);
 }
@@ -443,10 +507,21 @@ std::vector<double> second_order_gaps(const NodeSet& nodes, std::span<const doub
   std::vector<double> gap(nodes.size() * s);
   std::vector<int> row;
   const double on_face = 1e-9 * extent;
+  // Face neighbours are looked up among the hull's nodes, which with mirror symmetry include the
+  // reflections (the folded basis then equals that of the whole symmetric set); its first
+  // nodes.size() points are the nodes themselves.
+  std::vector<FaceMembership> faces(hull_nodes.size());
+  for (std::size_t a = 0; a < hull_nodes.size(); ++a)
+    dispatch(d, [&](auto dc) { faces[a] = face_membership<decltype(dc)::value>(planes, hull_nodes.point(a), on_face); });
+  const KdTree hull_tree(hull_nodes);
+  std::vector<int> face_row;
   for (std::size_t a = 0; a < nodes.size(); ++a) {
     tree.radius_search(nodes.point(a), kRowWindow * spacing[a], row);
+    face_row.clear();
+    if (faces[a].directions > 0) hull_tree.radius_search(nodes.point(a), kReach * spacing[a], face_row);
     dispatch(d, [&](auto dc) {
-      node_gap<decltype(dc)::value>(nodes, a, row, spacing[a], gamma[a], planes, on_face, gap.data() + a * s);
+      node_gap<decltype(dc)::value>(nodes, a, row, spacing[a], gamma[a], planes, on_face, hull_nodes, faces, face_row,
+                                    gap.data() + a * s);
     });
   }
   return gap;
