@@ -616,9 +616,15 @@ TEST(VesicleScene, ResolveInterfaceMeetsTheResolutionRule) {
               nodes.size(), near, s.h_min, s.h_max, uniform_count);
   EXPECT_GT(2 * near, nodes.size());               // most nodes resolve the interface
   EXPECT_LT(2 * nodes.size(), uniform_count);      // far fewer than a uniform grid of the same h_min
-  // A budget below the grid's node count is refused.
+  // A budget below the grid's node count is refused, naming the scene key that raises it.
   r.max_nodes = nodes.size() / 2;
-  EXPECT_THROW((void)problems::resolve_interface(solved.nodes, solved.state, box, eps, factor, r, cvt), std::invalid_argument);
+  try {
+    (void)problems::resolve_interface(solved.nodes, solved.state, box, eps, factor, r, cvt);
+    ADD_FAILURE() << "a grid above max_nodes was built";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("more than [vesicle.adaptivity] max_nodes = " + std::to_string(r.max_nodes)), std::string::npos)
+        << e.what();
+  }
 }
 
 TEST(VesicleScene, ResolutionAgainstTheUniformGrid) {

@@ -665,6 +665,10 @@ NodeSet resolve_interface(const NodeSet& sampled, std::span<const double> phi, c
   double h_interface = eps_resolve / resolution_factor;
   for (int attempt = 0;; ++attempt) {
     const SpacingFunction field = interface_spacing(sampled, phi, eps_resolve, h_interface, resolution);
+    if (const std::size_t needed_nodes = count_nodes_for_spacing(box, field).total; needed_nodes > resolution.max_nodes)
+      throw std::invalid_argument(fmt::format("the grid resolving eps >= {} (h {:.4g} at the interface) needs {} nodes, more than "
+                                              "[vesicle.adaptivity] max_nodes = {}: raise 'max_nodes' or resolve a larger eps",
+                                              eps_resolve, h_interface, needed_nodes, resolution.max_nodes));
     CvtReport report;
     NodeSet nodes = cvt_for_spacing(box, field, resolution.max_nodes, cvt, &report);
     const SpacingSummary spacing = spacing_summary(nodes);
