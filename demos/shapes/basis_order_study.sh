@@ -20,7 +20,9 @@ run() {
       -e "s/^resolution_factor = 2.0 .*/resolution_factor = $factor.0/" -e 's/^png = true/png = false/' \
       -e "s#^directory = .*#directory = \"$out/$name\"#" "$here/discocyte_resolved.toml" > "$out/$name.toml"
   if [[ -n "${FINE:-}" ]]; then
-    sed -i 's/^  { eps = 0.01,  lloyd_iterations = 0 },/  { eps = 0.01,  lloyd_iterations = 0 },\n  { eps = 0.0075, resolve = 0.005 },\n  { eps = 0.005, lloyd_iterations = 0 },/' "$out/$name.toml"
+    # The grid resolving 0.005 at factor 4 has 68421 nodes, above the default budget of 60000.
+    sed -i -e 's/^  { eps = 0.01,  lloyd_iterations = 0 },/  { eps = 0.01,  lloyd_iterations = 0 },\n  { eps = 0.0075, resolve = 0.005 },\n  { eps = 0.005, lloyd_iterations = 0 },/' \
+        -e 's/^lloyd_iterations = 20/lloyd_iterations = 20\nmax_nodes = 100000/' "$out/$name.toml"
   fi
   /usr/bin/time -v "$build/lmeform" run "$out/$name.toml" --json "$out/$name.json" > "$out/$name.log" 2>&1 || echo "$name failed: $out/$name.log"
 }
