@@ -17,6 +17,7 @@
 #include "lme_second_order.hpp"
 
 #include <algorithm>
+#include <optional>
 #include <array>
 #include <cmath>
 #include <sstream>
@@ -513,7 +514,10 @@ std::vector<double> second_order_gaps(const NodeSet& nodes, std::span<const doub
   std::vector<FaceMembership> faces(hull_nodes.size());
   for (std::size_t a = 0; a < hull_nodes.size(); ++a)
     dispatch(d, [&](auto dc) { faces[a] = face_membership<decltype(dc)::value>(planes, hull_nodes.point(a), on_face); });
-  const KdTree hull_tree(hull_nodes);
+  // Without mirrors the hull's nodes are the nodes: their tree is the one above.
+  std::optional<KdTree> reflected_tree;
+  if (&hull_nodes != &nodes) reflected_tree.emplace(hull_nodes);
+  const KdTree& hull_tree = reflected_tree ? *reflected_tree : tree;
   std::vector<int> face_row;
   for (std::size_t a = 0; a < nodes.size(); ++a) {
     tree.radius_search(nodes.point(a), kRowWindow * spacing[a], row);
