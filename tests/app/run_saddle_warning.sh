@@ -41,7 +41,12 @@ $2
 directory = "$out/$1"
 TOML
 }
-fail() { echo "FAIL: $*"; exit 1; }
+# On failure, every log written so far: a failure seen once under `ctest -j2` left nothing to read.
+fail() {
+  echo "FAIL: $*"
+  for f in "$out"/*.log "$out"/*.err; do [[ -f $f ]] && { echo "--- $f"; tail -n 40 "$f"; }; done
+  exit 1
+}
 
 write_scene circle $'shape = "sphere"\nradius = 0.5'
 write_scene elongated $'shape = "ellipsoid"\nsemi_axes = [0.52, 0.48]'

@@ -76,26 +76,36 @@ TEST(SceneCoefficients, NumberAndExpressionGiveTheSameField) {
   EXPECT_GT(biggest, 0.1);
 }
 
+// The start of a scene of initial_misfit.form on the unit square (nodes 0.1 apart), evaluated only:
+// its energies and its state (the coefficients), with the nodes.
+struct EvaluatedStart {
+  problems::ProblemResult result;
+  NodeSet nodes;
+};
+EvaluatedStart evaluate_start(const std::string& name, const std::string& basis, const std::string& fields) {
+  const fs::path dir = fs::path(LMEFORM_TEST_TMPDIR) / "coefficients";
+  fs::create_directories(dir);
+  fs::copy_file(fs::path(LMEFORM_TEST_DATA) / "initial_misfit.form", dir / "initial_misfit.form", fs::copy_options::overwrite_existing);
+  const fs::path path = dir / (name + ".toml");
+  std::ofstream(path) << "[scene]\nname = \"" << name << "\"\ncoordinates = \"cartesian\"\n[domain]\nlower = [0.0, 0.0]\nupper = [1.0, 1.0]\n"
+                      << "[nodes]\nspacing = 0.1\ngamma = 0.8\nbasis = \"" << basis << "\"\n[model]\nforms = [\"initial_misfit.form\"]\n" << fields;
+  const Scene s = load_scene(path);
+  const problems::BoundScene bound = problems::bind_scene(s, PETSC_COMM_WORLD, nullptr);
+  problems::ProblemInput input;
+  input.nodes = problems::initial_nodes(s);
+  input.evaluate_only = true;
+  input.lme = bound.lme(problems::AxisParity::even);
+  return {problems::solve_problem(PETSC_COMM_WORLD, bound, input), input.nodes};
+}
+
 // With the second-order basis a coefficient is not a nodal value: an [initial] or [coefficients]
 // expression is taken as g(x_a) - G_a : Hg(x_a) / 2, and a quadratic field is then represented
 // exactly (misfit at round-off); the first-order basis cannot (misfit O(h^4)).
 TEST(SceneCoefficients, QuadraticInitialAndCoefficientAreExactWithTheSecondOrderBasis) {
-  const fs::path dir = fs::path(LMEFORM_TEST_TMPDIR) / "coefficients";
-  fs::create_directories(dir);
-  fs::copy_file(fs::path(LMEFORM_TEST_DATA) / "initial_misfit.form", dir / "initial_misfit.form", fs::copy_options::overwrite_existing);
   auto misfit = [&](const std::string& basis) {
-    const fs::path path = dir / ("initial_" + basis + ".toml");
-    std::ofstream(path) << "[scene]\nname = \"initial\"\ncoordinates = \"cartesian\"\n[domain]\nlower = [0.0, 0.0]\nupper = [1.0, 1.0]\n"
-                           "[nodes]\nspacing = 0.1\ngamma = 0.8\nbasis = \"" + basis + "\"\n[model]\nforms = [\"initial_misfit.form\"]\n"
-                           "[initial]\nu = \"x[0]^2 + 3*x[0]*x[1] - x[1]^2\"\n"
-                           "[coefficients]\nf = \"x[0]^2 + 3*x[0]*x[1] - x[1]^2\"\n";
-    const Scene s = load_scene(path);
-    const problems::BoundScene bound = problems::bind_scene(s, PETSC_COMM_WORLD, nullptr);
-    problems::ProblemInput input;
-    input.nodes = problems::initial_nodes(s);
-    input.evaluate_only = true;
-    input.lme = bound.lme(problems::AxisParity::even);
-    const auto values = problems::solve_problem(PETSC_COMM_WORLD, bound, input).values;
+    const auto values = evaluate_start("initial_" + basis, basis,
+                                       "[initial]\nu = \"x[0]^2 + 3*x[0]*x[1] - x[1]^2\"\n[coefficients]\nf = \"x[0]^2 + 3*x[0]*x[1] - x[1]^2\"\n")
+                            .result.values;
     return std::pair{values.at("initial_misfit.misfit"), values.at("initial_misfit.coefficient_misfit")};
   };
   const auto second = misfit("second"), first = misfit("first");
@@ -105,6 +115,27 @@ TEST(SceneCoefficients, QuadraticInitialAndCoefficientAreExactWithTheSecondOrder
   EXPECT_GT(first.first, 1e-10);
   EXPECT_LT(second.second, 1e-20);
   EXPECT_GT(first.second, 1e-10);
+}
+
+// A profile narrower than the node spacing (a crack's band, l = 0.02 on nodes 0.1 apart): its
+// gap correction G_a : Hg / 2 is not small: without a limit the coefficients ran from 0.593 to 1.257
+// here, the field's values from 0.777 to 1. They stay within the values the field takes.
+TEST(SceneCoefficients, SecondOrderStartOfANarrowProfileStaysWithinItsValues) {
+  const auto [result, nodes] = evaluate_start("narrow", "second", "[initial]\nu = \"1 - exp(-abs(x[1] - 0.53)/0.02)\"\n[coefficients]\nf = 0.0\n");
+  ASSERT_EQ(result.state.size(), nodes.size());
+  double low = 1, high = 0, lowest_given = 1;
+  for (std::size_t a = 0; a < nodes.size(); ++a) {
+    low = std::min(low, result.state[a]), high = std::max(high, result.state[a]);
+    lowest_given = std::min(lowest_given, 1 - std::exp(-std::abs(nodes.point(a)[1] - 0.53) / 0.02));
+  }
+  std::printf("narrow profile: coefficients in [%.6f, %.6f], the field's values from %.6f\n", low, high, lowest_given);
+  EXPECT_GE(low, lowest_given - 1e-15);
+  EXPECT_LE(high, 1.0);
+  // Corrected, not merely the nodal values: somewhere the coefficient differs from g(x_a).
+  double moved = 0;
+  for (std::size_t a = 0; a < nodes.size(); ++a)
+    moved = std::max(moved, std::abs(result.state[a] - (1 - std::exp(-std::abs(nodes.point(a)[1] - 0.53) / 0.02))));
+  EXPECT_GT(moved, 1e-3);
 }
 
 TEST(SceneCoefficients, MissingAndMisspeltAreNamed) {

@@ -8,8 +8,10 @@
 // writes DIR/shapes_fine.json, with one `extrapolation` record per shape: E(eps) = E0 + a eps +
 // b eps^2 fitted to the stages eps <= 0.02, E0 against the sharp-interface reference.
 // --basis second runs every grid with the second-order max-ent basis ([nodes] basis = "second")
-// and names the outputs shapes[_fine]_second.{json,png}.
-//   bench_shapes [--quick | --fine] [--basis first|second] [--log] [--out DIR] [--nodes N] [--shape oblate:0.8 ...]
+// and names the outputs shapes[_fine]_second.{json,png}. --factor F (2, 3 or 4) makes every grid
+// F times finer than the eps it resolves ([vesicle] resolution_factor; default 2) and the uniform
+// start (F/2)^2 times denser (6124, 13800, 24600 nodes); F != 2 appends _fF to the output names.
+//   bench_shapes [--quick | --fine] [--basis first|second] [--factor F] [--log] [--out DIR] [--nodes N] [--shape oblate:0.8 ...]
 // --log prints the progress of every stage (the Newton iterates) as `lmeform run` does.
 #include <algorithm>
 #include <cmath>
@@ -54,9 +56,9 @@ double hex_spacing(int n) { return std::sqrt(2.0 * 1.5 * 2.0 / (std::sqrt(3.0) *
 // schedule of demos/shapes/: a uniform CVT of `nodes` at eps_0 = 2 h (the resolution rule), then a
 // grid that resolves eps >= 0.025 around the eps_0 solution (stages 0.04, 0.03, 0.025) and one that
 // resolves eps >= last_eps around the eps = 0.025 solution (stages 0.02, 0.015, ..., last_eps).
-std::string shape_scene(const Shape& shape, int nodes, double last_eps, const std::string& basis) {
+std::string shape_scene(const Shape& shape, int nodes, double last_eps, const std::string& basis, int factor) {
   const bool fine = last_eps < 0.01 - 1e-12;
-  const double eps0 = std::max(0.05, std::ceil(1000.0 * 2.05 * hex_spacing(nodes)) / 1000.0);
+  const double eps0 = std::max(0.05, std::ceil(1000.0 * (factor + 0.05) * hex_spacing(nodes)) / 1000.0);
   std::ostringstream s;
   s << "[scene]\nname = \"" << shape.branch << "_" << shape.v << "\"\ncoordinates = \"axisymmetric\"\n"
     << "[domain]\nlower = [0.0, 0.0]\nupper = [1.5, 2.0]\n"
@@ -66,9 +68,10 @@ std::string shape_scene(const Shape& shape, int nodes, double last_eps, const st
     << "[constants]\nk = 1.0\neps = " << eps0 << "\nC0 = 0.0\nzc = 1.0\n"
     << "[constraints]\narea = {}\nvolume = {}\nmoment = 0.0\n"
     << "[[dirichlet]]\nboundary = [\"r_max\", \"z_min\", \"z_max\"]\nunknown = \"phi\"\nvalue = -1.0\n"
-    << "[vesicle]\nradius = 0.4\nreduced_volume = " << shape.v << "\nresolution_factor = 2.0\n"
+    << "[vesicle]\nradius = 0.4\nreduced_volume = " << shape.v << "\nresolution_factor = " << factor << ".0\n"
     << "[vesicle.initial]\nshape = \"" << shape.branch << "\"\ncenter = [0.0, 1.0]\n"
-    << "[vesicle.adaptivity]\nlloyd_iterations = 20\nstages = [\n"
+    // The grid resolving 0.005 at factor 4 has about 68000 nodes, above the default budget.
+    << "[vesicle.adaptivity]\nlloyd_iterations = 20\n" << (fine ? "max_nodes = 100000\n" : "") << "stages = [\n"
     << "  { eps = 0.04, resolve = 0.025 },\n  { eps = 0.03, lloyd_iterations = 0 },\n"
     << "  { eps = 0.025, lloyd_iterations = 0 },\n  { eps = 0.02, resolve = " << std::max(last_eps, 0.01) << " },\n";
   for (const double eps : {0.015, 0.01})
@@ -100,7 +103,7 @@ int main(int argc, char** argv) {
   bool quick = false, fine = false, log = false;
   std::string basis = "first";
   std::filesystem::path out = "build/bench";
-  int nodes = 0;
+  int nodes = 0, factor = 2;
   std::vector<Shape> shapes;
   for (int i = 1; i < argc; ++i) {
     if (std::strcmp(argv[i], "--quick") == 0) {
@@ -111,6 +114,12 @@ int main(int argc, char** argv) {
       basis = argv[++i];
       if (basis != "first" && basis != "second") {
         std::fprintf(stderr, "bench_shapes: --basis takes first or second, got '%s'\n", basis.c_str());
+        return 2;
+      }
+    } else if (std::strcmp(argv[i], "--factor") == 0 && i + 1 < argc) {
+      factor = std::atoi(argv[++i]);
+      if (factor < 2 || factor > 4) {
+        std::fprintf(stderr, "bench_shapes: --factor takes 2, 3 or 4, got '%s'\n", argv[i]);
         return 2;
       }
     } else if (std::strcmp(argv[i], "--log") == 0) {
@@ -129,7 +138,7 @@ int main(int argc, char** argv) {
       }
       shapes.push_back({branch, std::atof(s.c_str() + colon + 1)});
     } else {
-      std::fprintf(stderr, "usage: bench_shapes [--quick | --fine] [--basis first|second] [--log] [--out DIR] [--nodes N] [--shape oblate:0.8 ...]\n");
+      std::fprintf(stderr, "usage: bench_shapes [--quick | --fine] [--basis first|second] [--factor F] [--log] [--out DIR] [--nodes N] [--shape oblate:0.8 ...]\n");
       return 2;
     }
   }
@@ -142,18 +151,19 @@ int main(int argc, char** argv) {
   // Quick: a coarser last grid and no eps = 0.01 stage. The start keeps O1's 6124 nodes: a
   // coarser start needs a larger eps by the resolution rule, and at eps = 0.07 (3000 nodes) the
   // oblate v = 0.9 energy lies below its eps = 0.04 value (8.0115 against 8.0286).
-  if (nodes == 0) nodes = 6124;
+  if (nodes == 0) nodes = factor == 2 ? 6124 : factor == 3 ? 13800 : 24600;
   if (quick && fine) {
     std::fprintf(stderr, "bench_shapes: --quick and --fine exclude each other\n");
     return 2;
   }
   const double last_eps = quick ? 0.015 : fine ? 0.005 : 0.01;
-  const std::string name = std::string(fine ? "shapes_fine" : "shapes") + (basis == "second" ? "_second" : "");
+  const std::string name = std::string(fine ? "shapes_fine" : "shapes") + (basis == "second" ? "_second" : "") +
+                           (factor != 2 ? "_f" + std::to_string(factor) : "");
 
   nlohmann::json records = nlohmann::json::array();
   for (const Shape& shape : shapes) {
     std::printf("== %s start, v = %.2f, %d nodes\n", shape.branch.c_str(), shape.v, nodes);
-    const Scene scene = parse_scene(shape_scene(shape, nodes, last_eps, basis), "bench_shapes " + shape.branch, problems::driver_tables());
+    const Scene scene = parse_scene(shape_scene(shape, nodes, last_eps, basis, factor), "bench_shapes " + shape.branch, problems::driver_tables());
     const problems::VesicleRun run = problems::run_vesicle(PETSC_COMM_WORLD, scene, *problems::read_vesicle(scene), log ? &std::cout : nullptr);
     double cumulative = run.wall_s;
     for (const auto& st : run.stages) cumulative -= st.wall_s;  // the uniform CVT of the start
@@ -164,6 +174,7 @@ int main(int argc, char** argv) {
       nlohmann::json r{{"branch", shape.branch},
                        {"v", shape.v},
                        {"basis", basis},
+                       {"resolution_factor", factor},
                        {"stage", st.stage},
                        {"grid", st.grid},
                        {"eps", st.eps},

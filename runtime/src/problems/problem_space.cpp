@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 
 #include <Eigen/Eigenvalues>
@@ -131,6 +132,10 @@ void gap_correct(const PointExpressions& expressions, int handle, const LmeBasis
 /// Nodal fields of `entries` given as expressions (the scene's [initial] or [coefficients]) as
 /// coefficients of the second-order basis (gap_correct): a curved field (a tanh profile, a load) is
 /// then represented to O(h^3) instead of O(h^2). Fields in `given` (a transfer's values) are left.
+/// The correction is G_a : Hg / 2, small only where g varies on scales longer than the gaps; a
+/// profile narrower than the nodes there (a crack's band of width l on the coarse nodes away from
+/// it) would be pushed out of the values it takes (a damage field above 1). So the coefficients
+/// stay within the range of the field's values at the nodes, component by component.
 void gap_correct_fields(const BoundScene& b, const std::vector<BoundNodalField>& entries, const StateLayout& layout, const NodeSet& nodes,
                         const Discretization& disc, std::vector<double>& values,
                         const std::map<std::string, std::vector<double>, std::less<>>& given = {}) {
@@ -141,10 +146,16 @@ void gap_correct_fields(const BoundScene& b, const std::vector<BoundNodalField>&
   for (const BoundNodalField& f : entries) {
     if (!layout.has(f.name) || !f.file.empty() || !f.value.is_expression() || given.contains(f.name)) continue;
     const UnknownField& u = layout.field(f.name);
+    std::vector<double> low(std::size_t(u.components), std::numeric_limits<double>::infinity());
+    std::vector<double> high(std::size_t(u.components), -std::numeric_limits<double>::infinity());
+    for (std::size_t a = 0; a < nodes.size(); ++a) {
+      b.expressions->evaluate(f.value.expression, nodes.point(a), value);
+      for (std::size_t c = 0; c < low.size(); ++c) low[c] = std::min(low[c], value[c]), high[c] = std::max(high[c], value[c]);
+    }
     for (std::size_t a = 0; a < nodes.size(); ++a) {
       b.expressions->evaluate(f.value.expression, nodes.point(a), value);
       gap_correct(*b.expressions, f.value.expression, disc.basis(), renumbered[a], nodes.point(a), value);
-      for (int c = 0; c < u.components; ++c) values[a * bs + std::size_t(u.offset + c)] = value[std::size_t(c)];
+      for (std::size_t c = 0; c < low.size(); ++c) values[a * bs + std::size_t(u.offset) + c] = std::clamp(value[c], low[c], high[c]);
     }
   }
 }
