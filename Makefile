@@ -3,8 +3,9 @@
 #   make demo   - the main demo
 #   make test   - the whole test suite (unit, form FD checks, 2-rank MPI tests)
 #   make bench  - the benchmarks in quick mode; JSON lands in build/bench/
-#   make bench-full - the long benchmarks: the vesicle shape family down to eps = 0.005
-#                  (build/bench/shapes_fine.json, hours on one core)
+#   make bench-full - the long benchmarks: the vesicle shape family down to eps = 0.005 with the
+#                  second-order basis on grids 4 times finer than eps
+#                  (build/bench/shapes_fine_second_f4.json, about 45 minutes per shape on one core)
 #   make compare - Stokes, the cantilever and fracture (SENT, SENS at l = 0.03): lmeform against
 #                  FEniCSx; results in build/compare/
 
@@ -36,7 +37,7 @@ bench: build
 	bash scripts/run-benchmarks.sh $(BUILD_DIR)
 
 bench-full: build
-	$(BUILD_DIR)/tests/solvers/bench_shapes --fine --out $(BUILD_DIR)/bench
+	$(BUILD_DIR)/tests/solvers/bench_shapes --fine --basis second --factor 4 --out $(BUILD_DIR)/bench
 
 compare: build
 	bash demos/stokes/compare.sh $(BUILD_DIR)
