@@ -5,7 +5,7 @@
 #   make bench  - the benchmarks in quick mode; JSON lands in build/bench/
 #   make bench-full - the long benchmarks: the vesicle shape family down to eps = 0.005 with the
 #                  second-order basis on grids 4 times finer than eps
-#                  (build/bench/shapes_fine_second_f4.json, about 45 minutes per shape on one core)
+#                  (build/bench/shapes_fine_second_f4.json, 40-90 minutes and 8.5-10.4 GB per shape on one core)
 #   make compare - Stokes, the cantilever and fracture (SENT, SENS at l = 0.03): lmeform against
 #                  FEniCSx; results in build/compare/
 
