@@ -11,8 +11,9 @@
 // and names the outputs shapes[_fine]_second.{json,png}. --factor F (2, 3 or 4) makes every grid
 // F times finer than the eps it resolves ([vesicle] resolution_factor; default 2) and the uniform
 // start (F/2)^2 times denser (6124, 13800, 24600 nodes); F != 2 appends _fF to the output names.
-//   bench_shapes [--quick | --fine] [--basis first|second] [--factor F] [--log] [--out DIR] [--nodes N] [--shape oblate:0.8 ...]
-// --log prints the progress of every stage (the Newton iterates) as `lmeform run` does.
+//   bench_shapes [--quick | --fine] [--basis first|second] [--factor F] [--log | --quiet] [--out DIR] [--nodes N] [--shape oblate:0.8 ...]
+// --log prints the progress of every stage (the Newton iterates) as `lmeform run` does; --fine
+// runs (an hour and more per shape) print it unless --quiet.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -20,6 +21,7 @@
 #include <cstring>
 #include <filesystem>
 #include <iostream>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -100,7 +102,8 @@ double constraint_rise(const ConstrainedResult& r) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  bool quick = false, fine = false, log = false;
+  bool quick = false, fine = false;
+  std::optional<bool> log;
   std::string basis = "first";
   std::filesystem::path out = "build/bench";
   int nodes = 0, factor = 2;
@@ -124,6 +127,8 @@ int main(int argc, char** argv) {
       }
     } else if (std::strcmp(argv[i], "--log") == 0) {
       log = true;
+    } else if (std::strcmp(argv[i], "--quiet") == 0) {
+      log = false;
     } else if (std::strcmp(argv[i], "--out") == 0 && i + 1 < argc) {
       out = argv[++i];
     } else if (std::strcmp(argv[i], "--nodes") == 0 && i + 1 < argc) {
@@ -138,7 +143,7 @@ int main(int argc, char** argv) {
       }
       shapes.push_back({branch, std::atof(s.c_str() + colon + 1)});
     } else {
-      std::fprintf(stderr, "usage: bench_shapes [--quick | --fine] [--basis first|second] [--factor F] [--log] [--out DIR] [--nodes N] [--shape oblate:0.8 ...]\n");
+      std::fprintf(stderr, "usage: bench_shapes [--quick | --fine] [--basis first|second] [--factor F] [--log | --quiet] [--out DIR] [--nodes N] [--shape oblate:0.8 ...]\n");
       return 2;
     }
   }
@@ -164,7 +169,7 @@ int main(int argc, char** argv) {
   for (const Shape& shape : shapes) {
     std::printf("== %s start, v = %.2f, %d nodes\n", shape.branch.c_str(), shape.v, nodes);
     const Scene scene = parse_scene(shape_scene(shape, nodes, last_eps, basis, factor), "bench_shapes " + shape.branch, problems::driver_tables());
-    const problems::VesicleRun run = problems::run_vesicle(PETSC_COMM_WORLD, scene, *problems::read_vesicle(scene), log ? &std::cout : nullptr);
+    const problems::VesicleRun run = problems::run_vesicle(PETSC_COMM_WORLD, scene, *problems::read_vesicle(scene), log.value_or(fine) ? &std::cout : nullptr);
     double cumulative = run.wall_s;
     for (const auto& st : run.stages) cumulative -= st.wall_s;  // the uniform CVT of the start
     const double reference = sharp_reference(shape);
