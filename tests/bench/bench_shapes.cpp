@@ -55,7 +55,7 @@ double sharp_reference(const Shape& s) {
 double hex_spacing(int n) { return std::sqrt(2.0 * 1.5 * 2.0 / (std::sqrt(3.0) * n)); }
 
 // The vesicle of demos/discocyte.toml with the start of `shape` and the interface-resolving
-// schedule of demos/shapes/: a uniform CVT of `nodes` at eps_0 = 2 h (the resolution rule), then a
+// schedule of demos/shapes/: a uniform CVT of `nodes` at eps_0 = factor h (the resolution rule), then a
 // grid that resolves eps >= 0.025 around the eps_0 solution (stages 0.04, 0.03, 0.025) and one that
 // resolves eps >= last_eps around the eps = 0.025 solution (stages 0.02, 0.015, ..., last_eps).
 std::string shape_scene(const Shape& shape, int nodes, double last_eps, const std::string& basis, int factor) {
