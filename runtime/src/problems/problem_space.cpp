@@ -146,16 +146,20 @@ void gap_correct_fields(const BoundScene& b, const std::vector<BoundNodalField>&
   for (const BoundNodalField& f : entries) {
     if (!layout.has(f.name) || !f.file.empty() || !f.value.is_expression() || given.contains(f.name)) continue;
     const UnknownField& u = layout.field(f.name);
-    std::vector<double> low(std::size_t(u.components), std::numeric_limits<double>::infinity());
-    std::vector<double> high(std::size_t(u.components), -std::numeric_limits<double>::infinity());
+    const auto components = std::size_t(u.components);
+    std::vector<double> at_nodes(nodes.size() * components);
+    std::vector<double> low(components, std::numeric_limits<double>::infinity()), high(components, -std::numeric_limits<double>::infinity());
     for (std::size_t a = 0; a < nodes.size(); ++a) {
       b.expressions->evaluate(f.value.expression, nodes.point(a), value);
-      for (std::size_t c = 0; c < low.size(); ++c) low[c] = std::min(low[c], value[c]), high[c] = std::max(high[c], value[c]);
+      for (std::size_t c = 0; c < components; ++c) {
+        at_nodes[a * components + c] = value[c];
+        low[c] = std::min(low[c], value[c]), high[c] = std::max(high[c], value[c]);
+      }
     }
     for (std::size_t a = 0; a < nodes.size(); ++a) {
-      b.expressions->evaluate(f.value.expression, nodes.point(a), value);
+      std::copy_n(at_nodes.begin() + std::ptrdiff_t(a * components), components, value.begin());
       gap_correct(*b.expressions, f.value.expression, disc.basis(), renumbered[a], nodes.point(a), value);
-      for (std::size_t c = 0; c < low.size(); ++c) values[a * bs + std::size_t(u.offset) + c] = std::clamp(value[c], low[c], high[c]);
+      for (std::size_t c = 0; c < components; ++c) values[a * bs + std::size_t(u.offset) + c] = std::clamp(value[c], low[c], high[c]);
     }
   }
 }
