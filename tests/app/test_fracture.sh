@@ -88,6 +88,15 @@ grep -q "^step    3/6" "$out/restart.log" && fail "the restart solved step 3 aga
 # outside [1, 2) is refused naming the key.
 sed -e 's#^max_iterations = 2000#max_iterations = 2000\nrelaxation = 1.5#' "$out/cycle.toml" > "$out/relaxed.toml"
 run relaxed
+# So does the Anderson-accelerated one (with and without the stretch), in fewer rounds; a negative
+# depth is refused naming the key.
+sed -e 's#^max_iterations = 2000#max_iterations = 2000\nanderson = 5#' "$out/cycle.toml" > "$out/anderson.toml"
+run anderson
+sed -e 's#^max_iterations = 2000#max_iterations = 2000\nanderson = 5\nrelaxation = 1.5#' "$out/cycle.toml" > "$out/anderson_relaxed.toml"
+run anderson_relaxed
+sed -e 's#^max_iterations = 2000#max_iterations = 2000\nanderson = -1#' "$out/cycle.toml" > "$out/anderson_negative.toml"
+if "$lmeform" run "$out/anderson_negative.toml" > "$out/anderson_negative.log" 2>&1; then fail "anderson = -1 was not refused"; fi
+grep -q "key 'staggered.anderson'.*must lie in \[0, 20\]" "$out/anderson_negative.log" || { cat "$out/anderson_negative.log"; fail "anderson = -1: no clear message"; }
 sed -e 's#^max_iterations = 2000#max_iterations = 2000\nrelaxation = 2.5#' "$out/cycle.toml" > "$out/overrelaxed.toml"
 if "$lmeform" run "$out/overrelaxed.toml" > "$out/overrelaxed.log" 2>&1; then fail "relaxation = 2.5 was not refused"; fi
 grep -q "key 'staggered.relaxation'.*must lie in \[1, 2)" "$out/overrelaxed.log" || { cat "$out/overrelaxed.log"; fail "relaxation = 2.5: no clear message"; }
@@ -157,7 +166,7 @@ grep -q "key 'nodes.adapt': nodes follow a field through load steps (\[steps\]);
   { cat "$out/adaptive_static.log"; fail "adapt without [steps]: no clear message"; }
 
 /usr/bin/python3 - "$out" <<'PY'
-import json, sys, pathlib
+import csv, json, sys, pathlib
 import h5py, numpy as np
 out = pathlib.Path(sys.argv[1])
 ok = True
@@ -192,6 +201,21 @@ for name in ("u", "v"):
     print(f"relaxation 1.5: |{name} plain - over-relaxed|_max = {d:.1e} (alternation tolerance 1e-9)")
     if not d <= 1e-8:
         print(f"FAIL: the over-relaxed alternation ends {d:.1e} away from the plain one"); ok = False
+def alternations(run):
+    with open(out / run / "history.csv") as f:
+        rows = list(csv.DictReader(f))
+    return sum(int(float(r["alternations"])) for r in rows)
+plain_rounds = alternations("cycle")
+for run in ("anderson", "anderson_relaxed"):
+    for name in ("u", "v"):
+        d = float(np.max(np.abs(field(out / "cycle" / "series" / "cycle_000006.h5", name) - field(out / run / "series" / "cycle_000006.h5", name))))
+        print(f"{run}: |{name} plain - accelerated|_max = {d:.1e} (alternation tolerance 1e-9)")
+        if not d <= 1e-8:
+            print(f"FAIL: the {run} alternation ends {d:.1e} away from the plain one"); ok = False
+    rounds = alternations(run)
+    print(f"{run}: {rounds} rounds against {plain_rounds} plain")
+    if not rounds < plain_rounds:
+        print(f"FAIL: the {run} alternation took no fewer rounds than the plain one"); ok = False
 whole = out / "cycle" / "series" / "cycle_000006.h5"
 parts = out / "restarted" / "series" / "cycle_000006.h5"
 for name in ("u", "v"):

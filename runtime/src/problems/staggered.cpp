@@ -8,12 +8,18 @@
 //   tolerance = 1e-6           # stop when no group's fields change by more than this (relative)
 //   max_iterations = 200
 //   relaxation = 1.0           # the largest over-relaxation of the updates (1: none; < 2)
+//   anderson = 0               # Anderson acceleration over this many past rounds (0: none)
 //
+// With `anderson`, the over-relaxation stretches the combined round instead of each group's update.
 // Each group's solve is the problem's own stationary solve (with its bounds), the other groups'
 // dofs fixed. Load steps ([steps]) take it as their stationary solve.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <deque>
+#include <optional>
+
+#include <Eigen/Dense>
 
 #include <fmt/format.h>
 #include <fmt/ranges.h>
@@ -35,11 +41,12 @@ struct StaggeredSettings {
   double tolerance = 1e-6;
   int max_iterations = 200;
   double relaxation = 1.0;
+  int anderson = 0;
   std::string where;
 };
 
 StaggeredSettings read_staggered(const Scene& scene) {
-  const auto t = extension_table(scene, kStaggeredTable, {"groups", "tolerance", "max_iterations", "relaxation"});
+  const auto t = extension_table(scene, kStaggeredTable, {"groups", "tolerance", "max_iterations", "relaxation", "anderson"});
   StaggeredSettings s;
   s.where = t->where("groups");
   const toml::node& n = t->require("groups");
@@ -56,6 +63,8 @@ StaggeredSettings read_staggered(const Scene& scene) {
   s.max_iterations = t->at_least("max_iterations", t->integer("max_iterations", s.max_iterations), 1);
   s.relaxation = t->number("relaxation", s.relaxation);
   if (!(s.relaxation >= 1 && s.relaxation < 2)) t->fail_key("relaxation", "must lie in [1, 2): the largest factor of the updates (1: none)");
+  s.anderson = t->integer("anderson", s.anderson);
+  if (s.anderson < 0 || s.anderson > 20) t->fail_key("anderson", "must lie in [0, 20]: the number of past rounds the acceleration combines (0: none)");
   return s;
 }
 
@@ -84,6 +93,120 @@ double relative_change(MPI_Comm comm, Vec u, Vec before, const std::vector<Petsc
   MPI_Allreduce(MPI_IN_PLACE, both, 2, MPI_DOUBLE, MPI_MAX, comm);
   return both[0] / both[1];
 }
+
+/// Anderson acceleration of the alternation. One round (every group solved once) maps the state of
+/// the groups after the first, x, to G(x); the first group's values are a function of the others and
+/// are solved again at the start of each round. From the last m rounds' x_j and f_j = G(x_j) - x_j,
+/// the next start is x_k - ΔX γ + β (f_k - ΔF γ), γ minimizing |f_k - ΔF γ|, put back within the
+/// bounds. The history restarts when a round's change grew: measured on the coarse SENT, keeping it
+/// through growth (or through growth up to 2x) stalled the step where the crack starts for minutes;
+/// restarting did not stall.
+class AndersonMixer {
+ public:
+  AndersonMixer(MPI_Comm comm, int depth, std::vector<PetscInt> dofs, PetscInt first)
+      : comm_(comm), depth_(depth), dofs_(std::move(dofs)), first_(first) {}
+
+  /// The state's accelerated dofs at the start of a round.
+  void start_round(Vec u) { x_ = values(u); }
+
+  /// After the round: writes the next start into u, x_k - ΔX γ + β (f_k - ΔF γ) (β = 1: the
+  /// combination of the rounds' results; with no history, x_k + β f_k, the over-relaxed round).
+  void mix(Vec u, Vec lower, Vec upper, double beta) {
+    std::vector<double> g = values(u), f(g.size());
+    for (std::size_t i = 0; i < g.size(); ++i) f[i] = g[i] - x_[i];
+    const double norm = std::sqrt(dot(f, f));
+    if (!f_.empty() && norm > last_norm_) {
+      xs_.clear();
+      f_.clear();
+      ++restarts_;
+    }
+    last_norm_ = norm;
+    xs_.push_back(x_);
+    f_.push_back(f);
+    if (static_cast<int>(xs_.size()) > depth_ + 1) {
+      xs_.pop_front();
+      f_.pop_front();
+    }
+    const int m = static_cast<int>(xs_.size()) - 1;
+    Eigen::VectorXd gamma = Eigen::VectorXd::Zero(m);
+    if (m > 0) {
+      // The Gram matrix of the residuals' differences and its right side, summed over ranks.
+      std::vector<double> sums(static_cast<std::size_t>(m * m + m), 0.0);
+      for (int a = 0; a < m; ++a) {
+        for (int c = a; c < m; ++c) sums[a * m + c] = local_dot_of_differences(a, c);
+        double r = 0;
+        for (std::size_t i = 0; i < f.size(); ++i) r += (f_[a + 1][i] - f_[a][i]) * f[i];
+        sums[m * m + a] = r;
+      }
+      MPI_Allreduce(MPI_IN_PLACE, sums.data(), static_cast<int>(sums.size()), MPI_DOUBLE, MPI_SUM, comm_);
+      double trace = 0;
+      for (int a = 0; a < m; ++a) trace += sums[a * m + a];
+      // A small shift keeps the nearly dependent differences of a converging run solvable.
+      const double shift = 1e-10 * std::max(trace, 1e-300);
+      Eigen::MatrixXd gram(m, m);
+      Eigen::VectorXd rhs(m);
+      for (int a = 0; a < m; ++a) {
+        for (int c = a; c < m; ++c) gram(a, c) = gram(c, a) = sums[a * m + c];
+        gram(a, a) += shift;
+        rhs(a) = sums[m * m + a];
+      }
+      gamma = gram.ldlt().solve(rhs);
+      if (!gamma.allFinite()) gamma.setZero();
+    }
+    std::vector<double> next(g.size());
+    for (std::size_t i = 0; i < g.size(); ++i) {
+      double x = x_[i], r = f[i];
+      for (int j = 0; j < m; ++j) {
+        x -= gamma(j) * (xs_[j + 1][i] - xs_[j][i]);
+        r -= gamma(j) * (f_[j + 1][i] - f_[j][i]);
+      }
+      next[i] = x + beta * r;
+    }
+    const VecWriteView w(u);
+    std::optional<VecReadView> lo, hi;
+    if (lower != nullptr) lo.emplace(lower), hi.emplace(upper);
+    for (std::size_t i = 0; i < dofs_.size(); ++i) {
+      const PetscInt d = dofs_[i] - first_;
+      w[d] = lo ? std::clamp(next[i], (*lo)[d], std::max((*lo)[d], (*hi)[d])) : next[i];
+    }
+    if (m > 0) ++accelerated_;
+  }
+
+  [[nodiscard]] int restarts() const { return restarts_; }
+  [[nodiscard]] int accelerated() const { return accelerated_; }
+
+ private:
+  std::vector<double> values(Vec u) const {
+    const VecReadView r(u);
+    std::vector<double> out(dofs_.size());
+    for (std::size_t i = 0; i < dofs_.size(); ++i) out[i] = r[dofs_[i] - first_];
+    return out;
+  }
+  double local_dot_of_differences(int a, int c) const {
+    double s = 0;
+    for (std::size_t i = 0; i < x_.size(); ++i) s += (f_[a + 1][i] - f_[a][i]) * (f_[c + 1][i] - f_[c][i]);
+    return s;
+  }
+  static double local_dot(const std::vector<double>& a, const std::vector<double>& b) {
+    double s = 0;
+    for (std::size_t i = 0; i < a.size(); ++i) s += a[i] * b[i];
+    return s;
+  }
+  double dot(const std::vector<double>& a, const std::vector<double>& b) const {
+    double s = local_dot(a, b);
+    MPI_Allreduce(MPI_IN_PLACE, &s, 1, MPI_DOUBLE, MPI_SUM, comm_);
+    return s;
+  }
+
+  MPI_Comm comm_;
+  int depth_;
+  std::vector<PetscInt> dofs_;
+  PetscInt first_;
+  std::vector<double> x_;
+  std::deque<std::vector<double>> xs_, f_;
+  double last_norm_ = 0;
+  int restarts_ = 0, accelerated_ = 0;
+};
 
 class StaggeredDriver final : public StationaryDriver {
  public:
@@ -148,8 +271,16 @@ void StaggeredDriver::solve(MPI_Comm comm, const BoundScene& b, ProblemSpace& sp
   double change = 0, last_change = -1, omega = 1.0;
   bool converged = false;
   std::string failure;
+  std::optional<AndersonMixer> anderson;
+  if (s.anderson > 0) {
+    std::vector<PetscInt> later;
+    for (std::size_t g = 1; g < dofs.size(); ++g) later.insert(later.end(), dofs[g].begin(), dofs[g].end());
+    std::sort(later.begin(), later.end());
+    anderson.emplace(comm, s.anderson, std::move(later), first);
+  }
   for (; iterations < s.max_iterations && !converged && failure.empty(); ++iterations) {
     change = 0;
+    if (anderson) anderson->start_round(u);
     for (std::size_t g = 0; g < s.groups.size() && failure.empty(); ++g) {
       // The other groups' dofs are held with the prescribed ones.
       space.fixed = prescribed;
@@ -169,7 +300,7 @@ void StaggeredDriver::solve(MPI_Comm comm, const BoundScene& b, ProblemSpace& sp
       if (!part.converged) failure = fmt::format("the solve of group {} ({}) did not converge: {}", g, fmt::join(s.groups[g], ", "), part.message);
       // Over-relaxation: the update stretched by ω, then put back within the bounds (the other
       // groups' and the prescribed dofs did not move, so they stay).
-      if (omega != 1.0 && failure.empty()) {
+      if (omega != 1.0 && !anderson && failure.empty()) {
         LMEFORM_PETSC_CHECK(VecAXPBY(u, 1.0 - omega, omega, before));
         if (space.bounded()) {
           LMEFORM_PETSC_CHECK(VecPointwiseMax(u, u, space.lower_bound));
@@ -191,9 +322,17 @@ void StaggeredDriver::solve(MPI_Comm comm, const BoundScene& b, ProblemSpace& sp
       omega = std::clamp(1.0 / (1.0 - rho), 1.0, s.relaxation);
     }
     last_change = change;
+    // With Anderson acceleration the stretch ω applies to the combined round instead.
+    if (anderson && failure.empty() && !converged)
+      anderson->mix(u, space.bounded() ? static_cast<Vec>(space.lower_bound) : nullptr,
+                    space.bounded() ? static_cast<Vec>(space.upper_bound) : nullptr, omega);
   }
   space.fixed = prescribed;
   result.solver_figures.emplace_back("alternations", double(iterations));
+  if (anderson) {
+    result.solver_figures.emplace_back("anderson_steps", double(anderson->accelerated()));
+    result.solver_figures.emplace_back("anderson_restarts", double(anderson->restarts()));
+  }
   for (std::size_t g = 0; g < s.groups.size(); ++g) {
     const std::string name = fmt::format("{}", fmt::join(s.groups[g], "+"));
     result.solver_figures.emplace_back(name + "_newton", double(group_newton[g]));
