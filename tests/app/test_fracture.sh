@@ -94,6 +94,8 @@ sed -e 's#^max_iterations = 2000#max_iterations = 2000\nanderson = 5#' "$out/cyc
 run anderson
 sed -e 's#^max_iterations = 2000#max_iterations = 2000\nanderson = 5\nrelaxation = 1.5#' "$out/cycle.toml" > "$out/anderson_relaxed.toml"
 run anderson_relaxed
+mpirun -n 2 "$lmeform" run "$out/anderson_relaxed.toml" --output "$out/anderson_ranks" > "$out/anderson_ranks.log" 2>&1 ||
+  { tail -20 "$out/anderson_ranks.log"; fail "the accelerated cycle on 2 ranks failed (log: $out/anderson_ranks.log)"; }
 sed -e 's#^max_iterations = 2000#max_iterations = 2000\nanderson = -1#' "$out/cycle.toml" > "$out/anderson_negative.toml"
 if "$lmeform" run "$out/anderson_negative.toml" > "$out/anderson_negative.log" 2>&1; then fail "anderson = -1 was not refused"; fi
 grep -q "key 'staggered.anderson'.*must lie in \[0, 20\]" "$out/anderson_negative.log" || { cat "$out/anderson_negative.log"; fail "anderson = -1: no clear message"; }
@@ -212,6 +214,12 @@ for run in ("anderson", "anderson_relaxed"):
         print(f"{run}: |{name} plain - accelerated|_max = {d:.1e} (alternation tolerance 1e-9)")
         if not d <= 1e-8:
             print(f"FAIL: the {run} alternation ends {d:.1e} away from the plain one"); ok = False
+    if run == "anderson_relaxed":
+        for name in ("u", "v"):
+            d = float(np.max(np.abs(field(out / run / "series" / "cycle_000006.h5", name) - field(out / "anderson_ranks" / "series" / "cycle_000006.h5", name))))
+            print(f"{run}: |{name} 1 rank - 2 ranks|_max = {d:.1e}")
+            if not d <= 1e-12:
+                print(f"FAIL: the accelerated alternation on 2 ranks ends {d:.1e} from 1 rank"); ok = False
     rounds = alternations(run)
     print(f"{run}: {rounds} rounds against {plain_rounds} plain")
     if not rounds < plain_rounds:
