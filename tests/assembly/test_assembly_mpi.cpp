@@ -6,6 +6,7 @@
 #include <random>
 
 #include "assembly_fixtures.hpp"
+#include "lmeform/collective_error.hpp"
 #include "lmeform/convex_hull.hpp"
 #include "lmeform/node_sets.hpp"
 #include "reference_kernels.hpp"
@@ -46,6 +47,31 @@ void expect_same(const Result& parallel, const Result& serial, const std::string
 }
 
 TEST(AssemblyMpi, RunsOnTwoRanks) { EXPECT_EQ(PetscSession::size(), 2); }
+
+TEST(AssemblyMpi, AnErrorOnOneRankIsThrownOnEveryRank) {
+  int rank = 0;
+  MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
+  EXPECT_NO_THROW(throw_on_every_rank(PETSC_COMM_WORLD, nullptr));
+  // Only rank 1 fails: rank 0 throws the same LME error, with its reason, point and neighbours.
+  const std::vector<double> x{0.98970, 0.39605};
+  const LmeEvaluationError original(LmeFailure::not_converged, x, 9, 0.0994, "100 iterations, tolerance 1.0e-12");
+  try {
+    throw_on_every_rank(PETSC_COMM_WORLD, rank == 1 ? std::make_exception_ptr(original) : nullptr);
+    ADD_FAILURE() << "rank " << rank << " returned";
+  } catch (const LmeEvaluationError& e) {
+    EXPECT_EQ(e.reason(), LmeFailure::not_converged);
+    EXPECT_EQ(e.point(), x);
+    EXPECT_EQ(e.neighbour_count(), 9u);
+    EXPECT_STREQ(e.what(), original.what());
+  }
+  // Both fail: the lowest rank's error is everyone's.
+  try {
+    throw_on_every_rank(PETSC_COMM_WORLD, std::make_exception_ptr(std::invalid_argument("failed on rank " + std::to_string(rank))));
+    ADD_FAILURE() << "rank " << rank << " returned";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_STREQ(e.what(), "failed on rank 0");
+  }
+}
 
 TEST(AssemblyMpi, OneRankEqualsTwoRanks) {
   const NodeSet nodes = test_nodes();

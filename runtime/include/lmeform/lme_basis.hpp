@@ -124,12 +124,16 @@ class LmeEvaluationError : public std::runtime_error {
   [[nodiscard]] std::size_t neighbour_count() const noexcept { return neighbours_; }
   /// Final scaled ||grad_lambda ln Z|| (NaN where Newton was not started).
   [[nodiscard]] double gradient_norm() const noexcept { return gradient_norm_; }
+  /// What the message adds to the reason (iterations, rcond, ...); the same error is rebuilt from
+  /// these five (on the other ranks of a collective setup).
+  [[nodiscard]] const std::string& detail() const noexcept { return detail_; }
 
  private:
   LmeFailure reason_;
   std::vector<double> point_;
   std::size_t neighbours_;
   double gradient_norm_;
+  std::string detail_;
 };
 
 /// Size of one compressed-storage record (doubles) for derivative order 0, 1 or 2. Physical units;

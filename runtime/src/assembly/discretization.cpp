@@ -7,9 +7,11 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <exception>
 #include <stdexcept>
 #include <string>
 
+#include "lmeform/collective_error.hpp"
 #include "lmeform/delaunay.hpp"
 #include "lmeform/kernel.hpp"
 #include "lmeform/neighbourhoods.hpp"
@@ -179,36 +181,52 @@ CsrLists point_lists_of_cells(const LmeBasis& basis, const CellQuadrature& quadr
   return out;
 }
 
-// Every facet point's neighbours and its facet's vertices. A hull facet whose points see only
-// nodes of its own face (a boundary refined more finely than the nodes beside it) has a flat
-// neighbourhood, where the dual problem is singular: there the vertices of its cell join, as a
-// quadrature point's own cell's do.
+// Every facet point's neighbours and its facet's vertices. The point lies inside its facet, so it
+// is strictly inside the hull of its list when the list holds nodes on both sides of the facet's
+// plane. Where a side has none — a hull facet whose points see only nodes of its own face (a
+// boundary refined more finely than the nodes beside it), or an interior facet whose nodes on one
+// side are fine and their supports end short of it (measured: SENT on following nodes, a facet
+// point 0.01 from the right edge between a node of the edge and one of the refined band, every
+// other neighbour below) — the point lies on the boundary of that hull, where the dual problem has
+// no solution: the vertices of the cell on that side join, as a quadrature point's own cell's do.
 CsrLists facet_point_lists(const LmeBasis& basis, const detail::CellFacets& facets, const BackgroundCells& cells, const NodeSet& nodes) {
   const CsrLists own = basis.neighbour_lists(facets.points);
   const auto per_facet = static_cast<std::size_t>(facets.points_per_facet);
   const auto dim = static_cast<std::size_t>(nodes.dim);
-  std::vector<long> facet_cell(facets.size(), -1);
+  std::vector<std::array<long, 2>> facet_cells(facets.size(), {-1, -1});
   for (std::size_t c = 0; c < cells.size(); ++c)
     for (std::size_t k = 0; k <= dim; ++k) {
-      const auto f = static_cast<std::size_t>(facets.cell_facets[c * (dim + 1) + k]);
-      if (facet_cell[f] < 0) facet_cell[f] = static_cast<long>(c);
+      auto& sharing = facet_cells[static_cast<std::size_t>(facets.cell_facets[c * (dim + 1) + k])];
+      (sharing[0] < 0 ? sharing[0] : sharing[1]) = static_cast<long>(c);
     }
-  auto on_facet_plane = [&](std::size_t f, int node) {
+  // -1, 0 or +1: the side of the facet's plane a node lies on (0 within rounding of the plane).
+  auto side = [&](std::size_t f, int node) {
     const auto v0 = nodes.point(static_cast<std::size_t>(facets.facet_vertices(f)[0])), x = nodes.point(static_cast<std::size_t>(node));
     double distance = 0, size = 0;
     for (std::size_t i = 0; i < dim; ++i) {
       distance += (x[i] - v0[i]) * facets.normals[f * dim + i];
       size = std::max(size, std::abs(x[i] - v0[i]));
     }
-    return std::abs(distance) <= 1e-10 * std::max(size, 1e-300);
+    if (std::abs(distance) <= 1e-10 * std::max(size, 1e-300)) return 0;
+    return distance > 0 ? 1 : -1;
   };
   return with_vertices(own, [&](std::size_t p) {
     const std::size_t f = p / per_facet;
     const auto facet = facets.facet_vertices(f);
     std::vector<int> extra(facet.begin(), facet.end());
-    const auto list = own[p];
-    if (facet_cell[f] >= 0 && std::all_of(list.begin(), list.end(), [&](int a) { return on_facet_plane(f, a); }))
-      for (const int v : cells.cell(static_cast<std::size_t>(facet_cell[f]))) extra.push_back(v);
+    bool above = false, below = false;
+    for (const int a : own[p]) {
+      const int s = side(f, a);
+      above = above || s > 0;
+      below = below || s < 0;
+    }
+    for (const long c : facet_cells[f]) {
+      if (c < 0) continue;
+      const auto vertices = cells.cell(static_cast<std::size_t>(c));
+      int cell_side = 0;
+      for (const int v : vertices) cell_side = cell_side != 0 ? cell_side : side(f, v);
+      if ((cell_side > 0 && !above) || (cell_side < 0 && !below)) extra.insert(extra.end(), vertices.begin(), vertices.end());
+    }
     return extra;
   });
 }
@@ -444,8 +462,17 @@ Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, Discretizati
   }
   {
     StageClock clock(times_.basis);
-    for (ElementSet& d : domains_) d.build_storage(*basis_, options_.storage, options_.basis_order, options_.strategy);
-    if (facets_ && options_.basis_order >= 1) build_gradient_correction();
+    std::exception_ptr failure;
+    try {
+      for (ElementSet& d : domains_) d.build_storage(*basis_, options_.storage, options_.basis_order, options_.strategy);
+      if (facets_ && options_.basis_order >= 1) build_gradient_correction();
+    } catch (...) {
+      failure = std::current_exception();
+    }
+    // Each rank evaluates the basis at its own elements' points only: a point one rank cannot
+    // evaluate must stop every rank here, not leave the others waiting in the next collective call
+    // (measured: SENT on 2 ranks hung in MatDestroy on the failing rank, in VecCreateGhost on the other).
+    throw_on_every_rank(comm_, failure);
   }
 }
 

@@ -64,7 +64,8 @@ LmeEvaluationError::LmeEvaluationError(LmeFailure reason, std::span<const double
       reason_(reason),
       point_(x.begin(), x.end()),
       neighbours_(neighbours),
-      gradient_norm_(gradient_norm) {}
+      gradient_norm_(gradient_norm),
+      detail_(detail) {}
 
 namespace {
 

@@ -26,13 +26,16 @@ std::vector<double> evaluate_with_cell_fallback(const LmeBasis& basis, std::span
     return basis.evaluate(x, list, order);
   } catch (const LmeEvaluationError& e) {
     const auto r = e.reason();
+    // not_converged: x on the boundary of its neighbours' hull (every neighbour on one side of a
+    // line through it), where the multipliers grow without bound; the cell's vertices add the other side.
     if (r != LmeFailure::outside_hull && r != LmeFailure::degenerate && r != LmeFailure::too_few_neighbours &&
-        r != LmeFailure::singular_jacobian)  // at a vertex of its neighbours' hull
+        r != LmeFailure::singular_jacobian && r != LmeFailure::not_converged)
       throw;
     const std::vector<int> vertices = cell_vertices();
-    if (vertices.empty()) throw;
+    const std::size_t before = list.size();
     for (const int v : vertices)
       if (std::find(list.begin(), list.end(), v) == list.end()) list.push_back(v);
+    if (list.size() == before) throw;  // the same neighbours again would fail the same way
     std::sort(list.begin(), list.end());
     return basis.evaluate(x, list, order);
   }
