@@ -149,6 +149,43 @@ TEST(Assembly, EveryPointListHoldsItsCellVertices) {
   }
 }
 
+TEST(Assembly, AFacetPointWhoseSupportsAllLieOnOneSideIsEvaluated) {
+  // Coarse nodes (h = 0.1) up to y = 0.5, fine ones (h = 0.01) from y = 0.6. A facet from a coarse
+  // node to a fine one has every node whose support reaches its middle below it (gamma 4: the fine
+  // supports end short of it), so the middle lies on the boundary of its list's hull; the vertices
+  // of the cell above join, at Gaussian factors of e^-80 there. The dual Newton then needs more
+  // than 100 iterations (measured: failed at 100 with the facet's vertices alone and with the
+  // cell's, passes at 200 with either).
+  std::vector<double> coords;
+  for (int i = 0; i <= 4; ++i)
+    for (int j = 0; j <= 5; ++j) coords.insert(coords.end(), {0.6 + 0.1 * i, 0.1 * j});
+  for (int i = 0; i <= 40; ++i)
+    for (int j = 0; j <= 10; ++j) coords.insert(coords.end(), {0.6 + 0.01 * i, 0.6 + 0.01 * j});
+  const NodeSet nodes(2, std::move(coords));
+  DiscretizationOptions opts = options(4.0, 6, NeighbourhoodStrategy::CellBased);
+  opts.consistent_integration = 3;  // a point at each facet's middle
+  const Discretization disc(PETSC_COMM_SELF, nodes, opts);
+  // The corrected gradients still reproduce affine fields: sum_a grad p_a x_a = I at every point.
+  LmeWorkspace ws;
+  double worst = 0;
+  for (int e = 0; e < disc.n_elements(); ++e) {
+    const auto list = disc.element_nodes(e);
+    const int points = disc.element_point_count(e);
+    const std::size_t J = 3;
+    std::vector<double> tab(static_cast<std::size_t>(points) * J * list.size());
+    disc.tabulate(e, 1, tab, ws);
+    for (int q = 0; q < points; ++q)
+      for (std::size_t i = 0; i < 2; ++i)
+        for (std::size_t j = 0; j < 2; ++j) {
+          double g = 0;
+          for (std::size_t m = 0; m < list.size(); ++m)
+            g += tab[(static_cast<std::size_t>(q) * J + 1 + i) * list.size() + m] * disc.nodes().point(static_cast<std::size_t>(list[m]))[j];
+          worst = std::max(worst, std::abs(g - (i == j ? 1.0 : 0.0)));
+        }
+  }
+  EXPECT_LT(worst, 1e-8);
+}
+
 TEST(Assembly, ACarriedPointOutsideItsCellTakesAnEnclosingCellsVertices) {
   // Carried quadrature points move with a map that is not affine on a cell, and can leave it. On a
   // fine strip (h = 0.02, x <= 0.1) beside coarse nodes (h = 0.2, x >= 0.3) the points of the gap

@@ -71,8 +71,10 @@ struct LmeOptions {
   double tol0 = 1e-6;
   /// Newton stops when ||sum_a p_a (x - x_a)|| / l <= newton_tolerance (scaled, unit-free).
   double newton_tolerance = 1e-12;
-  /// Upper bound on Newton iterations (each with at most 60 backtracking halvings).
-  int max_iterations = 100;
+  /// Upper bound on Newton iterations (each with at most 60 backtracking halvings). Most points
+  /// take fewer than 10; a point whose farthest neighbours weigh e^-80 or less (fine nodes joined to
+  /// a list for their cell, near the boundary of the list's hull) was measured to need over 100.
+  int max_iterations = 300;
   /// A neighbourhood whose thickness is below degeneracy_tolerance times its extent (square root
   /// of the ratio of the smallest to the largest eigenvalue of its scaled covariance) is affinely
   /// degenerate (collinear in 2D, coplanar in 3D): no LME basis exists there.
