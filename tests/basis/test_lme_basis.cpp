@@ -458,6 +458,46 @@ TEST(HardCases, DerivativesOnTheBoundaryNeedAWellConditionedJ) {
   }
 }
 
+TEST(HardCases, APointCollinearWithAFarFineAndANearCoarseNode) {
+  // The neighbourhood of a consistent-integration facet point of SENS on nodes that follow the crack
+  // (l = 0.0075, support_tolerance 1e-3): x lies on the segment from a far node of fine spacing
+  // (weight e^-152 at mu = 0) to a near coarse one, three further nodes around. The minimizer puts
+  // 11 % and 89 % on those two and e^-53 or less on the rest; on the way the dual Newton reaches
+  // iterates where one node carries all the weight (ln Z linear, J = 0), where unit steps of -r
+  // had crawled to the 300-iteration cap with ||r|| = 9.4e-2. Units: x at the origin, the RMS
+  // distance 1, gamma 1 and each node's spacing set to give its exponent.
+  const std::vector<std::array<double, 3>> neighbourhood = {
+      // exponent -beta_a |x - x_a|^2, then x - x_a
+      {-151.83285343791596, 0.73042931258103216, 0.12264472186948568},
+      {-0.80153606612543205, -0.092776687116058673, -0.015577922177184147},
+      {-4.462831279007542, -1.0855044902583331, -0.042295478057688358},
+      {-3.7891878440175017, -0.57093653158914104, -0.65004938880089025},
+      {-6.1074930061077719, -1.3453079097544807, -0.83909838357716715}};
+  std::vector<double> coords, spacing;
+  for (const auto& [exponent, dx, dy] : neighbourhood) {
+    coords.insert(coords.end(), {-dx, -dy});
+    spacing.push_back(std::sqrt((dx * dx + dy * dy) / -exponent));
+  }
+  const LmeBasis basis(NodeSet(2, coords), std::vector<double>{1.0}, spacing);
+  const std::vector<double> x = {0.0, 0.0};
+  const std::vector<int> nbrs = {0, 1, 2, 3, 4};
+  std::vector<double> p;
+  ASSERT_NO_THROW(p = basis.evaluate(x, nbrs, 0));
+  double sum = 0, first = 0, second = 0;
+  for (std::size_t a = 0; a < nbrs.size(); ++a) {
+    EXPECT_GE(p[a], 0.0);
+    sum += p[a];
+    first += p[a] * coords[2 * a];
+    second += p[a] * coords[2 * a + 1];
+  }
+  EXPECT_NEAR(sum, 1.0, 1e-14);
+  EXPECT_NEAR(first, 0.0, 1e-12);
+  EXPECT_NEAR(second, 0.0, 1e-12);
+  // On the segment: the weights of linear interpolation between its two ends.
+  EXPECT_NEAR(p[0], 0.092776687116058673 / (0.73042931258103216 + 0.092776687116058673), 1e-9);
+  EXPECT_NEAR(p[1], 0.73042931258103216 / (0.73042931258103216 + 0.092776687116058673), 1e-9);
+}
+
 TEST(HardCases, Gamma6NearTheDelaunayLimit) {
   // gamma = 6 on a regular 2D grid: at a node's own position its function dominates.
   const NodeSet nodes = test::grid(2, 11, 1.0);
