@@ -135,7 +135,7 @@ int main(int argc, char** argv) {
     // GLS at C = 0.1, gamma = 1 (docs/convergence.md).
     // Again with the compact support (support_tolerance 1e-3: about half the non-zeros per row),
     // and with it GMRES + ILU(0) in place of MUMPS.
-    const std::vector<Basis> second_order{{"second", true}, {"second", true, 1e-3}, {"second", true, 1e-3, kIterative}};
+    const std::vector<Basis> second_order{{"second", true, 1e-6, ""}, {"second", true, 1e-3, ""}, {"second", true, 1e-3, kIterative}};
     for (const Basis& basis : second_order)
       for (const auto& pb : demo_problems()) {
         std::vector<Record> l;

@@ -416,7 +416,7 @@ double Assembler::vector_pass(Vec u, Vec out, double scale, bool with_value) {
     std::fill_n(local_.begin(), m, 0.0);
     i.kernel->vector(in, local_.data());
     if (scale != 1.0) {
-      for (std::size_t i = 0; i < m; ++i) local_[i] *= scale;
+      for (std::size_t k = 0; k < m; ++k) local_[k] *= scale;
     }
     for (std::size_t a = 0; a < nodes.size(); ++a) {
       // Negative indices are skipped by PETSc: a rank keeps only its own rows.

@@ -362,23 +362,17 @@ Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, Discretizati
       // partitions and sends the parts: ranks that each ran METIS on the same graph were measured
       // to disagree (3D, 8 parts: two ranks owned the same rows and the ghosted vector failed).
       std::vector<int> parts(static_cast<std::size_t>(n));
-      std::string failure;
+      std::exception_ptr failure;
       if (rank_ == 0) {
         try {
           const CsrLists node_lists = original.neighbour_lists(nodes.coords);
           parts = partition_nodes(node_lists.offsets, node_lists.indices, size_).part_of;
         } catch (const std::exception& e) {
-          failure = e.what();
+          failure = std::make_exception_ptr(std::runtime_error(std::string("Discretization: partitioning the nodes: ") + e.what()));
         }
       }
-      // Every rank learns of a failure (and throws with its message), none waits for parts forever.
-      int length = static_cast<int>(failure.size());
-      MPI_Bcast(&length, 1, MPI_INT, 0, comm_);
-      if (length > 0) {
-        failure.resize(static_cast<std::size_t>(length));
-        MPI_Bcast(failure.data(), length, MPI_CHAR, 0, comm_);
-        throw std::runtime_error("Discretization: partitioning the nodes: " + failure);
-      }
+      // Every rank throws rank 0's error, none waits for parts forever.
+      throw_on_every_rank(comm_, failure);
       MPI_Bcast(parts.data(), n, MPI_INT, 0, comm_);
       partition_ = partition_from_parts(std::move(parts), size_);
     } else if (size_ > 1 && options_.partition == PartitionMethod::Hilbert) {

@@ -374,15 +374,15 @@ void ProblemSpace::update_previous_bounds(const BoundScene& b, Vec u) {
     const int r = renumbered[std::size_t(node)];
     if (disc->owns(r)) prescribed[std::size_t(r - disc->owned_begin()) * std::size_t(bs) + std::size_t(dof)] = 1;
   }
-  const VecReadView state(u);
+  const VecReadView previous(u);
   VecWriteView lower(lower_bound), upper(upper_bound);
   for (const BoundBound& bb : b.bounds)
     for (PetscInt a = 0; a < disc->n_owned(); ++a)
       for (int c = 0; c < bb.field.components; ++c) {
         const PetscInt dof = a * bs + bb.field.offset + c;
         if (prescribed[std::size_t(dof)] != 0) continue;
-        if (bb.lower_previous) lower[dof] = state[dof];
-        if (bb.upper_previous) upper[dof] = state[dof];
+        if (bb.lower_previous) lower[dof] = previous[dof];
+        if (bb.upper_previous) upper[dof] = previous[dof];
       }
 }
 
