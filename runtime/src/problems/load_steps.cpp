@@ -159,8 +159,10 @@ void LoadStepper::setup() {
   rebuild(initial_nodes(*ctx_.scene, ctx_.log), {});
   input_.log = ctx_.log;
   if (!ctx_.output_directory.empty()) series_.emplace(ctx_.output_directory, ctx_.scene->name);
-  if (adapting()) {
-    if (!ctx_.restart) refine_start();
+  // A restart takes the checkpoint's nodes and state: the scene's unrefined start, built here only
+  // to be replaced, is not judged (its warnings would name nodes the run no longer has).
+  if (adapting() && !ctx_.restart) {
+    refine_start();
     check_requirements(bound_, space_, ctx_.log);
   }
 }
