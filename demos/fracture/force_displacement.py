@@ -3,7 +3,8 @@
 FEniCSx reference run (demos/fracture/fenicsx_fracture.py JSON): the peak force, the displacement
 at the peak, steps, wall time, and per step the alternations and the seconds of assembly and solve.
     force_displacement.py RUN_DIR CASE OUT_DIR [--fenicsx JSON] [--reference KN --cite TEXT] [--l 0.015 --h 0.0075]
-Appends a record (case sent or sens) to OUT_DIR/fracture.json and draws OUT_DIR/fracture_CASE.png.
+Appends a record (case sent or sens; it replaces the record of the same case and l) to
+OUT_DIR/fracture.json and draws OUT_DIR/fracture_CASE.png (fracture_CASE_lL.png for l other than 0.015).
 """
 import json
 import pathlib
@@ -27,7 +28,10 @@ def main():
     print(f"{case}: {len(rows) - 1} steps to delta {delta[-1]:.5g}, peak force {force[i]:.4f} kN at delta {delta[i]:.5g} mm; "
           f"{sum(alternations):.0f} alternations (at most {max(alternations):.0f} in a step); assembly {assembly:.0f} s, solves {solve:.0f} s, "
           f"wall {wall:.0f} s")
-    record = {"case": case, "model": "at2", "l": float(arg("--l", 0.015)), "h_min": float(arg("--h", 0.0075)), "nodes": None, "steps": len(rows) - 1, "peak_force": force[i],
+    nodes = [r["quantities"]["nodes"] for r in rows if "nodes" in r["quantities"]]
+    length = float(arg("--l", 0.015))
+    record = {"case": case, "model": "at2", "l": length, "h_min": float(arg("--h", 0.0075)), "nodes": int(nodes[-1]) if nodes else None,
+              "nodes_at_peak": int(nodes[i]) if nodes else None, "steps": len(rows) - 1, "peak_force": force[i],
               "delta_at_peak": delta[i], "last_delta": delta[-1], "alternations": sum(alternations), "assembly_s": assembly, "solve_s": solve,
               "wall_s": wall}
     fenicsx = arg("--fenicsx")
@@ -43,7 +47,7 @@ def main():
         record["rel_error"] = abs(force[i] - record["reference"]) / record["reference"]
     path = out / "fracture.json"
     old = json.loads(path.read_text()) if path.exists() else {"records": []}
-    old["records"] = [r for r in old["records"] if r.get("case") != case] + [record]
+    old["records"] = [r for r in old["records"] if r.get("case") != case or r.get("l") != length] + [record]
     path.write_text(json.dumps(old, indent=1))
     try:
         import matplotlib
@@ -58,7 +62,7 @@ def main():
         ax.set_title(case.upper())
         ax.legend()
         fig.tight_layout()
-        fig.savefig(out / f"fracture_{case}.png", dpi=120)
+        fig.savefig(out / (f"fracture_{case}.png" if length == 0.015 else f"fracture_{case}_l{length:g}.png"), dpi=120)
     except ImportError:
         pass
 
