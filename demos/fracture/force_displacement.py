@@ -54,7 +54,7 @@ def main():
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
         fig, ax = plt.subplots(figsize=(5.5, 3.8))
-        ax.plot(delta, force, "-", lw=1.5, label=f"lmeform (LME), peak {force[i]:.3f} kN")
+        ax.plot(delta, force, "-", lw=1.5, label=f"lmeform (LME, l = {length:g}), peak {force[i]:.3f} kN")
         if ref:
             ax.plot(ref["delta"], ref["force"], "--", lw=1.2, label=f"FEniCSx P1 (l = {ref.get('l', 0.015)}), peak {ref['peak_force']:.3f} kN")
         ax.set_xlabel("imposed displacement (mm)")
