@@ -141,7 +141,7 @@ struct MaxEntDual {
       // A steepest-descent step (expand = true) that is accepted in full is doubled while ln Z keeps
       // falling: where one neighbour carries all the weight ln Z is linear in mu, J vanishes, and
       // unit steps of -r crawl (measured: a facet point collinear with a far and a near node of its
-      // list, the dual Newton at 300 iterations with ||r|| stuck at 9.4e-2; with doubling, 11).
+      // list, the dual Newton at 300 iterations with ||r|| stuck at 9.4e-2; with doubling, 13-15).
       auto line_search = [&](const V& d, bool expand) {
         const double slope = r.dot(d);
         double t = 1.0;
