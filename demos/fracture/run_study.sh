@@ -38,5 +38,8 @@ OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 mpirun -n 2 "$lmeform"
 OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 mpirun -n 2 "$lmeform" run "$here/sens_fine_steps.toml" --output "$build/demo/fracture/sens_fine_steps"
 /usr/bin/python3 "$here/force_displacement.py" "$build/demo/fracture/sens_fine_steps" sens "$out" --fenicsx "$here/fenicsx_fracture_sens_l0.015.json" --l 0.015 --h 0.006
 # SENS at l = 0.0075 on nodes that follow the crack (a "sens" record at that l; no FEniCSx run at it).
-OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 mpirun -n 2 "$lmeform" run "$here/sens_l0.0075.toml" --output "$build/demo/fracture/sens_l0.0075"
+# It stops at step 190, where the u Newton stagnates (docs/fracture.md): the record is made from the
+# converged steps it kept on disk.
+OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 mpirun -n 2 "$lmeform" run "$here/sens_l0.0075.toml" --output "$build/demo/fracture/sens_l0.0075" ||
+  echo "sens_l0.0075 stopped before its last step; recording the steps it converged"
 /usr/bin/python3 "$here/force_displacement.py" "$build/demo/fracture/sens_l0.0075" sens "$out" --l 0.0075 --h 0.003
