@@ -199,6 +199,26 @@ TEST(Staggered, EachGroupAnalysesItsMatrixOnceOverAllRounds) {
   EXPECT_NEAR(alternate.json["quantities"]["mean_v"].get<double>(), mono.json["quantities"]["mean_v"].get<double>(), 1e-8);
 }
 
+// Each group's Newton solves read PETSc options under its own prefix: an iterative solver given
+// to the group ["v"] alone leaves the group ["u"] its direct one (one LU analysis, not two), and the
+// alternation reaches the same solution.
+TEST(Staggered, EachGroupReadsPetscOptionsUnderItsOwnPrefix) {
+  const problems::RunReport mono = run("residual_mono.toml", two_fields("", "residual = \"R\"\n"), "");
+  LMEFORM_PETSC_CHECK(PetscLogDefaultBegin());
+  const int analyses_before = petsc_event_count("MatLUFactorSym");
+  const problems::RunReport alternate =
+      run("residual_prefixed.toml",
+          two_fields("[staggered]\ngroups = [[\"u\"], [\"v\"]]\ntolerance = 1e-10\n"
+                     "[solver]\npetsc_options = \"-v_ksp_type gmres -v_pc_type jacobi -v_ksp_rtol 1e-13\"\n",
+                     "residual = \"R\"\n"),
+          "");
+  const int analyses = petsc_event_count("MatLUFactorSym") - analyses_before;
+  ASSERT_TRUE(alternate.success) << alternate.status;
+  EXPECT_EQ(analyses, 1) << "the group v's options did not reach its solver alone";
+  ASSERT_TRUE(mono.success) << mono.status;
+  EXPECT_NEAR(alternate.json["quantities"]["mean_v"].get<double>(), mono.json["quantities"]["mean_v"].get<double>(), 1e-8);
+}
+
 // A staggered group's Hessian couples only its own components: the generated kernel skips the
 // other component blocks and the matrix keeps only their diagonal. On the fracture form (u, v)
 // with the split's non-smooth energy, on a graded node set, it equals the full Hessian once the

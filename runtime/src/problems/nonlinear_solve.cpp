@@ -88,7 +88,8 @@ ProblemSpace::KeptNewtonSolver& kept_solver(MPI_Comm comm, ProblemSpace& space, 
   constexpr std::size_t kMostKept = 4;
   auto& kept = space.kept_newton_solvers;
   const auto found = std::find_if(kept.begin(), kept.end(), [&](const ProblemSpace::KeptNewtonSolver& k) {
-    return k.jacobian == spec.name && k.variational_inequality == variational_inequality && k.fixed == space.fixed;
+    return k.jacobian == spec.name && k.variational_inequality == variational_inequality && k.options_prefix == space.solver_options_prefix &&
+           k.fixed == space.fixed;
   });
   // Each rank compares its own fixed dofs; the SNES objects are collective, so the lists change in
   // step on every rank: a solver is reused only where every rank found the same one.
@@ -105,9 +106,11 @@ ProblemSpace::KeptNewtonSolver& kept_solver(MPI_Comm comm, ProblemSpace& space, 
   k.jacobian = spec.name;
   k.fixed = space.fixed;
   k.variational_inequality = variational_inequality;
+  k.options_prefix = space.solver_options_prefix;
   k.matrix = spec.create();
   k.residual = space.primary->create_vector();
   LMEFORM_PETSC_CHECK(SNESCreate(comm, k.snes.out()));
+  if (!k.options_prefix.empty()) LMEFORM_PETSC_CHECK(SNESSetOptionsPrefix(k.snes, k.options_prefix.c_str()));
   if (variational_inequality) LMEFORM_PETSC_CHECK(SNESSetType(k.snes, SNESVINEWTONRSLS));
   KSP ksp = nullptr;
   LMEFORM_PETSC_CHECK(SNESGetKSP(k.snes, &ksp));

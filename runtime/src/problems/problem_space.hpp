@@ -93,11 +93,16 @@ struct ProblemSpace {
     std::string jacobian;          ///< which Jacobian (the driver's name for it)
     std::vector<PetscInt> fixed;   ///< the fixed dofs it was built for
     bool variational_inequality = false;
+    std::string options_prefix;    ///< the PETSc options prefix it was built with
     PetscMatrix matrix;
     PetscVector residual;
     PetscNonlinearSolver snes;
   };
   std::vector<KeptNewtonSolver> kept_newton_solvers;  ///< the most recently used last
+  /// The PETSc options prefix of the next Newton solves ("": none). A staggered solve sets its
+  /// group's ("v_" for the group ["v"]), so that `-v_ksp_type cg -v_pc_type hypre` reaches
+  /// that group's linear solves alone.
+  std::string solver_options_prefix;
   /// The bounds given as "previous" become the state u (after a converged load step).
   void update_previous_bounds(const BoundScene& b, Vec u);
 

@@ -11,6 +11,8 @@
 //   anderson = 0               # Anderson acceleration over this many past rounds (0: none)
 //
 // With `anderson`, the over-relaxation stretches the combined round instead of each group's update.
+// Each group's Newton solves read PETSc options under its unknowns' names joined by "_" as
+// prefix ("v_" for ["v"]): `-v_ksp_type cg -v_pc_type hypre` sets one group's linear solver.
 // Each group's solve is the problem's own stationary solve (with its bounds), the other groups'
 // dofs fixed. Load steps ([steps]) take it as their stationary solve.
 #include <algorithm>
@@ -278,6 +280,14 @@ void StaggeredDriver::solve(MPI_Comm comm, const BoundScene& b, ProblemSpace& sp
     std::sort(later.begin(), later.end());
     anderson.emplace(comm, s.anderson, std::move(later), first);
   }
+  // Each group's Newton solves read the PETSc options under its own prefix ("v_" for ["v"]):
+  // a group's linear solver can differ from the others' (an iterative one for the damage).
+  std::vector<std::string> prefixes;
+  for (const auto& g : s.groups) prefixes.push_back(fmt::format("{}_", fmt::join(g, "_")));
+  struct PrefixReset {
+    ProblemSpace& space;
+    ~PrefixReset() { space.solver_options_prefix.clear(); }
+  } prefix_reset{space};
   for (; iterations < s.max_iterations && !converged && failure.empty(); ++iterations) {
     change = 0;
     if (anderson) anderson->start_round(u);
@@ -292,6 +302,7 @@ void StaggeredDriver::solve(MPI_Comm comm, const BoundScene& b, ProblemSpace& sp
       ProblemResult part;
       const double assembly_before = assembly_seconds();
       const auto started = std::chrono::steady_clock::now();
+      space.solver_options_prefix = prefixes[g];
       inner.solve(comm, b, space, input, u, part);
       group_wall[g] += std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
       group_assembly[g] += assembly_seconds() - assembly_before;
