@@ -3,7 +3,8 @@
 # runs only the 1D study, gamma_convergence.py --quick): SENT and SENS force-displacement, surfing
 # with AT2 and AT1, the anisotropic crack at three orientations, SENT on nodes that follow the
 # crack, SENT to complete failure (sent_fast.toml) and SENS at l = 0.015 on following nodes (40 equal steps,
-# and steps of 2e-5 near the peak: sens_fine_steps.toml), and SENS at l = 0.0075 (sens_l0.0075.toml).
+# and steps of 2e-5 near the peak: sens_fine_steps.toml), and SENT and SENS at l = 0.0075 (sent_l0.0075.toml,
+# sens_l0.0075.toml).
 # Records go to BUILD/bench/fracture.json, figures next to it.
 #   demos/fracture/run_study.sh [BUILD]
 set -euo pipefail
@@ -37,6 +38,9 @@ OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 mpirun -n 2 "$lmeform"
 /usr/bin/python3 "$here/force_displacement.py" "$build/demo/fracture/sens_adaptive" sens "$out" --fenicsx "$here/fenicsx_fracture_sens_l0.015.json" --l 0.015 --h 0.006
 OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 mpirun -n 2 "$lmeform" run "$here/sens_fine_steps.toml" --output "$build/demo/fracture/sens_fine_steps"
 /usr/bin/python3 "$here/force_displacement.py" "$build/demo/fracture/sens_fine_steps" sens "$out" --fenicsx "$here/fenicsx_fracture_sens_l0.015.json" --l 0.015 --h 0.006
+# SENT at l = 0.0075 on nodes that follow the crack, against FEniCSx's run at that l.
+OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 mpirun -n 2 "$lmeform" run "$here/sent_l0.0075.toml" --output "$build/demo/fracture/sent_l0.0075"
+/usr/bin/python3 "$here/force_displacement.py" "$build/demo/fracture/sent_l0.0075" sent "$out" --fenicsx "$here/fenicsx_fracture_sent_l0.0075.json" --l 0.0075 --h 0.003
 # SENS at l = 0.0075 on nodes that follow the crack (a "sens" record at that l; no FEniCSx run at it).
 # It stops at step 190, where the u Newton stagnates (docs/fracture.md): the record is made from the
 # converged steps it kept on disk.
