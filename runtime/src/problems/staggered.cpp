@@ -280,8 +280,7 @@ void StaggeredDriver::solve(MPI_Comm comm, const BoundScene& b, ProblemSpace& sp
     std::sort(later.begin(), later.end());
     anderson.emplace(comm, s.anderson, std::move(later), first);
   }
-  // Each group's Newton solves read the PETSc options under its own prefix ("v_" for ["v"]):
-  // a group's linear solver can differ from the others' (an iterative one for the damage).
+  // The prefix is the space's for this solve only: cleared on the way out, a throw included.
   std::vector<std::string> prefixes;
   for (const auto& g : s.groups) prefixes.push_back(fmt::format("{}_", fmt::join(g, "_")));
   struct PrefixReset {
