@@ -252,6 +252,52 @@ TEST(Staggered, AGroupsHessianFromTheGeneratedKernelEqualsTheFullOne) {
   lmeform::testing::expect_coupled_hessian_equals_full(assembler, u, {2});
 }
 
+// The smoothed volumetric-deviatoric split (split_width w > 0): intact material keeps the energy of
+// the unsplit model exactly (the smoothed parts sum to tr(eps)^2), and where damage degrades the
+// tension part the energy moves from the exact split's by at most K w^2/8 per unit volume, and does
+// move. The strain field's trace changes sign at x = 0.4, so the kink lies inside the square.
+TEST(Fracture, TheSmoothedSplitKeepsTheIntactEnergyAndMovesTheDamagedOneByLessThanKw2Over8) {
+  GradedGridOptions graded;
+  graded.h_min = 0.03;
+  graded.h_max = 0.15;
+  const NodeSet nodes = graded_grid_2d(graded);
+  DiscretizationOptions options;
+  options.gamma = {1.6};
+  options.quadrature_points = 3;
+  const Discretization disc(PETSC_COMM_WORLD, nodes, options);
+  const kernel::FormKernels* energy = load_form("fracture_at2").find("elastic", 2);
+  ASSERT_NE(energy, nullptr);
+  const double lambda = 121.15, mu = 80.77, width = 1e-3;
+  const double bulk = lambda + 2 * mu / 3;
+  auto elastic_energy = [&](double split, double split_width, bool damaged) {
+    Assembler assembler(disc, *energy);
+    const std::vector<std::pair<std::string, double>> constants{{"lambda", lambda}, {"mu", mu},    {"Gc", 2.7e-3},
+                                                                {"l", 0.015},       {"k", 1e-6},   {"split", split},
+                                                                {"split_width", split_width}};
+    for (int i = 0; i < energy->n_constants; ++i)
+      for (const auto& [name, value] : constants)
+        if (name == energy->constants[i]) assembler.set_constant(name, value);
+    std::vector<double> state(nodes.size() * 3);
+    for (std::size_t a = 0; a < nodes.size(); ++a) {
+      const double x = nodes.coords[2 * a], y = nodes.coords[2 * a + 1];
+      state[3 * a] = 1e-3 * (x * x - x);  // tr eps = 1e-3 (2.5 x - 1)
+      state[3 * a + 1] = 0.5e-3 * x * y;
+      state[3 * a + 2] = damaged ? 0.2 + 0.8 * y : 1.0;
+    }
+    PetscVector u = assembler.create_vector();
+    set_from_original(disc, state, 3, u);
+    return assembler.value(u);
+  };
+  const double unsplit = elastic_energy(0, 0, false);
+  EXPECT_NEAR(elastic_energy(1, width, false), unsplit, 1e-13 * unsplit);
+  EXPECT_NEAR(elastic_energy(1, 0, false), unsplit, 1e-13 * unsplit);
+  const double exact = elastic_energy(1, 0, true);
+  const double change = std::abs(elastic_energy(1, width, true) - exact);
+  const double bound = bulk * width * width / 8;  // per unit volume, the unit square
+  EXPECT_LT(change, bound);
+  EXPECT_GT(change, 1e-3 * bound) << "the smoothing width did not reach the energy";
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {

@@ -187,7 +187,8 @@ TEST(ModuleCheck, SolidsFormsByName) {
 }
 
 // Every fracture form in every dimension it declares, both bases, with and without the
-// volumetric-deviatoric split (max/min of tr eps: the branch taken is differentiated) and, for the
+// volumetric-deviatoric split (max/min of tr eps: the branch taken is differentiated), the split
+// smoothed over a width of the order of the check's strains (its curvature in play) and, for the
 // anisotropic surface energy, a rotated cubic tensor and an orthotropic gradient metric.
 TEST(ModuleCheck, FractureFormsByName) {
   const std::map<std::string, std::vector<int>> forms = {
@@ -195,12 +196,12 @@ TEST(ModuleCheck, FractureFormsByName) {
   const std::vector<std::pair<std::string, double>> anisotropy = {{"theta0", 0.4}, {"a2", 1.6}, {"g1111", 1.2}, {"g1122", 0.3}, {"g1212", 0.7}};
   for (const auto basis : {lmeform::LmeConsistency::first, lmeform::LmeConsistency::second}) {
     for (const auto& [name, dims] : forms) {
-      for (const double split : {0.0, 1.0}) {
+      for (const auto& [split, width] : std::vector<std::pair<double, double>>{{0.0, 0.0}, {1.0, 0.0}, {1.0, 0.3}}) {
         fc::ModuleCheckOptions options;
         options.basis = basis;
-        options.constants = {{"split", split}};
+        options.constants = {{"split", split}, {"split_width", width}};
         if (name == "fracture_anisotropic") options.constants.insert(options.constants.end(), anisotropy.begin(), anisotropy.end());
-        (void)expect_form_passes(name, dims, options, "split " + std::to_string(int(split)));
+        (void)expect_form_passes(name, dims, options, "split " + std::to_string(int(split)) + " width " + std::to_string(width));
       }
     }
   }
