@@ -72,6 +72,9 @@ FlowSettings read_flow(const Scene& scene) {
 
 namespace {
 
+// At most 3 x 3 and on the stack: the spread and moment matrices of a node's neighbourhood.
+using SmallMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 3, 3>;
+
 
 const StepHistoryFormat kHistoryFormat{"time", {"iterations", "substeps"}};
 
@@ -115,24 +118,24 @@ NodeQuality node_quality(const LmeBasis& basis) {
     if (near.size() < std::size_t(d) + 1) continue;
     std::partial_sort(near.begin(), near.begin() + std::ptrdiff_t(std::min(k, near.size())), near.end());
     near.resize(std::min(k, near.size()));
-    Eigen::MatrixXd spread = Eigen::MatrixXd::Zero(d, d);
+    SmallMatrix spread = SmallMatrix::Zero(d, d);
     for (const auto& [r2, b] : near)
       for (int i = 0; i < d; ++i)
         for (int j = 0; j < d; ++j)
           spread(i, j) += (nodes.point(b)[std::size_t(i)] - x[std::size_t(i)]) * (nodes.point(b)[std::size_t(j)] - x[std::size_t(j)]);
-    const Eigen::VectorXd ev = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(spread).eigenvalues();
+    const auto ev = Eigen::SelfAdjointEigenSolver<SmallMatrix>(spread).eigenvalues();
     if (ev(0) > 0) q.anisotropy = std::max(q.anisotropy, std::sqrt(ev(d - 1) / ev(0)));
     try {
       const std::vector<int> list = basis.neighbours(x);
       const std::vector<double> p = basis.evaluate(x, list, 0);
-      Eigen::MatrixXd J = Eigen::MatrixXd::Zero(d, d);
+      SmallMatrix J = SmallMatrix::Zero(d, d);
       for (std::size_t m = 0; m < list.size(); ++m) {
         if (std::size_t(list[m]) >= nodes.size()) continue;  // a mirror image (the flow's basis has none)
         const auto xb = nodes.point(std::size_t(list[m]));
         for (int i = 0; i < d; ++i)
           for (int j = 0; j < d; ++j) J(i, j) += p[m] * (x[std::size_t(i)] - xb[std::size_t(i)]) * (x[std::size_t(j)] - xb[std::size_t(j)]);
       }
-      const Eigen::VectorXd jv = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(J).eigenvalues();
+      const auto jv = Eigen::SelfAdjointEigenSolver<SmallMatrix>(J).eigenvalues();
       q.lme_condition = std::max(q.lme_condition, jv(0) > 0 ? jv(d - 1) / jv(0) : std::numeric_limits<double>::infinity());
     } catch (const LmeEvaluationError&) {
       q.lme_condition = std::numeric_limits<double>::infinity();
