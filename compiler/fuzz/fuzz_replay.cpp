@@ -9,7 +9,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
-#include <iterator>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -38,7 +38,9 @@ void replay(const fs::path& file) {
   SCOPED_TRACE(file.string());
   std::ifstream in(file, std::ios::binary);
   ASSERT_TRUE(in) << "cannot read " << file;
-  const std::string bytes{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  std::ostringstream read;
+  read << in.rdbuf();
+  const std::string bytes = std::move(read).str();
   try {
     EXPECT_EQ(LLVMFuzzerTestOneInput(reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size()), 0);
   } catch (const std::exception& e) {

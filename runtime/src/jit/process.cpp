@@ -8,7 +8,7 @@
 #include <cerrno>
 #include <cstring>
 #include <fstream>
-#include <iterator>
+#include <sstream>
 #include <random>
 #include <stdexcept>
 
@@ -26,7 +26,9 @@ std::string read_and_remove(const fs::path& path) {
   std::string text;
   {
     std::ifstream in(path, std::ios::binary);
-    text.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+    std::ostringstream read;
+    read << in.rdbuf();
+    text = std::move(read).str();
   }
   std::error_code ec;
   fs::remove(path, ec);
