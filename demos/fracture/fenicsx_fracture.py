@@ -40,12 +40,15 @@ Writes DIR/fenicsx_fracture_<case>_l<l>.json (delta, force, elastic and surface 
 peak force and its delta, sizes, wall and CPU time, per step the u and v solve times, sweeps and
 Newton iterations, the crack points (nodes where v < 0.1 outside the initial notch)) and
 DIR/fenicsx_fracture_<case>_l<l>.png (v at the last step; --snapshots adds earlier ones).
+A run stopped by hand (Ctrl-C, SIGTERM) finishes the step in progress and writes both files for
+the steps done ("stopped_by_signal": true, "steps" of "steps_scheduled").
 Serial only: the reaction sum and the output assume one process.
 """
 import argparse
 import json
 import logging
 import os
+import signal
 import sys
 import time
 
@@ -379,6 +382,11 @@ def run(args):
     setup_s = time.perf_counter() - t_start
     print(f"{case}: l = {l}, {sizes['cells']} cells, {n_v} nodes, {n_u} + {n_v} unknowns, "
           f"band edges: mean {sizes['edge_mean_band']:.5f}, longest {sizes['h_max_band']:.5f}, {len(deltas)} steps, setup {setup_s:.1f} s", flush=True)
+    # A run stopped by hand (SIGINT, SIGTERM) finishes the step in progress and writes its record
+    # of the steps done: a long run is never lost whole.
+    stop_signals = []
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda received, frame: stop_signals.append(received))
     t_loop = time.perf_counter()
     for step, delta in enumerate(deltas, start=1):
         t_step = time.perf_counter()
@@ -451,7 +459,11 @@ def run(args):
         if sweeps > 10 or step % args.print_every == 0:
             print(f"  step {step:5d} delta {delta:.6f} F {force:.5f} sweeps {sweeps:3d} change {change:.1e} "
                   f"min v {v.x.array.min():.3f} t {time.perf_counter() - t_loop:.0f} s", flush=True)
+        if stop_signals:
+            print(f"  stopped by signal {stop_signals[0]} after step {step} (delta {delta:.6f}) of {len(deltas)}", flush=True)
+            break
     loop_s = time.perf_counter() - t_loop
+    steps_done = len(record["delta"]) - 1
 
     forces = np.array(record["force"])
     peak = int(np.argmax(forces))
@@ -475,21 +487,22 @@ def run(args):
         "staggered": {"tol_v_max_change": args.tol, "max_sweeps": args.max_iter,
                       "unconverged_steps": unconverged,
                       "u_newton_damped_retries": u_retries, "u_newton_failures": u_failures},
-        "steps": len(deltas),
+        "steps": steps_done, "steps_scheduled": len(deltas), "stopped_by_signal": bool(stop_signals),
         "peak_force": float(forces[peak]), "delta_at_peak": float(record["delta"][peak]),
         "setup_s": setup_s, "loop_s": loop_s, "wall_s": time.perf_counter() - t_start,
         "cpu_s": time.process_time() - cpu_start,
-        "mean_step_s": loop_s / len(deltas), "total_sweeps": int(sweeps_arr.sum()),
+        "mean_step_s": loop_s / max(steps_done, 1), "total_sweeps": int(sweeps_arr.sum()),
         "max_sweeps_in_a_step": int(sweeps_arr.max()),
         "u_solve_s_total": float(np.sum(record["u_solve_s"])), "v_solve_s_total": float(np.sum(record["v_solve_s"])),
         "crack_points_v_below_0.1": crack.round(5).tolist(),
         **record,
     }
-    with open(stem + ".json", "w") as f:
+    with open(stem + ".json.part", "w") as f:
         json.dump(result, f, indent=1)
-    plot_field(V_v, v, coords, stem + ".png", f"FEniCSx {case.upper()}, l = {l:g}: v at delta = {deltas[-1]:g} mm")
-    print(f"{case}: peak force {result['peak_force']:.5f} kN at delta {result['delta_at_peak']:.6f} mm, "
-          f"{len(deltas)} steps, {result['total_sweeps']} sweeps, unconverged {len(unconverged)}, "
+    os.replace(stem + ".json.part", stem + ".json")
+    plot_field(V_v, v, coords, stem + ".png", f"FEniCSx {case.upper()}, l = {l:g}: v at delta = {record['delta'][-1]:g} mm")
+    print(f"{case}{' (stopped by hand: the peak so far)' if stop_signals else ''}: peak force {result['peak_force']:.5f} kN at delta {result['delta_at_peak']:.6f} mm, "
+          f"{steps_done} steps, {result['total_sweeps']} sweeps, unconverged {len(unconverged)}, "
           f"wall {result['wall_s']:.1f} s, cpu {result['cpu_s']:.1f} s (u {result['u_solve_s_total']:.1f} s, v {result['v_solve_s_total']:.1f} s)"
           f" -> {stem}.json", flush=True)
     return result
