@@ -75,7 +75,6 @@ namespace {
 // At most 3 x 3 and on the stack: the spread and moment matrices of a node's neighbourhood.
 using SmallMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 3, 3>;
 
-
 const StepHistoryFormat kHistoryFormat{"time", {"iterations", "substeps"}};
 
 /// A node within this fraction of the bounding-box diagonal of a hull face is on the surface: a
