@@ -219,26 +219,45 @@ TEST(Staggered, EachGroupReadsPetscOptionsUnderItsOwnPrefix) {
   EXPECT_NEAR(alternate.json["quantities"]["mean_v"].get<double>(), mono.json["quantities"]["mean_v"].get<double>(), 1e-8);
 }
 
+// The fracture tests' graded node set (spacings 0.03 to 0.15 on the unit square) and its basis.
+struct GradedFractureSetup {
+  NodeSet nodes;
+  Discretization disc;
+  GradedFractureSetup() : nodes(graded_nodes()), disc(PETSC_COMM_WORLD, nodes, discretization_options()) {}
+  static NodeSet graded_nodes() {
+    GradedGridOptions graded;
+    graded.h_min = 0.03;
+    graded.h_max = 0.15;
+    return graded_grid_2d(graded);
+  }
+  static DiscretizationOptions discretization_options() {
+    DiscretizationOptions options;
+    options.gamma = {1.6};
+    options.quadrature_points = 3;
+    return options;
+  }
+};
+
+// Sets those of `constants` that the kernels declare (a form need not use every one).
+void set_declared_constants(Assembler& assembler, const kernel::FormKernels& kernels,
+                            const std::vector<std::pair<std::string, double>>& constants) {
+  for (int i = 0; i < kernels.n_constants; ++i)
+    for (const auto& [name, value] : constants)
+      if (name == kernels.constants[i]) assembler.set_constant(name, value);
+}
+
 // A staggered group's Hessian couples only its own components: the generated kernel skips the
 // other component blocks and the matrix keeps only their diagonal. On the fracture form (u, v)
 // with the split's non-smooth energy, on a graded node set, it equals the full Hessian once the
 // other group's rows and columns are the identity.
 TEST(Staggered, AGroupsHessianFromTheGeneratedKernelEqualsTheFullOne) {
-  GradedGridOptions graded;
-  graded.h_min = 0.03;
-  graded.h_max = 0.15;
-  const NodeSet nodes = graded_grid_2d(graded);
-  DiscretizationOptions options;
-  options.gamma = {1.6};
-  options.quadrature_points = 3;
-  const Discretization disc(PETSC_COMM_WORLD, nodes, options);
+  const GradedFractureSetup setup;
+  const NodeSet& nodes = setup.nodes;
+  const Discretization& disc = setup.disc;
   const kernel::FormKernels* energy = load_form("fracture_at2").find("elastic", 2);
   ASSERT_NE(energy, nullptr);
   Assembler assembler(disc, *energy);
-  const std::vector<std::pair<std::string, double>> constants{{"lambda", 121.15}, {"mu", 80.77}, {"Gc", 2.7e-3}, {"l", 0.015}, {"k", 1e-6}, {"split", 1.0}};
-  for (int i = 0; i < energy->n_constants; ++i)
-    for (const auto& [name, value] : constants)
-      if (name == energy->constants[i]) assembler.set_constant(name, value);
+  set_declared_constants(assembler, *energy, {{"lambda", 121.15}, {"mu", 80.77}, {"Gc", 2.7e-3}, {"l", 0.015}, {"k", 1e-6}, {"split", 1.0}, {"split_width", 0.0}});
   std::vector<double> state(nodes.size() * 3);
   for (std::size_t a = 0; a < nodes.size(); ++a) {
     const double x = nodes.coords[2 * a], y = nodes.coords[2 * a + 1];
@@ -257,26 +276,17 @@ TEST(Staggered, AGroupsHessianFromTheGeneratedKernelEqualsTheFullOne) {
 // tension part the energy moves from the exact split's by at most K w^2/8 per unit volume, and does
 // move. The strain field's trace changes sign at x = 0.4, so the kink lies inside the square.
 TEST(Fracture, TheSmoothedSplitKeepsTheIntactEnergyAndMovesTheDamagedOneByLessThanKw2Over8) {
-  GradedGridOptions graded;
-  graded.h_min = 0.03;
-  graded.h_max = 0.15;
-  const NodeSet nodes = graded_grid_2d(graded);
-  DiscretizationOptions options;
-  options.gamma = {1.6};
-  options.quadrature_points = 3;
-  const Discretization disc(PETSC_COMM_WORLD, nodes, options);
+  const GradedFractureSetup setup;
+  const NodeSet& nodes = setup.nodes;
+  const Discretization& disc = setup.disc;
   const kernel::FormKernels* energy = load_form("fracture_at2").find("elastic", 2);
   ASSERT_NE(energy, nullptr);
   const double lambda = 121.15, mu = 80.77, width = 1e-3;
   const double bulk = lambda + 2 * mu / 3;
   auto elastic_energy = [&](double split, double split_width, bool damaged) {
     Assembler assembler(disc, *energy);
-    const std::vector<std::pair<std::string, double>> constants{{"lambda", lambda}, {"mu", mu},    {"Gc", 2.7e-3},
-                                                                {"l", 0.015},       {"k", 1e-6},   {"split", split},
-                                                                {"split_width", split_width}};
-    for (int i = 0; i < energy->n_constants; ++i)
-      for (const auto& [name, value] : constants)
-        if (name == energy->constants[i]) assembler.set_constant(name, value);
+    set_declared_constants(assembler, *energy,
+                           {{"lambda", lambda}, {"mu", mu}, {"Gc", 2.7e-3}, {"l", 0.015}, {"k", 1e-6}, {"split", split}, {"split_width", split_width}});
     std::vector<double> state(nodes.size() * 3);
     for (std::size_t a = 0; a < nodes.size(); ++a) {
       const double x = nodes.coords[2 * a], y = nodes.coords[2 * a + 1];

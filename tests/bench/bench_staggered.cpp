@@ -48,7 +48,7 @@ struct Timing {
 
 void set_fracture_constants(Assembler& a) {
   const std::vector<std::pair<const char*, double>> constants{{"lambda", 121.15}, {"mu", 80.77}, {"Gc", 2.7e-3},
-                                                              {"l", 0.015},       {"k", 1e-6},   {"split", 1.0}};
+                                                              {"l", 0.015},       {"k", 1e-6},   {"split", 1.0}, {"split_width", 0.0}};
   for (int i = 0; i < a.form().n_constants; ++i)
     for (const auto& [name, value] : constants)
       if (std::string(name) == a.form().constants[i]) a.set_constant(name, value);
