@@ -2,8 +2,10 @@
 // quantities they report: a load-stepped Poisson problem restarted mid-way equals the uninterrupted
 // run; a reaction balances the source; bounds give a known active set; alternate minimization of
 // two coupled fields reaches the monolithic minimizer.
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -27,7 +29,8 @@ fs::path folder() {
   const fs::path dir = fs::path(LMEFORM_TEST_TMPDIR) / "steps_and_bounds";
   fs::create_directories(dir);
   for (const char* form : {"poisson_mms.form"}) fs::copy_file(fs::path(LMEFORM_DEMOS) / "poisson" / form, dir / form, fs::copy_options::overwrite_existing);
-  fs::copy_file(fs::path(LMEFORM_TEST_DATA) / "two_fields.form", dir / "two_fields.form", fs::copy_options::overwrite_existing);
+  for (const char* form : {"two_fields.form", "kinked_spring.form"})
+    fs::copy_file(fs::path(LMEFORM_TEST_DATA) / form, dir / form, fs::copy_options::overwrite_existing);
   return dir;
 }
 
@@ -269,6 +272,81 @@ TEST(Staggered, AGroupsHessianFromTheGeneratedKernelEqualsTheFullOne) {
   set_from_original(disc, state, 3, u);
   lmeform::testing::expect_coupled_hessian_equals_full(assembler, u, {0, 1});
   lmeform::testing::expect_coupled_hessian_equals_full(assembler, u, {2});
+}
+
+/// The string on a kinked foundation (data/kinked_spring.form, k = 1, kink width w) loaded to f in
+/// one step from u = 0, where the exact kink's gradient is 0/0: `extra` adds to [steps].
+std::string kinked(double f, double w, const std::string& extra, const std::string& initial = "") {
+  return fmt::format(
+      "[scene]\nname = \"kinked\"\ncoordinates = \"cartesian\"\n[domain]\nlower = [0.0]\nupper = [1.0]\n[nodes]\nspacing = 0.05\n"
+      "[model]\nforms = [\"kinked_spring.form\"]\n[constants]\nk = 1.0\nw = {}\n{}[[dirichlet]]\nboundary = [\"hull\"]\nunknown = \"u\"\n"
+      "value = 0.0\n[steps]\ncount = 1\nsolve_start = false\nmax_cuts = 1\nramp = {{ f = [0.0, {}] }}\n{}"
+      "[quantities]\ncentre = {{ probe = [0.5], field = \"u\" }}\n",
+      w, initial.empty() ? "" : "[initial]\nu = \"" + initial + "\"\n", f, extra);
+}
+
+double last(const problems::RunReport& r, const std::string& quantity) { return r.json.at("quantities").at(quantity).get<double>(); }
+
+bool has_warning(const problems::RunReport& r, const std::string& text) {
+  return std::any_of(r.warnings.begin(), r.warnings.end(), [&](const std::string& w) { return w.find(text) != std::string::npos; });
+}
+
+// Without a fallback the step stops at the kink's 0/0 with a message; with one it is solved with
+// the kink smoothed and then again with the exact kink from there: for f = 2 > k the solution
+// u = (f - k) x (1 - x)/2 lies off the kink and the run ends on it, the same state as a run of the
+// exact model started off the kink, not on the smoothed model's.
+TEST(LoadSteps, AFallbackModelLeadsAStepThatFailsAtEveryCutToTheScenesSolution) {
+  const problems::RunReport stopped = run("kinked_stops.toml", kinked(2.0, 0.0, ""), "");
+  EXPECT_FALSE(stopped.success);
+  EXPECT_NE(stopped.status.find("step 1 did not converge"), std::string::npos) << stopped.status;
+  EXPECT_NE(stopped.status.find("not finite"), std::string::npos) << stopped.status;
+
+  const fs::path out = folder() / "kinked_fallback";
+  fs::remove_all(out);
+  const problems::RunReport r = run("kinked_fallback.toml", kinked(2.0, 0.0, "fallback = { w = 0.1 }\n"), out);
+  ASSERT_TRUE(r.success) << r.status;
+  EXPECT_EQ(r.status, "every step converged");
+  EXPECT_EQ(last(r, "fallback"), 1.0);
+  EXPECT_TRUE(r.warnings.empty());
+  const problems::RunReport off_kink = run("kinked_off.toml", kinked(2.0, 0.0, "", "0.1*x[0]*(1 - x[0])"), "");
+  ASSERT_TRUE(off_kink.success) << off_kink.status;
+  EXPECT_NEAR(last(r, "centre"), last(off_kink, "centre"), 1e-10);
+  EXPECT_NEAR(last(r, "centre"), 0.125, 1e-5);  // (f - k)/8
+  const problems::RunReport smoothed = run("kinked_smoothed.toml", kinked(2.0, 0.1, ""), "");
+  ASSERT_TRUE(smoothed.success) << smoothed.status;
+  EXPECT_GT(std::abs(last(smoothed, "centre") - 0.125), 1e-3) << "the smoothed model's solution is not told apart from the exact one";
+  // The history says which steps needed the fallback.
+  const std::string csv = read(out / "history.csv");
+  EXPECT_NE(csv.find(",fallback,"), std::string::npos) << csv;
+}
+
+// For f = 0.5 < k the exact solution is u = 0, on the kink, where the exact model's Newton cannot
+// go: the step keeps the smoothed model's solution, and the status, a warning and the history say so.
+TEST(LoadSteps, AStepTheScenesModelCannotSolveFromTheFallbacksSolutionKeepsItAndSaysSo) {
+  const problems::RunReport r = run("kinked_kept.toml", kinked(0.5, 0.0, "fallback = { w = 0.1 }\n"), "");
+  ASSERT_TRUE(r.success) << r.status;
+  EXPECT_NE(r.status.find("only with the fallback constants"), std::string::npos) << r.status;
+  EXPECT_TRUE(has_warning(r, "step 1 keeps the solution of the fallback constants w = 0.1")) << r.status;
+  EXPECT_EQ(last(r, "fallback"), 2.0);
+  const problems::RunReport smoothed = run("kinked_smoothed_low.toml", kinked(0.5, 0.1, ""), "");
+  ASSERT_TRUE(smoothed.success) << smoothed.status;
+  EXPECT_NEAR(last(r, "centre"), last(smoothed, "centre"), 1e-10);
+  EXPECT_GT(last(r, "centre"), 1e-3);
+}
+
+TEST(LoadSteps, AFallbackNamingNoConstantOrASteppedOneIsRefused) {
+  for (const auto& [fallback, expected] : std::vector<std::pair<std::string, std::string>>{
+           {"fallback = { width = 0.1 }\n", "key 'steps.fallback.width': 'width' is no constant of the forms"},
+           {"fallback = { f = 1.0 }\n", "is a stepped constant"},
+           {"fallback = {}\n", "key 'steps.fallback' is empty"}}) {
+    try {
+      const problems::RunReport r = run("kinked_bad.toml", kinked(2.0, 0.0, fallback), "");
+      ADD_FAILURE() << fallback << " was accepted: " << r.status;
+    } catch (const SceneError& e) {
+      EXPECT_NE(std::string(e.what()).find(expected), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("kinked_bad.toml"), std::string::npos) << e.what();
+    }
+  }
 }
 
 // The smoothed volumetric-deviatoric split (split_width w > 0): intact material keeps the energy of

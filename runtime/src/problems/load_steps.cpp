@@ -43,7 +43,7 @@ std::vector<double> numbers_of(const SceneTable& t, const std::string& name, con
 }  // namespace
 
 LoadStepSettings read_steps(const Scene& scene) {
-  const auto t = extension_table(scene, kStepsTable, {"count", "ramp", "values", "cut", "max_cuts", "solve_start", "checkpoint_every", "until"});
+  const auto t = extension_table(scene, kStepsTable, {"count", "ramp", "values", "cut", "max_cuts", "solve_start", "checkpoint_every", "until", "fallback"});
   LoadStepSettings s;
   s.count = t->at_least("count", t->integer_of("count", t->require("count")), 1);
   if (s.count > 100000) t->fail_key("count", "= " + std::to_string(s.count) + " is more steps than a run can write (at most 100000)");
@@ -73,6 +73,15 @@ LoadStepSettings read_steps(const Scene& scene) {
   s.until = t->at_least("until", t->integer("until", s.count), 0);
   if (s.until > s.count) t->fail_key("until", "= " + std::to_string(s.until) + " exceeds count = " + std::to_string(s.count));
   if (s.until < s.count && s.checkpoint_every == 0) t->fail_key("until", "stops before the last step: it needs checkpoints to continue from");
+  if (const auto fallback = t->optional_any_table("fallback")) {
+    for (const auto& [name, node] : scene_detail::in_file_order(fallback->entries())) {
+      if (std::any_of(s.constants.begin(), s.constants.end(), [&](const SteppedConstant& c) { return c.name == name; }))
+        fallback->fail_key(name, "is a stepped constant: the fallback changes the model's constants, not the load");
+      s.fallback.emplace_back(name, fallback->number_of(name, *node));
+      s.fallback_where.push_back(fallback->where(name));
+    }
+    if (s.fallback.empty()) t->fail_key("fallback", "is empty: give the constants of the regularized model, e.g. { split_width = 0.01 }");
+  }
   return s;
 }
 
@@ -99,6 +108,12 @@ class LoadStepper {
         for (const auto& [n, v] : bound_.constants) names.push_back(n);
         throw SceneError(fmt::format("{}: '{}' is no constant of the forms{}", c.where, c.name, did_you_mean(c.name, names)));
       }
+    for (std::size_t i = 0; i < settings.fallback.size(); ++i)
+      if (const std::string& name = settings.fallback[i].first; !bound_.constants.contains(name)) {
+        std::vector<std::string> names;
+        for (const auto& [n, v] : bound_.constants) names.push_back(n);
+        throw SceneError(fmt::format("{}: '{}' is no constant of the forms{}", settings.fallback_where[i], name, did_you_mean(name, names)));
+      }
     if (const auto& adapt = ctx.scene->nodes.adapt) {
       std::vector<std::string> names;
       for (const auto& f : bound_.layout.fields) names.push_back(f.name);
@@ -120,7 +135,10 @@ class LoadStepper {
   void set_load(double lambda);
   [[nodiscard]] bool attempt(double lambda, ProblemResult& result);
   [[nodiscard]] bool advance(int step);
-  void record(int step, double lambda, const ProblemResult& result, int cuts);
+  [[nodiscard]] bool ramp_to(int step, ProblemResult& result, int& cuts, std::string& failure);
+  [[nodiscard]] bool solve_with_fallback(int step, ProblemResult& result, int& cuts, FallbackUse& use, std::string& failure);
+  void set_constants(const std::vector<std::pair<std::string, double>>& values);
+  void record(int step, double lambda, const ProblemResult& result, int cuts, FallbackUse fallback = FallbackUse::none);
   void write_outputs(int step);
   void check_state_requirements(int step);
   [[nodiscard]] bool adapting() const noexcept { return ctx_.scene->nodes.adapt.has_value(); }
@@ -285,18 +303,19 @@ bool LoadStepper::attempt(double lambda, ProblemResult& result) {
   return true;
 }
 
-/// Step `step` (from λ = step − 1, or the start): the whole increment, else cut increments.
-bool LoadStepper::advance(int step) {
+/// From the converged load to `step`: the whole increment, else cut increments. False (with the
+/// reason in `failure`) when the smallest increment fails; the state is then the last converged one.
+bool LoadStepper::ramp_to(int step, ProblemResult& result, int& cuts, std::string& failure) {
   const double target = step;
   double increment = target - lambda_;
-  int cuts = 0;
-  ProblemResult result;
+  int cut_here = 0;
   while (lambda_ < target - 1e-12) {
     const double next = std::min(target, lambda_ + increment);
     if (attempt(next, result)) continue;
-    if (++cuts > settings_.max_cuts) {
-      run_.failure = fmt::format("step {} did not converge from load {:.6g} with increments down to {:.3g} of a step ({} cuts): {}", step,
-                                 lambda_, increment, settings_.max_cuts, result.message);
+    ++cuts;
+    if (++cut_here > settings_.max_cuts) {
+      failure = fmt::format("step {} did not converge from load {:.6g} with increments down to {:.3g} of a step ({} cuts): {}", step, lambda_,
+                            increment, settings_.max_cuts, result.message);
       set_load(lambda_);
       return false;
     }
@@ -304,15 +323,91 @@ bool LoadStepper::advance(int step) {
     if (ctx_.log != nullptr)
       *ctx_.log << fmt::format("  step {} at load {:.6g}: {}; retrying with an increment of {:.3g} step\n", step, next, result.message, increment);
   }
+  return true;
+}
+
+void LoadStepper::set_constants(const std::vector<std::pair<std::string, double>>& values) {
+  for (const auto& [name, v] : values) {
+    bound_.expressions->set_constant(name, v);
+    if (space_.disc) space_.set_constant(name, v);
+    input_.constants[name] = v;
+  }
+}
+
+namespace {
+
+std::string listed(const std::vector<std::pair<std::string, double>>& values) {
+  std::string s;
+  for (const auto& [name, v] : values) s += fmt::format("{}{} = {:.6g}", s.empty() ? "" : ", ", name, v);
+  return s;
+}
+
+}  // namespace
+
+/// The step with the fallback constants, then again with the scene's from that solution. The
+/// second solve keeps the bounds of the step's start (irreversibility against the state before
+/// the step, not against the regularized solution). On failure of the fallback itself the state,
+/// the load and the bounds are those of before.
+bool LoadStepper::solve_with_fallback(int step, ProblemResult& result, int& cuts, FallbackUse& use, std::string& failure) {
+  std::vector<std::pair<std::string, double>> scene_values;
+  for (const auto& [name, v] : settings_.fallback) scene_values.emplace_back(name, space_.constants.at(name));
+  const double lambda_start = lambda_;
+  PetscVector start = space_.primary->create_vector();
+  LMEFORM_PETSC_CHECK(VecCopy(u_, start));
+  if (ctx_.log != nullptr)
+    *ctx_.log << fmt::format("  step {}: solving it from load {:.6g} with the fallback constants {} (steps.fallback)\n", step, lambda_start,
+                             listed(settings_.fallback));
+  set_constants(settings_.fallback);
+  std::string fallback_failure;
+  const bool regularized = ramp_to(step, result, cuts, fallback_failure);
+  set_constants(scene_values);
+  if (!regularized) {
+    LMEFORM_PETSC_CHECK(VecCopy(start, u_));
+    lambda_ = lambda_start;
+    set_load(lambda_);
+    space_.update_previous_bounds(bound_, u_);
+    failure += fmt::format("; with the fallback constants {} too: {}", listed(settings_.fallback), fallback_failure);
+    return false;
+  }
+  const ProblemResult regularized_result = result;
+  space_.update_previous_bounds(bound_, start);
+  if (attempt(lambda_, result)) {
+    use = FallbackUse::resolved;
+    if (ctx_.log != nullptr)
+      *ctx_.log << fmt::format("  step {}: converged with the fallback constants, then with the scene's ({}) from that solution\n", step,
+                               listed(scene_values));
+    return true;
+  }
+  const std::string message =
+      fmt::format("step {} keeps the solution of the fallback constants {}: the scene's constants ({}) did not converge from it ({})", step,
+                  listed(settings_.fallback), listed(scene_values), result.message);
+  result = regularized_result;
+  space_.update_previous_bounds(bound_, u_);
+  use = FallbackUse::kept;
+  run_.warnings.push_back(message);
+  if (ctx_.log != nullptr) *ctx_.log << "lmeform: warning: " << message << std::endl;
+  return true;
+}
+
+/// Step `step` (from λ = step − 1, or the start), with the fallback constants when every cut fails.
+bool LoadStepper::advance(int step) {
+  int cuts = 0;
+  ProblemResult result;
+  std::string failure;
+  FallbackUse fallback = FallbackUse::none;
+  if (!ramp_to(step, result, cuts, failure) && (settings_.fallback.empty() || !solve_with_fallback(step, result, cuts, fallback, failure))) {
+    run_.failure = failure;
+    return false;
+  }
   if (step == 0 && !attempt(0.0, result)) {
     run_.failure = "the start (step 0) did not converge: " + result.message;
     return false;
   }
-  record(step, lambda_, result, cuts);
+  record(step, lambda_, result, cuts, fallback);
   return true;
 }
 
-void LoadStepper::record(int step, double lambda, const ProblemResult& result, int cuts) {
+void LoadStepper::record(int step, double lambda, const ProblemResult& result, int cuts, FallbackUse fallback) {
   StepRow s;
   s.step = step;
   s.position = lambda;
@@ -325,6 +420,7 @@ void LoadStepper::record(int step, double lambda, const ProblemResult& result, i
   }
   s.quantities.insert(s.quantities.end(), result.solver_figures.begin(), result.solver_figures.end());
   if (adapting()) s.quantities.emplace_back("nodes", double(input_.nodes.size()));
+  if (!settings_.fallback.empty()) s.quantities.emplace_back("fallback", double(static_cast<int>(fallback)));
   s.counts = {{"iterations", result.iterations}, {"cuts", cuts}};
   s.wall_s = clock_.seconds();
   run_.history.push_back(s);
@@ -438,6 +534,14 @@ void describe_steps(const LoadStepSettings& settings, const LoadStepRun& run, Ru
   for (const auto& [name, v] : last.constants) report.row(name, fmt::format("{:.10g}", v));
   describe_quantities(last.quantities, report);
   if (run.refinements > 0) report.row("refinements", fmt::format("{} (the nodes followed the field: steps solved again)", run.refinements));
+  if (!settings.fallback.empty()) {
+    std::string resolved, kept;
+    for (const StepRow& s : run.history)
+      for (const auto& [name, v] : s.quantities)
+        if (name == "fallback" && v > 0) (v > 1 ? kept : resolved) += fmt::format("{}{}", (v > 1 ? kept : resolved).empty() ? "" : " ", s.step);
+    report.row("fallback constants", fmt::format("{}: steps solved again from it: {}; steps that kept its solution: {}", listed(settings.fallback),
+                                       resolved.empty() ? "none" : resolved, kept.empty() ? "none" : kept));
+  }
 }
 
 class LoadStepsDriver final : public ProblemDriver {
@@ -457,9 +561,14 @@ class LoadStepsDriver final : public ProblemDriver {
     RunReport report;
     report.problem = std::string(stepper.bound().solver->name());
     report.success = run.failure.empty();
+    std::string kept;
+    for (const StepRow& s : run.history)
+      for (const auto& [name, v] : s.quantities)
+        if (name == "fallback" && v > 1) kept += fmt::format("{}{}", kept.empty() ? "" : " ", s.step);
     report.status = !run.failure.empty()            ? "STOPPED: " + run.failure
                     : settings.until < settings.count ? fmt::format("stopped after step {} as asked (steps.until): --restart continues", settings.until)
-                                                      : std::string("every step converged");
+                    : !kept.empty() ? "every step converged, step(s) " + kept + " only with the fallback constants (steps.fallback)"
+                                    : std::string("every step converged");
     if (run.history.empty()) throw std::runtime_error(report.status);
     describe_steps(settings, run, report);
     report.warnings.insert(report.warnings.end(), run.warnings.begin(), run.warnings.end());

@@ -5,12 +5,17 @@
 // [quantities] in <output>/history.csv and history.json, writes the state as one entry of an XDMF
 // series and a checkpoint. A step that does not converge is retried with its increment halved, up
 // to `max_cuts` times; if the smallest increment fails, the run stops with the last converged
-// state on disk, and `lmeform run --restart` continues from it.
+// state on disk, and `lmeform run --restart` continues from it. With `fallback` constants (a
+// regularized model: a smoothed kink, a larger residual stiffness) such a step is first solved
+// with them and then solved again with the scene's constants from that solution: the regularized
+// model is a path to the scene's solution. If the second solve fails too, the step keeps the
+// regularized solution, the run says so (history column `fallback` = 2, a warning) and goes on.
 //
 //   [steps]
 //   count = 20
 //   ramp = { delta = [0.0, 0.01] }        # linear in the step: delta_k = 0 + 0.01 k / count
 //   values = { load = [0.0, 0.2, ...] }   # or one value per step, step 0 first (count + 1 values)
+//   fallback = { split_width = 0.01 }     # constants for a step that fails with every cut
 #pragma once
 
 #include <mpi.h>
@@ -46,7 +51,13 @@ struct LoadStepSettings {
   bool solve_start = true;      ///< solve at step 0 too (else step 0 is the initial state)
   int checkpoint_every = 1;     ///< steps between checkpoints (0: none)
   int until = 0;                ///< the last step of this run (count: all; fewer: continue later with --restart)
+  /// Constants of a regularized model for a step that fails with every cut (empty: none).
+  std::vector<std::pair<std::string, double>> fallback;
+  std::vector<std::string> fallback_where;  ///< where each fallback constant is, for messages
 };
+
+/// How a step was solved, in the history's `fallback` column (runs with fallback constants).
+enum class FallbackUse { none = 0, resolved = 1, kept = 2 };
 
 /// Reads [steps]; throws SceneError naming the key.
 [[nodiscard]] LoadStepSettings read_steps(const Scene& scene);

@@ -27,9 +27,24 @@ void write_step_history(const fs::path& directory, const std::string& scene, con
   nlohmann::ordered_json js;
   js["scene"] = scene;
   js["steps"] = nlohmann::ordered_json::array();
+  // The columns are every name any row has, in order of appearance: rows may differ (a step 0
+  // without a solve has no solver figures; a restarted run may record a column its first part did not).
+  std::vector<std::string> constant_columns, quantity_columns;
+  const auto add_columns = [](std::vector<std::string>& columns, const std::vector<std::pair<std::string, double>>& values) {
+    for (const auto& [name, v] : values)
+      if (std::find(columns.begin(), columns.end(), name) == columns.end()) columns.push_back(name);
+  };
+  for (const StepRow& s : rows) add_columns(constant_columns, s.constants), add_columns(quantity_columns, s.quantities);
+  const auto csv_cells = [&csv](const std::vector<std::string>& columns, const std::vector<std::pair<std::string, double>>& values) {
+    for (const std::string& column : columns) {
+      csv << ",";
+      const auto it = std::find_if(values.begin(), values.end(), [&](const auto& nv) { return nv.first == column; });
+      if (it != values.end()) csv << fmt::format("{:.17g}", it->second);
+    }
+  };
   csv << "step," << format.position;
-  for (const auto& [name, v] : rows.front().constants) csv << "," << name;
-  for (const auto& [name, v] : rows.front().quantities) csv << "," << name;
+  for (const std::string& name : constant_columns) csv << "," << name;
+  for (const std::string& name : quantity_columns) csv << "," << name;
   for (const std::string& name : format.counts) csv << "," << name;
   csv << ",wall_s\n";
   for (const StepRow& s : rows) {
@@ -37,8 +52,10 @@ void write_step_history(const fs::path& directory, const std::string& scene, con
     nlohmann::ordered_json row{{"step", s.step}, {format.position, s.position}};
     for (const std::string& name : format.counts) row[name] = s.count(name);
     row["wall_s"] = s.wall_s;
-    for (const auto& [name, v] : s.constants) csv << "," << fmt::format("{:.17g}", v), row["constants"][name] = json_number(v);
-    for (const auto& [name, v] : s.quantities) csv << "," << fmt::format("{:.17g}", v), row["quantities"][name] = json_number(v);
+    for (const auto& [name, v] : s.constants) row["constants"][name] = json_number(v);
+    for (const auto& [name, v] : s.quantities) row["quantities"][name] = json_number(v);
+    csv_cells(constant_columns, s.constants);
+    csv_cells(quantity_columns, s.quantities);
     for (const std::string& name : format.counts) csv << "," << s.count(name);
     csv << "," << fmt::format("{:.3f}", s.wall_s) << "\n";
     js["steps"].push_back(row);

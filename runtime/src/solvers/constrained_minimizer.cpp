@@ -745,6 +745,12 @@ ConstrainedResult ConstrainedMinimizer::minimize(Vec u, std::vector<double> mult
     }
     run.sigma = run.nu;
     evaluate(u, run.nu, false, run.ev);
+    // A state whose energy or gradient is not finite (a kink evaluated on it, 0/0) gives the
+    // augmented Lagrangian nothing to factor either: a failed solve, for the caller to handle.
+    if (!std::isfinite(run.ev.energy) || !std::isfinite(norm(run.ev.energy_gradient))) {
+      result.message = "the energy or its gradient is not finite at the state Newton started from (" + kkt.divergence + ")";
+      break;
+    }
     if (!options_.augmented_fallback) {
       result.message = "KKT Newton diverged or stalled: " + kkt.divergence;
       break;
