@@ -164,6 +164,7 @@ class LoadStepper {
   std::optional<TimeSeriesWriter> series_;  ///< with an output folder
   LoadStepRun run_;
   std::map<std::string, std::size_t> requirement_failures_;  ///< condition -> failing nodes when last warned
+  int fallback_step_ = -1;      ///< the last step a fallback solve took part in
 };
 
 /// Refinements of one step before the run goes on with nodes still too coarse (and says so).
@@ -384,8 +385,8 @@ bool LoadStepper::solve_with_fallback(int step, ProblemResult& result, int& cuts
   result = regularized_result;
   space_.update_previous_bounds(bound_, u_);
   use = FallbackUse::kept;
-  run_.warnings.push_back(message);
-  if (ctx_.log != nullptr) *ctx_.log << "lmeform: warning: " << message << std::endl;
+  run_.fallback_kept[step] = message;  // a warning unless a later solve of the step (refined nodes) converges
+  if (ctx_.log != nullptr) *ctx_.log << "  " << message << std::endl;
   return true;
 }
 
@@ -399,6 +400,11 @@ bool LoadStepper::advance(int step) {
     run_.failure = failure;
     return false;
   }
+  // A step solved again on refined nodes starts from its earlier solution: if that came through
+  // the fallback, so does this one.
+  if (fallback != FallbackUse::none) fallback_step_ = step;
+  if (fallback == FallbackUse::none && fallback_step_ == step) fallback = FallbackUse::resolved;
+  if (fallback != FallbackUse::kept) run_.fallback_kept.erase(step);
   if (step == 0 && !attempt(0.0, result)) {
     run_.failure = "the start (step 0) did not converge: " + result.message;
     return false;
@@ -572,6 +578,7 @@ class LoadStepsDriver final : public ProblemDriver {
     if (run.history.empty()) throw std::runtime_error(report.status);
     describe_steps(settings, run, report);
     report.warnings.insert(report.warnings.end(), run.warnings.begin(), run.warnings.end());
+    for (const auto& [step, message] : run.fallback_kept) report.warnings.push_back(message);
     report.fields = stepper.final_fields();
     report_step_history(kHistoryFormat, run.history, ctx.output_directory, ctx.scene->name, report);
     return report;

@@ -22,6 +22,7 @@
 
 #include <filesystem>
 #include <iosfwd>
+#include <map>
 #include <string>
 #include <utility>
 #include <vector>
@@ -67,6 +68,9 @@ struct LoadStepRun {
   std::string failure;          ///< empty when every step converged
   std::vector<std::string> warnings;  ///< a state requirement that stopped holding at a step
   int refinements = 0;          ///< new node sets ([nodes] adapt), each followed by a step solved again
+  /// Steps that kept the fallback constants' solution, with why the scene's constants failed (a
+  /// step solved again on refined nodes forgets what its earlier solves did).
+  std::map<int, std::string> fallback_kept;
   double wall_s = 0;
 };
 
