@@ -533,6 +533,15 @@ ReportFields LoadStepper::final_fields() const {
   return f;
 }
 
+/// The steps whose history row has this fallback use, "" when none.
+std::string steps_with(const std::vector<StepRow>& history, FallbackUse use) {
+  std::string steps;
+  for (const StepRow& s : history)
+    for (const auto& [name, v] : s.quantities)
+      if (name == "fallback" && static_cast<int>(v) == static_cast<int>(use)) steps += fmt::format("{}{}", steps.empty() ? "" : " ", s.step);
+  return steps;
+}
+
 void describe_steps(const LoadStepSettings& settings, const LoadStepRun& run, RunReport& report) {
   const StepRow& last = run.history.back();
   report.row("steps", fmt::format("{} of {} (load {:.6g}), {} increments cut", last.step, settings.count, last.position,
@@ -541,12 +550,9 @@ void describe_steps(const LoadStepSettings& settings, const LoadStepRun& run, Ru
   describe_quantities(last.quantities, report);
   if (run.refinements > 0) report.row("refinements", fmt::format("{} (the nodes followed the field: steps solved again)", run.refinements));
   if (!settings.fallback.empty()) {
-    std::string resolved, kept;
-    for (const StepRow& s : run.history)
-      for (const auto& [name, v] : s.quantities)
-        if (name == "fallback" && v > 0) (v > 1 ? kept : resolved) += fmt::format("{}{}", (v > 1 ? kept : resolved).empty() ? "" : " ", s.step);
+    const std::string resolved = steps_with(run.history, FallbackUse::resolved), kept = steps_with(run.history, FallbackUse::kept);
     report.row("fallback constants", fmt::format("{}: steps solved again from it: {}; steps that kept its solution: {}", listed(settings.fallback),
-                                       resolved.empty() ? "none" : resolved, kept.empty() ? "none" : kept));
+                                                 resolved.empty() ? "none" : resolved, kept.empty() ? "none" : kept));
   }
 }
 
@@ -567,10 +573,7 @@ class LoadStepsDriver final : public ProblemDriver {
     RunReport report;
     report.problem = std::string(stepper.bound().solver->name());
     report.success = run.failure.empty();
-    std::string kept;
-    for (const StepRow& s : run.history)
-      for (const auto& [name, v] : s.quantities)
-        if (name == "fallback" && v > 1) kept += fmt::format("{}{}", kept.empty() ? "" : " ", s.step);
+    const std::string kept = steps_with(run.history, FallbackUse::kept);
     report.status = !run.failure.empty()            ? "STOPPED: " + run.failure
                     : settings.until < settings.count ? fmt::format("stopped after step {} as asked (steps.until): --restart continues", settings.until)
                     : !kept.empty() ? "every step converged, step(s) " + kept + " only with the fallback constants (steps.fallback)"
