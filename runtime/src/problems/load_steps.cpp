@@ -80,7 +80,7 @@ LoadStepSettings read_steps(const Scene& scene) {
       s.fallback.emplace_back(name, fallback->number_of(name, *node));
       s.fallback_where.push_back(fallback->where(name));
     }
-    if (s.fallback.empty()) t->fail_key("fallback", "is empty: give the constants of the regularized model, e.g. { split_width = 0.01 }");
+    if (s.fallback.empty()) t->fail_key("fallback", "is empty: give the regularized model's constants, { NAME = value, ... }");
   }
   return s;
 }
@@ -102,18 +102,14 @@ class LoadStepper {
   LoadStepper(const DriverContext& ctx, const LoadStepSettings& settings)
       : ctx_(ctx), settings_(settings), bound_(bind_scene(*ctx.scene, ctx.comm, ctx.log, ramped(settings))) {
     MPI_Comm_rank(ctx.comm, &rank_);
-    for (const SteppedConstant& c : settings.constants)
-      if (!bound_.constants.contains(c.name)) {
-        std::vector<std::string> names;
-        for (const auto& [n, v] : bound_.constants) names.push_back(n);
-        throw SceneError(fmt::format("{}: '{}' is no constant of the forms{}", c.where, c.name, did_you_mean(c.name, names)));
-      }
-    for (std::size_t i = 0; i < settings.fallback.size(); ++i)
-      if (const std::string& name = settings.fallback[i].first; !bound_.constants.contains(name)) {
-        std::vector<std::string> names;
-        for (const auto& [n, v] : bound_.constants) names.push_back(n);
-        throw SceneError(fmt::format("{}: '{}' is no constant of the forms{}", settings.fallback_where[i], name, did_you_mean(name, names)));
-      }
+    const auto require_constant = [this](const std::string& where, const std::string& name) {
+      if (bound_.constants.contains(name)) return;
+      std::vector<std::string> names;
+      for (const auto& [n, v] : bound_.constants) names.push_back(n);
+      throw SceneError(fmt::format("{}: '{}' is no constant of the forms{}", where, name, did_you_mean(name, names)));
+    };
+    for (const SteppedConstant& c : settings.constants) require_constant(c.where, c.name);
+    for (std::size_t i = 0; i < settings.fallback.size(); ++i) require_constant(settings.fallback_where[i], settings.fallback[i].first);
     if (const auto& adapt = ctx.scene->nodes.adapt) {
       std::vector<std::string> names;
       for (const auto& f : bound_.layout.fields) names.push_back(f.name);
