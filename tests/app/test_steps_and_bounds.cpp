@@ -334,6 +334,25 @@ TEST(LoadSteps, AStepTheScenesModelCannotSolveFromTheFallbacksSolutionKeepsItAnd
   EXPECT_GT(last(r, "centre"), 1e-3);
 }
 
+// A run stopped after a step that kept the fallback's solution and then restarted still says so
+// at its end: the warning comes back from history.json, the status names the step.
+TEST(LoadSteps, ARestartWarnsAgainOfAStepThatKeptTheFallbacksSolution) {
+  const fs::path out = folder() / "kinked_kept_restart";
+  fs::remove_all(out);
+  const std::string whole = kinked(0.5, 0.0, "fallback = { w = 0.1 }\n");
+  std::string part = whole;
+  part.replace(part.find("count = 1"), 9, "count = 2\nuntil = 1");
+  std::string rest = whole;
+  rest.replace(rest.find("count = 1"), 9, "count = 2");
+  const problems::RunReport first = run("kinked_kept_part.toml", part, out);
+  ASSERT_TRUE(first.success) << first.status;
+  ASSERT_TRUE(has_warning(first, "step 1 keeps the solution of the fallback constants w = 0.1")) << first.status;
+  const problems::RunReport resumed = run("kinked_kept_rest.toml", rest, out, /*restart=*/true);
+  ASSERT_TRUE(resumed.success) << resumed.status;
+  EXPECT_TRUE(has_warning(resumed, "step 1 keeps the solution of the fallback constants w = 0.1")) << resumed.status;
+  EXPECT_NE(resumed.status.find("step(s) 1"), std::string::npos) << resumed.status;
+}
+
 TEST(LoadSteps, AFallbackNamingNoConstantOrASteppedOneIsRefused) {
   for (const auto& [fallback, expected] : std::vector<std::pair<std::string, std::string>>{
            {"fallback = { width = 0.1 }\n", "key 'steps.fallback.width': 'width' is no constant of the forms"},

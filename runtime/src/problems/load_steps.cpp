@@ -339,6 +339,13 @@ std::string listed(const std::vector<std::pair<std::string, double>>& values) {
   return s;
 }
 
+/// How a recorded step used the fallback (its history quantity "fallback"; none without one).
+FallbackUse fallback_use(const StepRow& row) {
+  for (const auto& [name, v] : row.quantities)
+    if (name == "fallback") return static_cast<FallbackUse>(static_cast<int>(v));
+  return FallbackUse::none;
+}
+
 }  // namespace
 
 /// The step with the fallback constants, then again with the scene's from that solution. The
@@ -489,6 +496,13 @@ void LoadStepper::resume() {
   set_from_original(*space_.disc, cp.fields.at("state").values, bound_.layout.dofs_per_node, u_);
   space_.update_previous_bounds(bound_, u_);  // irreversibility continues from the checkpoint, not from the start
   run_.history = read_step_history(ctx_.output_directory, kHistoryFormat, step);
+  // The steps that kept a fallback solution before the restart are warned of again at its end.
+  for (const StepRow& row : run_.history)
+    if (fallback_use(row) == FallbackUse::kept)
+      run_.fallback_kept[row.step] = fmt::format("step {} keeps the solution of the fallback constants {} (before the restart: history.json)",
+                                                 row.step, listed(settings_.fallback));
+  if (!run_.history.empty() && fallback_use(run_.history.back()) != FallbackUse::none)
+    fallback_step_ = run_.history.back().step;
   series_->restore(restored_series(*series_, ctx_.output_directory, run_.history, bound_.layout, bound_.dim));
   first_step_ = step + 1;
   if (ctx_.log != nullptr) *ctx_.log << fmt::format("resumed from {} at step {} (load {:.6g})\n", checkpoint.string(), step, lambda_);
@@ -533,8 +547,7 @@ ReportFields LoadStepper::final_fields() const {
 std::string steps_with(const std::vector<StepRow>& history, FallbackUse use) {
   std::string steps;
   for (const StepRow& s : history)
-    for (const auto& [name, v] : s.quantities)
-      if (name == "fallback" && static_cast<int>(v) == static_cast<int>(use)) steps += fmt::format("{}{}", steps.empty() ? "" : " ", s.step);
+    if (fallback_use(s) == use) steps += fmt::format("{}{}", steps.empty() ? "" : " ", s.step);
   return steps;
 }
 
