@@ -501,8 +501,6 @@ void LoadStepper::resume() {
     if (fallback_use(row) == FallbackUse::kept)
       run_.fallback_kept[row.step] = fmt::format("step {} keeps the solution of the fallback constants {} (before the restart: history.json)",
                                                  row.step, listed(settings_.fallback));
-  if (!run_.history.empty() && fallback_use(run_.history.back()) != FallbackUse::none)
-    fallback_step_ = run_.history.back().step;
   series_->restore(restored_series(*series_, ctx_.output_directory, run_.history, bound_.layout, bound_.dim));
   first_step_ = step + 1;
   if (ctx_.log != nullptr) *ctx_.log << fmt::format("resumed from {} at step {} (load {:.6g})\n", checkpoint.string(), step, lambda_);
