@@ -135,6 +135,27 @@ TEST(PrimalLists, PerNodeRadiiMatchBruteForce) {
   EXPECT_EQ(one[3].size(), tree.radius_search(std::span<const double>(pts.data() + 6, 2), 0.1).size());
 }
 
+TEST(PrimalLists, StronglyGradedRadiiIn3DMatchBruteForce) {
+  // Radii from 0.02 to 0.32 (five classes of the search) and from 0.1 to 0.12 (one search).
+  const NodeSet nodes(3, test::random_points(3, 3000, 0.0, 1.0, 5));
+  const KdTree tree(nodes);
+  const auto pts = test::random_points(3, 80, 0.0, 1.0, 9);
+  for (const auto& [lo, hi] : {std::pair{0.02, 0.32}, std::pair{0.1, 0.12}}) {
+    std::vector<double> radii(nodes.size());
+    for (std::size_t a = 0; a < radii.size(); ++a) radii[a] = lo + (hi - lo) * std::pow(nodes.point(a)[2], 2);
+    const CsrLists lists = primal_lists(tree, pts, radii);
+    lists.validate();
+    for (std::size_t q = 0; q < 80; ++q) {
+      const std::span<const double> x(pts.data() + 3 * q, 3);
+      std::vector<int> expect;
+      for (std::size_t a = 0; a < nodes.size(); ++a)
+        if (dist(nodes, a, x) <= radii[a]) expect.push_back(static_cast<int>(a));
+      const auto got = lists[q];
+      ASSERT_EQ(std::vector<int>(got.begin(), got.end()), expect) << "radii " << lo << " to " << hi << ", point " << q;
+    }
+  }
+}
+
 TEST(CsrLists, PushBackAndValidate) {
   CsrLists l;
   l.push_back(std::vector<int>{3, 1});

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <set>
 
 #include "lmeform/domain.hpp"
 
@@ -179,6 +180,85 @@ TEST(Domain, PolyhedronNodesAndFaceQuadrature) {
     for (const double w : q.weights) area += w;
     EXPECT_NEAR(area, d.part_measure(part), 1e-12) << part;
   }
+}
+
+}  // namespace
+}  // namespace lmeform
+
+namespace lmeform {
+namespace {
+
+/// The spacing h_near within `band` of the sphere |x| = radius, growing by `grading` per unit
+/// distance beyond it, up to h_far: the shape of an interface-resolving spacing.
+SpacingFunction toward_sphere(double radius, double h_near, double band, double grading, double h_far) {
+  return {[=](std::span<const double> x) {
+            double r2 = 0;
+            for (const double c : x) r2 += c * c;
+            const double d = std::abs(std::sqrt(r2) - radius);
+            return std::min(h_far, h_near + grading * std::max(0.0, d - band));
+          },
+          h_near};
+}
+
+TEST(NestedGrids, AConstantSpacingGivesTheUniformGrid) {
+  const Box box{3, {0, 0, 0}, {1, 0.5, 0.75}};
+  const NodeSet nested = nested_grids(box, uniform(0.125));
+  const NodeSet grid = uniform_grid(box, 0.125);
+  ASSERT_EQ(nested.size(), grid.size());
+  for (std::size_t a = 0; a < grid.size(); ++a)
+    for (std::size_t i = 0; i < 3; ++i) EXPECT_NEAR(nested.point(a)[i], grid.point(a)[i], 1e-15) << a;
+}
+
+TEST(NestedGrids, NodesNearTheInterfaceFormTheFinestGridAndTheFarOnesTheCoarsest) {
+  for (const int dim : {2, 3}) {
+    const Box box = Box::unit(dim);
+    const double fine = 1.0 / 64, coarse = 1.0 / 8;
+    const NodeSet nodes = nested_grids(box, toward_sphere(0.5, fine, 0.05, 0.3, coarse));
+    // Every node is a vertex of the finest grid, none is repeated, all lie in the box.
+    std::set<std::array<long, 3>> seen;
+    for (std::size_t a = 0; a < nodes.size(); ++a) {
+      std::array<long, 3> index{0, 0, 0};
+      for (std::size_t i = 0; i < std::size_t(dim); ++i) {
+        const double c = nodes.point(a)[i];
+        ASSERT_GE(c, 0.0);
+        ASSERT_LE(c, 1.0);
+        index[i] = std::lround(c / fine);
+        EXPECT_NEAR(c, double(index[i]) * fine, 1e-14);
+      }
+      EXPECT_TRUE(seen.insert(index).second) << "node " << a << " repeated";
+    }
+    // Around points of the interface every vertex of the finest grid's cell is a node.
+    for (const double angle : {0.1, 0.7, 1.3}) {
+      const std::array<double, 3> x{0.5 * std::cos(angle) * (dim == 3 ? std::sqrt(0.5) : 1.0), 0.5 * std::sin(angle),
+                                    dim == 3 ? 0.5 * std::cos(angle) * std::sqrt(0.5) : 0.0};
+      for (int v = 0; v < (1 << dim); ++v) {
+        std::array<long, 3> index{0, 0, 0};
+        for (std::size_t i = 0; i < std::size_t(dim); ++i) index[i] = long(std::floor(x[i] / fine)) + ((v >> i) & 1);
+        EXPECT_TRUE(seen.count(index)) << "dim " << dim << ": the finest grid's vertex (" << index[0] << ", " << index[1] << ", "
+                                       << index[2] << ") next to the interface is missing";
+      }
+    }
+    // At the far corner the next node is the coarsest grid's spacing away.
+    double next = std::numeric_limits<double>::infinity();
+    for (std::size_t a = 0; a < nodes.size(); ++a) {
+      double d2 = 0;
+      for (std::size_t i = 0; i < std::size_t(dim); ++i) d2 += std::pow(nodes.point(a)[i] - 1.0, 2);
+      if (d2 > 0) next = std::min(next, std::sqrt(d2));
+    }
+    EXPECT_NEAR(next, coarse, 1e-12) << "dim " << dim;
+    // Far fewer nodes than the finest grid, more than the coarsest.
+    const double finest_grid = std::pow(65.0, dim), coarsest_grid = std::pow(9.0, dim);
+    EXPECT_LT(double(nodes.size()), 0.5 * finest_grid) << "dim " << dim;
+    EXPECT_GT(double(nodes.size()), 2 * coarsest_grid) << "dim " << dim;
+  }
+}
+
+TEST(NestedGrids, BadSpacingsAndBudgetsAreRefused) {
+  const Box box = Box::unit(3);
+  EXPECT_THROW((void)nested_grids(box, uniform(0.0)), std::invalid_argument);
+  EXPECT_THROW((void)nested_grids(box, {[](std::span<const double> x) { return x[0] > 0.5 ? -1.0 : 0.1; }, 0.1}), std::invalid_argument);
+  expect_error([&] { (void)nested_grids(box, uniform(0.01), 1000); }, "max_nodes");
+  EXPECT_THROW((void)nested_grids(Box::unit(1), uniform(0.1)), std::invalid_argument);
 }
 
 }  // namespace

@@ -436,7 +436,13 @@ radius = 0.5
 )";
   EXPECT_EQ(vesicle_of(ball).semi_axes[2], 0.5);
   t = ball + "[vesicle.adaptivity]\nstages = [ { eps = 0.2, f = 1.0 } ]\n";
-  expect_error(t, {"CVT adaptivity is available in 2D and axisymmetric scenes only"});
+  expect_error(t, {"stages", "[0] relocates the nodes by a CVT", "2D and axisymmetric only", "resolve = ..."});
+  // In 3D a stage resolves the interface (nested grids) or keeps its grid.
+  t = ball + "[vesicle.adaptivity]\nstages = [ { eps = 0.25, resolve = 0.25 }, { eps = 0.2, lloyd_iterations = 0 } ]\n";
+  const auto model = vesicle_of(t);
+  ASSERT_TRUE(model.adaptivity.has_value());
+  EXPECT_EQ(model.adaptivity->stages[0].resolve, 0.25);
+  EXPECT_FALSE(model.adaptivity->stages[1].new_grid());
 }
 
 TEST(VesicleScene, InterfaceResolutionKeys) {

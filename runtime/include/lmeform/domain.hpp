@@ -108,6 +108,16 @@ struct SpacingFunction {
 [[nodiscard]] NodeSet domain_nodes(const Domain& domain, const SpacingFunction& spacing, std::uint64_t seed = 1,
                                    std::size_t max_nodes = 2'000'000, std::span<const double> kept = {});
 
+/// The vertices of an octree (quadtree in 2D) of a box whose cells follow a spacing: level 0 is a
+/// uniform grid whose spacing is about the largest h(x), and a cell of size s is halved on every
+/// axis where h at its centre is below s, down to the first level at or below spacing.h_min. Within
+/// each level the nodes form a uniform grid (the LME basis of a fourth-order energy wants regular
+/// neighbourhoods, which a Poisson-disk sample is not), and a point where h(x) ≤ h_min sees the
+/// finest grid in every direction. Deterministic; nodes ordered x fastest. Throws
+/// std::invalid_argument for a box that is not 2D or 3D, a spacing that is not positive and finite,
+/// or more than max_nodes nodes (the message gives the count).
+[[nodiscard]] NodeSet nested_grids(const Box& box, const SpacingFunction& spacing, std::size_t max_nodes = 2'000'000);
+
 /// Quadrature on the faces of a boundary part: points grouped into facets (segments between
 /// consecutive boundary nodes in 2D, triangles of a face's boundary nodes in 3D), each with its
 /// weights (facet measure included), the face's outward normal, and the facet's vertices (node

@@ -83,8 +83,9 @@ class KdTree {
 [[nodiscard]] double support_radius(double beta, double tol0);
 
 /// Primal lists: for each evaluation point x_q, the nodes b with |x_q - x_b| <= radii[b], sorted by
-/// index. `radii` has one entry per node (per-node supports; the tree is searched with the largest
-/// radius and filtered) or a single entry for all nodes.
+/// index. `radii` has one entry per node (per-node supports: the nodes are searched in classes of
+/// radii within a factor 1.5, each with its largest radius, and filtered) or a single entry for all
+/// nodes.
 [[nodiscard]] CsrLists primal_lists(const KdTree& tree, std::span<const double> points, std::span<const double> radii);
 
 }  // namespace lmeform

@@ -217,11 +217,56 @@ CsrLists primal_lists(const KdTree& tree, std::span<const double> points, std::s
                                 std::to_string(tree.size()) + " nodes (need 1 or one per node)");
   }
   const double rmax = *std::max_element(radii.begin(), radii.end());
+  const double rmin = *std::min_element(radii.begin(), radii.end());
   const NodeSet& nodes = tree.nodes();
-  CsrLists lists;
   const std::size_t nq = points.size() / d;
+  CsrLists lists;
   lists.offsets.reserve(nq + 1);
   std::vector<int> cand;
+  // On a graded node set one search with the largest radius gathers, at every fine point, every
+  // node within a coarse support (an octree with spacings 1:8 in 3D: thousands of candidates for a
+  // list of hundreds). Nodes are searched instead in classes of radii within a factor 1.5, each with
+  // its own tree and largest radius.
+  constexpr double class_ratio = 1.5;
+  if (radii.size() > 1 && rmin > 0 && rmax > class_ratio * rmin) {
+    struct RadiusClass {
+      std::vector<int> members;   // node indices
+      std::vector<double> coords;
+      double radius = 0;
+      std::unique_ptr<KdTree> tree;
+    };
+    const auto class_count = static_cast<std::size_t>(std::floor(std::log(rmax / rmin) / std::log(class_ratio))) + 1;
+    std::vector<RadiusClass> classes(class_count);
+    for (std::size_t b = 0; b < radii.size(); ++b) {
+      const auto c = std::min(class_count - 1, static_cast<std::size_t>(std::floor(std::log(radii[b] / rmin) / std::log(class_ratio))));
+      classes[c].members.push_back(static_cast<int>(b));
+      const auto xb = nodes.point(b);
+      classes[c].coords.insert(classes[c].coords.end(), xb.begin(), xb.end());
+      classes[c].radius = std::max(classes[c].radius, radii[b]);
+    }
+    std::erase_if(classes, [](const RadiusClass& c) { return c.members.empty(); });
+    for (RadiusClass& c : classes) c.tree = std::make_unique<KdTree>(NodeSet(tree.dim(), std::move(c.coords)));
+    std::vector<int> list;
+    for (std::size_t q = 0; q < nq; ++q) {
+      const auto x = points.subspan(q * d, d);
+      list.clear();
+      for (const RadiusClass& c : classes) {
+        c.tree->radius_search(x, c.radius, cand);
+        for (const int local : cand) {
+          const int b = c.members[static_cast<std::size_t>(local)];
+          const auto xb = nodes.point(static_cast<std::size_t>(b));
+          double d2 = 0.0;
+          for (std::size_t i = 0; i < d; ++i) d2 += (x[i] - xb[i]) * (x[i] - xb[i]);
+          const double rb = radii[static_cast<std::size_t>(b)];
+          if (d2 <= rb * rb) list.push_back(b);
+        }
+      }
+      std::sort(list.begin(), list.end());
+      lists.indices.insert(lists.indices.end(), list.begin(), list.end());
+      lists.offsets.push_back(static_cast<int>(lists.indices.size()));
+    }
+    return lists;
+  }
   for (std::size_t q = 0; q < nq; ++q) {
     const auto x = points.subspan(q * d, d);
     tree.radius_search(x, rmax, cand);

@@ -234,7 +234,6 @@ std::optional<VesicleModel> read_vesicle(const Scene& s) {
   if (const auto init = t->optional_table("initial", {"shape", "center", "semi_axes", "radius", "eps", "thickness", "aperture", "resolve"})) {
     read_initial_shape(s, *init, m);
     if (init->has("resolve")) {
-      if (s.dim() != 2) init->fail_key("resolve", "needs a CVT grid: available in 2D and axisymmetric scenes only");
       m.initial_resolve = init->positive("resolve", init->number("resolve"));
       if (m.eps < *m.initial_resolve)
         init->fail_key("resolve", fmt::format("= {} is coarser than the first solve's {} = {}: the first grid must resolve it",
@@ -246,8 +245,15 @@ std::optional<VesicleModel> read_vesicle(const Scene& s) {
                                        m.field));
   }
   if (const auto adapt = t->optional_table("adaptivity", {"stages", "lloyd_iterations", "start", "samples_per_node", "band", "grading", "coarsening", "max_nodes", "fit_iterations"})) {
-    if (s.dim() != 2) adapt->fail_key("stages", "CVT adaptivity is available in 2D and axisymmetric scenes only");
     read_adaptivity(*adapt, m);
+    // A 3D grid is built only to resolve an interface (nested grids); the CVT relocation is 2D.
+    if (s.dim() == 3)
+      for (std::size_t i = 0; i < m.adaptivity->stages.size(); ++i)
+        if (const AdaptivityStage& st = m.adaptivity->stages[i]; !st.resolve && st.new_grid())
+          adapt->fail_key("stages", fmt::format("[{}] relocates the nodes by a CVT (f, lloyd_iterations = {}), which is 2D and axisymmetric "
+                                                "only: in 3D a stage resolves the interface ('resolve = ...', nested grids) or keeps "
+                                                "its grid ('lloyd_iterations = 0')",
+                                                i, st.lloyd_iterations));
   }
   // The sphere of the targets must be wider than the interface at least at the schedule's finest
   // eps: a diffuse interface wider than the vesicle leaves it no inside phase (radius 1e-14 in the
@@ -663,6 +669,19 @@ NodeSet resolve_interface(const NodeSet& sampled, std::span<const double> phi, c
                           const InterfaceResolution& resolution, const CvtOptions& cvt, std::ostream* log) {
   const Stopwatch clock;
   double h_interface = eps_resolve / resolution_factor;
+  // In 3D (no CVT there) the grid is an octree's vertices: uniform grids nested toward the interface,
+  // whose finest level is already at or below the interface spacing.
+  if (box.dim == 3) {
+    const NodeSet nodes = nested_grids(box, interface_spacing(sampled, phi, eps_resolve, h_interface, resolution), resolution.max_nodes);
+    const SpacingSummary spacing = spacing_summary(nodes);
+    if (log != nullptr)
+      *log << fmt::format("interface grid for eps >= {}: h {:.4g} within {:.4g} of the interface, grading {}, {} nodes of nested "
+                          "grids, h_min {:.4g} ({:.1f} s)\n",
+                          eps_resolve, h_interface, resolution.band * eps_resolve, resolution.grading, nodes.size(), spacing.h_min,
+                          clock.seconds())
+           << std::flush;
+    return nodes;
+  }
   for (int attempt = 0;; ++attempt) {
     const SpacingFunction field = interface_spacing(sampled, phi, eps_resolve, h_interface, resolution);
     if (const std::size_t needed_nodes = count_nodes_for_spacing(box, field).total; needed_nodes > resolution.max_nodes)
@@ -677,7 +696,8 @@ NodeSet resolve_interface(const NodeSet& sampled, std::span<const double> phi, c
       *log << fmt::format("interface grid for eps >= {}: h {:.4g} within {:.4g} of the interface, grading {}, {} nodes, "
                           "{} Lloyd iterations, h_min {:.4g} ({:.1f} s)\n",
                           eps_resolve, h_interface, resolution.band * eps_resolve, resolution.grading, nodes.size(),
-                          report.iterations.size(), spacing.h_min, clock.seconds());
+                          report.iterations.size(), spacing.h_min, clock.seconds())
+           << std::flush;
     }
     // The measured h_min (a low quantile of the Voronoi-ring spacing) lies a little below the
     // target spacing of a CVT: refine by the ratio until the resolution rule holds.
