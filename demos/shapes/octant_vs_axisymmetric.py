@@ -4,8 +4,8 @@ octant's mirror planes against the axisymmetric meridian.
 
     octant_vs_axisymmetric.py OCTANT_DIR AXISYMMETRIC_DIR --axis x|z --out FIGURE.png
 
-Each directory is a run's output folder (`lmeform run SCENE --output DIR --json DIR/run.json`):
-its NAME.h5 and run.json. `--axis` is the 3D axis of revolution (the axisymmetric z). The octant's
+Each directory is a run's output folder (`lmeform run SCENE --output DIR --json DIR.json`): its
+NAME.h5, and the run's JSON as DIR/run.json or DIR.json. `--axis` is the 3D axis of revolution (the axisymmetric z). The octant's
 energy is multiplied by 8 (three mirror planes). Prints the energies, their relative difference and
 the membrane's extent along and across the axis in each mirror plane. The figure has the contours
 and a 3D view of the membrane: phi = 0 on the octant's tetrahedra (piecewise linear, marching
@@ -32,7 +32,10 @@ def load(run_dir):
         sys.exit(f"{run_dir}: expected one output .h5, found {h5}")
     with h5py.File(h5[0], "r") as f:
         nodes, phi, cells = f["nodes"][:], f["fields/phi"][:].ravel(), f["cells"][:]
-    with open(os.path.join(run_dir, "run.json")) as f:
+    json_path = os.path.join(run_dir, "run.json")
+    if not os.path.exists(json_path):
+        json_path = run_dir.rstrip("/") + ".json"
+    with open(json_path) as f:
         record = json.load(f)
     return nodes, phi, cells, record
 

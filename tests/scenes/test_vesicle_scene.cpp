@@ -443,6 +443,13 @@ radius = 0.5
   ASSERT_TRUE(model.adaptivity.has_value());
   EXPECT_EQ(model.adaptivity->stages[0].resolve, 0.25);
   EXPECT_FALSE(model.adaptivity->stages[1].new_grid());
+  // Without stages the table only shapes the grid of initial.resolve; without that it is incomplete.
+  t = ball + "resolve = 0.3\n[vesicle.adaptivity]\nband = 2.0\n";
+  const auto resolved = vesicle_of(t);
+  ASSERT_TRUE(resolved.adaptivity.has_value());
+  EXPECT_TRUE(resolved.adaptivity->stages.empty());
+  EXPECT_EQ(resolved.adaptivity->interface.band, 2.0);
+  expect_error(ball + "[vesicle.adaptivity]\nband = 2.0\n", {"stages"});
 }
 
 TEST(VesicleScene, InterfaceResolutionKeys) {

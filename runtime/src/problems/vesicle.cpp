@@ -104,6 +104,11 @@ void read_adaptivity(const SceneTable& t, VesicleModel& m) {
   r.coarsening = t.positive("coarsening", t.number("coarsening", r.coarsening));
   if (r.coarsening < 1) t.fail_key("coarsening", "must be at least 1 (the far spacing over the interface spacing), got " + format_number(r.coarsening));
   r.max_nodes = static_cast<std::size_t>(t.at_least("max_nodes", t.integer("max_nodes", static_cast<int>(r.max_nodes)), 4));
+  // Without stages the table only shapes the first grid of initial.resolve.
+  if (!t.has("stages") && m.initial_resolve) {
+    m.adaptivity = std::move(a);
+    return;
+  }
   const toml::node& n = t.require("stages");
   const auto* arr = n.as_array();
   if (arr == nullptr) t.wrong_type("stages", n, "an array of tables");
