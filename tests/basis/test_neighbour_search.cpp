@@ -136,16 +136,20 @@ TEST(PrimalLists, PerNodeRadiiMatchBruteForce) {
 }
 
 TEST(PrimalLists, StronglyGradedRadiiIn3DMatchBruteForce) {
-  // Radii from 0.02 to 0.32 (five classes of the search) and from 0.1 to 0.12 (one search).
+  // Radii from 0.02 to 0.32 (five classes of the search) and from 0.1 to 0.12 (one search); 400
+  // points search by classes, the first 10 alone by one search: the lists are the same.
   const NodeSet nodes(3, test::random_points(3, 3000, 0.0, 1.0, 5));
   const KdTree tree(nodes);
-  const auto pts = test::random_points(3, 80, 0.0, 1.0, 9);
+  const auto pts = test::random_points(3, 400, 0.0, 1.0, 9);
   for (const auto& [lo, hi] : {std::pair{0.02, 0.32}, std::pair{0.1, 0.12}}) {
     std::vector<double> radii(nodes.size());
     for (std::size_t a = 0; a < radii.size(); ++a) radii[a] = lo + (hi - lo) * std::pow(nodes.point(a)[2], 2);
     const CsrLists lists = primal_lists(tree, pts, radii);
+    const CsrLists few = primal_lists(tree, std::span<const double>(pts).first(30), radii);
     lists.validate();
-    for (std::size_t q = 0; q < 80; ++q) {
+    for (std::size_t q = 0; q < 10; ++q)
+      EXPECT_TRUE(std::ranges::equal(few[q], lists[q])) << "radii " << lo << " to " << hi << ", point " << q;
+    for (std::size_t q = 0; q < 400; ++q) {
       const std::span<const double> x(pts.data() + 3 * q, 3);
       std::vector<int> expect;
       for (std::size_t a = 0; a < nodes.size(); ++a)

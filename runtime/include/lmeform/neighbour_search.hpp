@@ -83,9 +83,9 @@ class KdTree {
 [[nodiscard]] double support_radius(double beta, double tol0);
 
 /// Primal lists: for each evaluation point x_q, the nodes b with |x_q - x_b| <= radii[b], sorted by
-/// index. `radii` has one entry per node (per-node supports: the nodes are searched in classes of
-/// radii within a factor 1.5, each with its largest radius, and filtered) or a single entry for all
-/// nodes.
+/// index. `radii` has one entry per node (per-node supports, filtered: for at least an eighth as
+/// many points as nodes the nodes are searched in classes of radii within a factor 1.5, each with
+/// its own tree and largest radius, else with the largest radius) or a single entry for all nodes.
 [[nodiscard]] CsrLists primal_lists(const KdTree& tree, std::span<const double> points, std::span<const double> radii);
 
 }  // namespace lmeform

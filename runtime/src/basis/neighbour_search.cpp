@@ -226,9 +226,10 @@ CsrLists primal_lists(const KdTree& tree, std::span<const double> points, std::s
   // On a graded node set one search with the largest radius gathers, at every fine point, every
   // node within a coarse support (an octree with spacings 1:8 in 3D: thousands of candidates for a
   // list of hundreds). Nodes are searched instead in classes of radii within a factor 1.5, each with
-  // its own tree and largest radius.
+  // its own tree and largest radius. Building those trees costs about one search per node, so a
+  // few points (one node's list, a probe) keep the single search.
   constexpr double class_ratio = 1.5;
-  if (radii.size() > 1 && rmin > 0 && rmax > class_ratio * rmin) {
+  if (radii.size() > 1 && rmin > 0 && rmax > class_ratio * rmin && 8 * nq >= tree.size()) {
     struct RadiusClass {
       std::vector<int> members;   // node indices
       std::vector<double> coords;
