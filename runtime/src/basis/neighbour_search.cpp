@@ -223,6 +223,13 @@ CsrLists primal_lists(const KdTree& tree, std::span<const double> points, std::s
   CsrLists lists;
   lists.offsets.reserve(nq + 1);
   std::vector<int> cand;
+  const auto within_own_support = [&](std::span<const double> x, int b) {
+    const auto xb = nodes.point(static_cast<std::size_t>(b));
+    double d2 = 0.0;
+    for (std::size_t i = 0; i < d; ++i) d2 += (x[i] - xb[i]) * (x[i] - xb[i]);
+    const double rb = radii[static_cast<std::size_t>(b)];
+    return d2 <= rb * rb;
+  };
   // On a graded node set one search with the largest radius gathers, at every fine point, every
   // node within a coarse support (an octree with spacings 1:8 in 3D: thousands of candidates for a
   // list of hundreds). Nodes are searched instead in classes of radii within a factor 1.5, each with
@@ -255,11 +262,7 @@ CsrLists primal_lists(const KdTree& tree, std::span<const double> points, std::s
         c.tree->radius_search(x, c.radius, cand);
         for (const int local : cand) {
           const int b = c.members[static_cast<std::size_t>(local)];
-          const auto xb = nodes.point(static_cast<std::size_t>(b));
-          double d2 = 0.0;
-          for (std::size_t i = 0; i < d; ++i) d2 += (x[i] - xb[i]) * (x[i] - xb[i]);
-          const double rb = radii[static_cast<std::size_t>(b)];
-          if (d2 <= rb * rb) list.push_back(b);
+          if (within_own_support(x, b)) list.push_back(b);
         }
       }
       std::sort(list.begin(), list.end());
@@ -274,13 +277,8 @@ CsrLists primal_lists(const KdTree& tree, std::span<const double> points, std::s
     if (radii.size() == 1) {
       lists.indices.insert(lists.indices.end(), cand.begin(), cand.end());
     } else {
-      for (const int b : cand) {
-        const auto xb = nodes.point(static_cast<std::size_t>(b));
-        double d2 = 0.0;
-        for (std::size_t i = 0; i < d; ++i) d2 += (x[i] - xb[i]) * (x[i] - xb[i]);
-        const double rb = radii[static_cast<std::size_t>(b)];
-        if (d2 <= rb * rb) lists.indices.push_back(b);
-      }
+      for (const int b : cand)
+        if (within_own_support(x, b)) lists.indices.push_back(b);
     }
     lists.offsets.push_back(static_cast<int>(lists.indices.size()));
   }
