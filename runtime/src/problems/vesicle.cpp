@@ -502,7 +502,8 @@ StageRecord run_vesicle_stage(MPI_Comm comm, const BoundScene& bound, const Vesi
   if (st != nullptr) {
     nodes = stages[from].result.nodes;
     rec.generation = stages[from].generation + (st->new_grid() ? 1 : 0);
-    rec.grid = rec.generation == 0 ? stages[from].grid : "cvt-" + std::to_string(rec.generation);
+    // A 3D stage's new grid is a nested grid around the interface; in 2D it is a CVT.
+    rec.grid = rec.generation == 0 ? stages[from].grid : (scene.dim() == 3 ? "nested-" : "cvt-") + std::to_string(rec.generation);
     if (st->branch) rec.label = " (branch)";
     if (st->new_grid()) nodes = relocated_nodes(scene, model, *st, stages[from], log);
     rec.adapt_s = clock.seconds();
