@@ -82,6 +82,95 @@ TEST(MembraneTopology, JsonNamesComponentsAndGenusAndReadsBack) {
   EXPECT_FALSE(problems::topology_from_json(problems::topology_json(lme_topology(torus)), LevelSetGeometry::axisymmetric).same_as(t));
 }
 
+/// A uniform grid over [0, L]^dim with n intervals per side.
+NodeSet corner_grid(int dim, double L, int n) {
+  std::vector<double> coords;
+  const int nz = dim == 3 ? n : 0;
+  for (int k = 0; k <= nz; ++k)
+    for (int j = 0; j <= n; ++j)
+      for (int i = 0; i <= n; ++i) {
+        coords.push_back(L * i / n);
+        coords.push_back(L * j / n);
+        if (dim == 3) coords.push_back(L * k / n);
+      }
+  return NodeSet(dim, coords);
+}
+
+std::vector<double> sampled(const NodeSet& nodes, const std::function<double(std::span<const double>)>& f) {
+  std::vector<double> v(nodes.size());
+  for (std::size_t a = 0; a < nodes.size(); ++a) v[a] = f(nodes.point(a));
+  return v;
+}
+
+// One part of a symmetric body: the level set in the part has boundary on the planes; with its
+// mirror images it is the closed surface of the whole.
+TEST(MembraneTopology, APartOfASymmetricBodyIsCountedWithItsImages) {
+  const NodeSet octant = corner_grid(3, 0.8, 12);
+  const std::vector<MirrorPlane> planes = {{0, 0.0}, {1, 0.0}, {2, 0.0}};
+  const auto topology = [&](const std::function<double(std::span<const double>)>& f, std::span<const MirrorPlane> p) {
+    return problems::symmetric_level_set_topology(octant, sampled(octant, f), p, LevelSetGeometry::spatial).describe();
+  };
+  const auto centred_sphere = [](std::span<const double> x) { return 0.5 - std::hypot(x[0], x[1], x[2]); };
+  const auto flat_torus = [](std::span<const double> x) { return 0.16 - std::hypot(std::hypot(x[0], x[1]) - 0.45, x[2]); };
+  const auto sphere_pair = [](std::span<const double> x) { return 0.22 - std::hypot(x[0] - 0.45, x[1], x[2]); };
+  const auto off_plane = [](std::span<const double> x) { return 0.2 - std::hypot(x[0] - 0.4, x[1] - 0.4, x[2] - 0.4); };
+  EXPECT_EQ(topology(centred_sphere, planes), "1 component, genus 0 (a sphere)");
+  EXPECT_EQ(topology(flat_torus, planes), "1 component, genus 1 (a torus)");
+  EXPECT_EQ(topology(sphere_pair, planes), "2 components, genus 0, 0 (2 spheres)");
+  EXPECT_EQ(topology(off_plane, planes), "8 components, genus 0, 0, 0, 0, 0, 0, 0, 0 (8 spheres)");
+  // The torus mirrored across z = 0 only is a quarter of it cut by the planes x = 0 and y = 0: open.
+  EXPECT_EQ(topology(flat_torus, std::span(planes).subspan(2)).find("1 component"), 0u);
+  EXPECT_EQ(problems::symmetric_level_set_topology(octant, sampled(octant, flat_torus), std::span(planes).subspan(2), LevelSetGeometry::spatial)
+                .components[0]
+                .closed,
+            false);
+
+  // A meridian half-plane mirrored across z = 0 (an equatorial plane): a sphere and a torus.
+  const NodeSet quarter = corner_grid(2, 0.8, 20);
+  const std::vector<MirrorPlane> equator = {{1, 0.0}};
+  const auto meridian = [&](const Profile& d) {
+    return problems::symmetric_level_set_topology(quarter, sampled(quarter, [&](std::span<const double> x) { return d(x[0], x[1]); }), equator,
+                                                  LevelSetGeometry::axisymmetric)
+        .describe();
+  };
+  EXPECT_EQ(meridian([](double r, double z) { return 0.5 - std::hypot(r, z); }), "1 component, genus 0 (a sphere)");
+  EXPECT_EQ(meridian([](double r, double z) { return 0.12 - std::hypot(r - 0.4, z); }), "1 component, genus 1 (a torus)");
+  // Planar: a quadrant of a circle.
+  const std::vector<MirrorPlane> two = {{0, 0.0}, {1, 0.0}};
+  EXPECT_EQ(problems::symmetric_level_set_topology(quarter, sampled(quarter, [](std::span<const double> x) { return 0.5 - std::hypot(x[0], x[1]); }),
+                                                   two, LevelSetGeometry::planar)
+                .describe(),
+            "1 closed curve");
+  EXPECT_THROW((void)problems::symmetric_level_set_topology(quarter, std::vector<double>(3, 1.0), two, LevelSetGeometry::planar),
+               std::invalid_argument);
+  EXPECT_THROW((void)problems::symmetric_level_set_topology(quarter, sampled(quarter, centred_sphere), planes, LevelSetGeometry::planar),
+               std::invalid_argument);
+}
+
+// A vesicle solved on a quadrant of its domain reports the topology of the whole membrane.
+TEST(MembraneTopology, AVesicleOnAQuadrantReportsTheWholeMembrane) {
+  const std::string text =
+      "[scene]\nname = \"quadrant\"\ncoordinates = \"cartesian\"\n"
+      "[domain]\nlower = [0.0, 0.0]\nupper = [1.0, 1.0]\nmirror = [\"x_min\", \"y_min\"]\n"
+      "[nodes]\ncounts = [21, 21]\n"
+      "[model]\nforms = [\"helfrich\", \"area\", \"volume\"]\n"
+      "[constants]\neps = 0.1\n"
+      "[constraints]\narea = {}\nvolume = {}\n"
+      "[[dirichlet]]\nboundary = [\"x_max\", \"y_max\"]\nunknown = \"phi\"\nvalue = -1.0\n"
+      "[solver]\naugmented_tolerance = 1e-2\n"
+      "[vesicle]\nradius = 0.5\nreduced_volume = 0.9\n"
+      "[vesicle.initial]\nshape = \"ellipsoid\"\ncenter = [0.0, 0.0]\nsemi_axes = [0.6, 0.4]\n";
+  const Scene scene = parse_scene(text, "quadrant.toml", problems::driver_tables());
+  const problems::VesicleRun run = problems::run_vesicle(PETSC_COMM_SELF, scene, *problems::read_vesicle(scene), nullptr);
+  ASSERT_TRUE(run.initial_topology.has_value());
+  EXPECT_EQ(run.initial_topology->describe(), "1 closed curve");
+  ASSERT_EQ(run.stages.size(), 1u);
+  ASSERT_TRUE(run.stages[0].topology.has_value());
+  EXPECT_EQ(run.stages[0].topology->describe(), "1 closed curve");
+  EXPECT_TRUE(run.warnings.empty());
+  EXPECT_TRUE(run.failure.empty()) << run.failure;
+}
+
 /// A small vesicle whose start is a torus with a hole narrower than the interface width: the
 /// phase field closes it (a sphere bends less than any torus).
 Scene torus_start(bool guard) {

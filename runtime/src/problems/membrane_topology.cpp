@@ -1,5 +1,8 @@
 #include "membrane_topology.hpp"
 
+#include <algorithm>
+#include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -55,9 +58,52 @@ std::vector<double> lme_values_at_nodes(MPI_Comm comm, const LmeBasis& basis, st
   return values;
 }
 
-LevelSetTopology field_topology(const Discretization& disc, std::span<const double> coefficients, LevelSetGeometry geometry) {
+LevelSetTopology field_topology(const Discretization& disc, std::span<const double> coefficients, LevelSetGeometry geometry,
+                                std::span<const MirrorPlane> symmetry_planes) {
   const std::vector<double> renumbered = renumbered_state(disc, coefficients, 1);
-  return level_set_topology(disc.nodes(), disc.cells(), lme_values_at_nodes(disc.comm(), disc.basis(), renumbered), geometry);
+  const std::vector<double> values = lme_values_at_nodes(disc.comm(), disc.basis(), renumbered);
+  if (symmetry_planes.empty()) return level_set_topology(disc.nodes(), disc.cells(), values, geometry);
+  return symmetric_level_set_topology(disc.nodes(), values, symmetry_planes, geometry);
+}
+
+LevelSetTopology symmetric_level_set_topology(const NodeSet& nodes, std::span<const double> values, std::span<const MirrorPlane> symmetry_planes,
+                                              LevelSetGeometry geometry) {
+  if (values.size() != nodes.size())
+    throw std::invalid_argument(fmt::format("symmetric_level_set_topology: {} values for {} nodes", values.size(), nodes.size()));
+  if (symmetry_planes.empty()) return level_set_topology(nodes, delaunay(nodes), values, geometry);
+  const auto dim = static_cast<std::size_t>(nodes.dim);
+  for (const MirrorPlane& m : symmetry_planes)
+    if (m.axis < 0 || std::size_t(m.axis) >= dim)
+      throw std::invalid_argument(fmt::format("symmetric_level_set_topology: a plane normal to axis {} in {}D", m.axis, dim));
+  // Nodes on a plane (to round-off of the nodes' extent) are not copied across it: the images
+  // must not duplicate them, or the triangulation of the whole would have coincident vertices.
+  double extent = 0;
+  for (std::size_t k = 0; k < dim; ++k) {
+    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    for (std::size_t a = 0; a < nodes.size(); ++a) {
+      lo = std::min(lo, nodes.coords[a * dim + k]);
+      hi = std::max(hi, nodes.coords[a * dim + k]);
+    }
+    extent = std::max(extent, hi - lo);
+  }
+  const double on_plane = 1e-9 * extent;
+  std::vector<double> coords = nodes.coords, all_values(values.begin(), values.end());
+  for (std::size_t mask = 1; mask < (std::size_t(1) << symmetry_planes.size()); ++mask)
+    for (std::size_t a = 0; a < nodes.size(); ++a) {
+      std::vector<double> image(nodes.coords.begin() + std::ptrdiff_t(a * dim), nodes.coords.begin() + std::ptrdiff_t((a + 1) * dim));
+      bool distinct = true;
+      for (std::size_t p = 0; distinct && p < symmetry_planes.size(); ++p) {
+        if ((mask & (std::size_t(1) << p)) == 0) continue;
+        double& x = image[std::size_t(symmetry_planes[p].axis)];
+        distinct = std::abs(x - symmetry_planes[p].position) > on_plane;
+        x = 2 * symmetry_planes[p].position - x;
+      }
+      if (!distinct) continue;
+      coords.insert(coords.end(), image.begin(), image.end());
+      all_values.push_back(values[a]);
+    }
+  const NodeSet whole(nodes.dim, std::move(coords));
+  return level_set_topology(whole, delaunay(whole), all_values, geometry);
 }
 
 LevelSetTopology field_topology(MPI_Comm comm, const NodeSet& nodes, const BackgroundCells& cells, std::span<const double> coefficients,

@@ -32,9 +32,18 @@ namespace lmeform::problems {
 [[nodiscard]] std::vector<double> lme_values_at_nodes(MPI_Comm comm, const LmeBasis& basis, std::span<const double> coefficients);
 
 /// The topology of φ = 0 for the scalar coefficients of a solve's discretization (original node
-/// order, one per node). Collective over the discretization's communicator.
+/// order, one per node). Collective over the discretization's communicator. With planes of
+/// symmetry (the scene's [domain] mirror), the nodes are a part of a symmetric body: the level set
+/// is that of the whole body, the part and its mirror images (symmetric_level_set_topology).
 [[nodiscard]] LevelSetTopology field_topology(const Discretization& disc, std::span<const double> coefficients,
-                                              LevelSetGeometry geometry);
+                                              LevelSetGeometry geometry, std::span<const MirrorPlane> symmetry_planes = {});
+
+/// The topology of {f = 0} of the whole body of which `nodes` with `values` are the part on one
+/// side of each plane: the nodes and their images across every combination of the planes (a node
+/// on a plane is its own image there) are triangulated anew and counted by level_set_topology.
+/// Without planes, the Delaunay cells of the nodes.
+[[nodiscard]] LevelSetTopology symmetric_level_set_topology(const NodeSet& nodes, std::span<const double> values,
+                                                            std::span<const MirrorPlane> symmetry_planes, LevelSetGeometry geometry);
 
 /// The same on nodes with their cells and a basis built for them (γ, options), collective over comm.
 [[nodiscard]] LevelSetTopology field_topology(MPI_Comm comm, const NodeSet& nodes, const BackgroundCells& cells, std::span<const double> coefficients,

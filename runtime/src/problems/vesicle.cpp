@@ -475,10 +475,9 @@ std::vector<double> first_start(const BoundScene& bound, const VesicleModel& mod
 std::optional<LevelSetTopology> topology_or_none(const ProblemResult& solved, std::span<const double> coefficients, const BoundScene& bound,
                                                  std::ostream* log) {
   if (!solved.discretization) return std::nullopt;
-  // The level set of one part of a symmetric body is a surface with boundary on the planes.
-  if (!bound.discretization.mirrors.empty()) return std::nullopt;
   try {
-    return field_topology(*solved.discretization, coefficients, level_set_geometry(bound.dim, bound.axisymmetric));
+    // With planes of symmetry, the topology of the whole body (the part's level set has boundary on the planes).
+    return field_topology(*solved.discretization, coefficients, level_set_geometry(bound.dim, bound.axisymmetric), bound.discretization.mirrors);
   } catch (const std::exception& e) {
     if (log != nullptr) *log << "the membrane's topology could not be evaluated: " << e.what() << "\n";
     return std::nullopt;
