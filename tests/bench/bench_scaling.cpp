@@ -13,7 +13,6 @@
 // Rank 0 appends one JSON record per run to FILE (one line each); scripts/scaling_study.py runs
 // the rank counts and writes build/bench/scaling.json.
 #include <mpi.h>
-#include <sys/resource.h>
 
 #include <cmath>
 #include <cstdio>
@@ -30,16 +29,11 @@
 #include "lmeform/discretization.hpp"
 #include "lmeform/node_sets.hpp"
 #include "lmeform/petsc.hpp"
+#include "lmeform/resource_usage.hpp"
 #include "poisson_kernels.hpp"
 
 namespace lmeform::bench {
 namespace {
-
-double peak_rss_mb() {
-  rusage usage{};
-  getrusage(RUSAGE_SELF, &usage);
-  return static_cast<double>(usage.ru_maxrss) / 1024.0;  // kilobytes on Linux
-}
 
 struct ScalingArgs {
   int dim = 2;
@@ -87,7 +81,7 @@ NodeSet jittered_grid(int dim, long long nodes) {
 }
 
 int run(int argc, char** argv) {
-  const double base_rss = max_over_ranks(peak_rss_mb());
+  const double base_rss = max_over_ranks(peak_resident_mb());
   const ScalingArgs args = parse_args(argc, argv);
   int ranks = 1;
   MPI_Comm_size(PETSC_COMM_WORLD, &ranks);
@@ -112,7 +106,7 @@ int run(int argc, char** argv) {
   const double setup_s = max_over_ranks(clock.seconds());
   const double setup_cpu_s = max_over_ranks(cpu.seconds());
   const StageTimes& t = disc.times();
-  const double setup_rss = max_over_ranks(peak_rss_mb());
+  const double setup_rss = max_over_ranks(peak_resident_mb());
   const Discretization::MemoryReport memory = disc.memory_report();
 
   const kernel::FormKernels& form = args.dim == 2 ? poisson_heat_2d : poisson_heat_3d;
@@ -140,7 +134,7 @@ int run(int argc, char** argv) {
   PetscReal t_max = 0;
   LMEFORM_PETSC_CHECK(VecMax(T, nullptr, &t_max));
 
-  const double peak = max_over_ranks(peak_rss_mb());
+  const double peak = max_over_ranks(peak_resident_mb());
   long long elements = disc.n_elements(), owned_elements = 0;
   for (int e = 0; e < disc.n_elements(); ++e) owned_elements += disc.cells_domain().element_owned(e) ? 1 : 0;
   const long long max_elements = static_cast<long long>(max_over_ranks(static_cast<double>(elements)));
@@ -177,7 +171,7 @@ int run(int argc, char** argv) {
       .set("base_rss_mb", base_rss)
       .set("setup_rss_mb_per_rank", setup_rss)
       .set("peak_rss_mb_per_rank", peak)
-      .set("work_rss_mb_per_rank", max_over_ranks(peak_rss_mb() - base_rss))
+      .set("work_rss_mb_per_rank", max_over_ranks(peak_resident_mb() - base_rss))
       .set("replicated_mb", max_over_ranks(memory.replicated_bytes / 1e6))
       .set("local_mb_per_rank", max_over_ranks(memory.local_bytes / 1e6));
   say("%s\n", r.str(0).c_str());

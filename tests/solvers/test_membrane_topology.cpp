@@ -167,6 +167,7 @@ TEST(MembraneTopology, AVesicleOnAQuadrantReportsTheWholeMembrane) {
   ASSERT_EQ(run.stages.size(), 1u);
   ASSERT_TRUE(run.stages[0].topology.has_value());
   EXPECT_EQ(run.stages[0].topology->describe(), "1 closed curve");
+  EXPECT_GT(run.stages[0].peak_rss_mb, 1.0);  // the process' peak, MPI and PETSc included
   EXPECT_TRUE(run.warnings.empty());
   EXPECT_TRUE(run.failure.empty()) << run.failure;
 }

@@ -12,6 +12,7 @@
 #include "figures.hpp"
 #include "lmeform/output.hpp"
 #include "lmeform/petsc.hpp"
+#include "lmeform/resource_usage.hpp"
 #include "lmeform/scene.hpp"
 #include "lmeform/stopwatch.hpp"
 #include "problem_registry.hpp"
@@ -164,6 +165,12 @@ int run_command(const RunOptions& options) {
 
   RunReport report = driver.run(ctx);
   if (report.fields && writes_files) write_fields(scene, out_dir, report);
+  int ranks = 1;
+  MPI_Comm_size(PETSC_COMM_WORLD, &ranks);
+  const double peak_mb = peak_resident_mb_per_rank(PETSC_COMM_WORLD);
+  report.row("ranks, peak memory", fmt::format("{} rank{}, {:.0f} MiB resident at most per rank", ranks, ranks == 1 ? "" : "s", peak_mb));
+  report.json["ranks"] = ranks;
+  report.json["peak_rss_mb_per_rank"] = problems::json_number(peak_mb);
   if (rank == 0) {
     const double total_s = clock.seconds();
     print_report(scene, report, total_s);

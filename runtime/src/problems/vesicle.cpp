@@ -13,6 +13,7 @@
 #include "lmeform/delaunay.hpp"
 #include "lmeform/neighbour_search.hpp"
 #include "lmeform/node_sets.hpp"
+#include "lmeform/resource_usage.hpp"
 #include "lmeform/scene_table.hpp"
 #include "lmeform/stopwatch.hpp"
 #include "field_transfer.hpp"
@@ -533,6 +534,7 @@ StageRecord run_vesicle_stage(MPI_Comm comm, const BoundScene& bound, const Vesi
   rec.topology = topology_or_none(rec.result, rec.result.state, bound, log);
   rec.topology_s = topology_clock.seconds();
   rec.wall_s = clock.seconds();
+  rec.peak_rss_mb = peak_resident_mb_per_rank(comm);
   return rec;
 }
 

@@ -152,6 +152,7 @@ struct StageRecord {
   double topology_s = 0;  ///< evaluating it (stage 0: the start's too)
   double wall_s = 0;   ///< this stage: relocation + setup + solve
   double adapt_s = 0;  ///< of which the relocation
+  double peak_rss_mb = 0;  ///< the largest peak resident set of any rank at the stage's end (MiB)
 };
 
 struct VesicleRun {

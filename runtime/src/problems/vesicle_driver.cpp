@@ -15,7 +15,7 @@ namespace {
 void describe_stages(const VesicleRun& run, const VesicleModel& model, const std::optional<double>& reference, RunReport& report) {
   auto rel_error = [&](double e) { return reference ? (e - *reference) / *reference : std::nan(""); };
   ReportTable table;
-  table.header = {"stage", "nodes", model.width, "h_min", "energy", "rel. error", "AL+KKT", "adapt s", "setup s", "AL s", "KKT s", "membrane"};
+  table.header = {"stage", "nodes", model.width, "h_min", "energy", "rel. error", "AL+KKT", "adapt s", "setup s", "AL s", "KKT s", "MiB", "membrane"};
   report.json["stages"] = nlohmann::json::array();
   std::vector<const StageRecord*> stages;
   for (const auto& s : run.stages) stages.push_back(&s);
@@ -35,7 +35,7 @@ void describe_stages(const VesicleRun& run, const VesicleModel& model, const std
                           reference ? fmt::format("{:+.3f}%", 100 * rel_error(s.result.energy)) : "-",
                           fmt::format("{}+{}", m.augmented_iterations, m.newton_iterations), fmt::format("{:.2f}", s.adapt_s),
                           fmt::format("{:.2f}", s.result.seconds_setup), fmt::format("{:.2f}", m.seconds_augmented),
-                          fmt::format("{:.2f}", m.seconds_newton), s.topology ? s.topology->shapes() : "-"});
+                          fmt::format("{:.2f}", m.seconds_newton), fmt::format("{:.0f}", s.peak_rss_mb), s.topology ? s.topology->shapes() : "-"});
     report.json["stages"].push_back({{"stage", s.stage},
                                      {"grid", s.grid},
                                      {"branch", !s.label.empty()},
@@ -58,7 +58,8 @@ void describe_stages(const VesicleRun& run, const VesicleModel& model, const std
                                      {"setup_s", json_number(s.result.seconds_setup)},
                                      {"hessian_s", json_number(m.seconds_hessian)},
                                      {"factor_solve_s", json_number(m.seconds_factor)},
-                                     {"wall_s", json_number(s.wall_s)}});
+                                     {"wall_s", json_number(s.wall_s)},
+                                     {"peak_rss_mb_per_rank", json_number(s.peak_rss_mb)}});
   }
   report.table = std::move(table);
 }
