@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # One scene, any number of ranks: a statics run (two stages of the tiny vesicle) on 1, 2, 4 and 8
-# ranks (METIS and Hilbert partitions; 4 and 8 oversubscribe two cores) and a dynamics run on 1 and
+# ranks (METIS and Hilbert partitions; 4 and 8 oversubscribe two cores), the same schedule's first stage
+# on 2 ranks resumed on 1 from its checkpoint, and a dynamics run on 1 and
 # 4 ranks reach the same energies to 1e-10 (relative); a dynamics run checkpointed on 2 ranks and
 # resumed on 1 ends where the uninterrupted 1-rank run ends; more ranks than nodes is refused with
 # a message.
@@ -33,6 +34,12 @@ for run in "2 statics_hilbert" "4 statics" "8 statics_hilbert"; do
   mpirun -n "$1" "$lmeform" run "$out/$2.toml" --json "$out/statics_$1.json" --output "$out/s$1" > "$out/statics_$1.log" 2>&1 ||
     { tail -20 "$out/statics_$1.log"; fail "statics on $1 ranks"; }
 done
+# The schedule's first stage on 2 ranks, the second on 1 from its checkpoint.
+mpirun -n 2 "$lmeform" run "$here/tiny_scene.toml" --output "$out/sr" > "$out/statics_first_2.log" 2>&1 ||
+  { tail -20 "$out/statics_first_2.log"; fail "the first stage on 2 ranks"; }
+"$lmeform" run "$out/statics.toml" --output "$out/sr" --restart --json "$out/statics_resumed.json" > "$out/statics_resumed.log" 2>&1 ||
+  { tail -20 "$out/statics_resumed.log"; fail "the 1-rank restart of a 2-rank schedule checkpoint"; }
+grep -q "resumed from $out/sr after stage 0" "$out/statics_resumed.log" || { cat "$out/statics_resumed.log"; fail "the schedule did not resume"; }
 
 # Dynamics: the oblate relaxation on a coarse box, 10 steps.
 sed -e 's/^upper = \[1.0, 1.6\]/upper = [1.0, 1.5]/' -e 's/^spacing = 0.025/spacing = 0.0625/' -e 's/^eps = 0.05/eps = 0.125/' \
@@ -92,6 +99,11 @@ for p in (2, 4, 8):
         print(f"FAIL: statics on {p} ranks did not converge"); ok = False
     for a, b in zip(other["stages"], one["stages"]):
         close(a["energy"], b["energy"], f"statics stage {b['stage']}, {p} ranks")
+resumed = json.load(open(f"{out}/statics_resumed.json"))
+if not resumed["converged"] or len(resumed["stages"]) != 2:
+    print("FAIL: the resumed schedule did not finish both stages"); ok = False
+for a, b in zip(resumed["stages"], one["stages"]):
+    close(a["energy"], b["energy"], f"statics stage {b['stage']}, stage 0 on 2 ranks, resumed on 1")
 d1, d4, resumed = (json.load(open(f"{out}/{n}.json")) for n in ("dynamics_1", "dynamics_4", "resumed"))
 if d1["steps"] != d4["steps"] or d1["steps"] != resumed["steps"]:
     print(f"FAIL: steps 1 rank {d1['steps']}, 4 ranks {d4['steps']}, resumed {resumed['steps']}"); ok = False

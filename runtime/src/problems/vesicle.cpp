@@ -18,6 +18,7 @@
 #include "lmeform/stopwatch.hpp"
 #include "field_transfer.hpp"
 #include "membrane_topology.hpp"
+#include "vesicle_checkpoint.hpp"
 
 namespace lmeform::problems {
 
@@ -600,16 +601,28 @@ bool watch_topology(const VesicleModel& model, int stage, std::ostream* log, Ves
 
 }  // namespace
 
-VesicleRun run_vesicle(MPI_Comm comm, const Scene& scene, const VesicleModel& model, std::ostream* log) {
+VesicleRun run_vesicle(MPI_Comm comm, const Scene& scene, const VesicleModel& model, std::ostream* log, const VesicleCheckpoint* checkpoint) {
   const Stopwatch clock;
   const Scene completed = with_vesicle_targets(scene, model);
   const BoundScene bound = bind_vesicle(completed, comm, log, model);
   VesicleRun run;
-  run.layout = bound.layout;
-  NodeSet nodes = initial_nodes(scene, log);
   std::size_t main_stage = 0;
+  int first_stage = 0;
+  NodeSet nodes;
+  if (checkpoint != nullptr && checkpoint->restart) {
+    ResumedSchedule resumed = read_vesicle_checkpoint(*checkpoint, model, level_set_geometry(bound.dim, bound.axisymmetric));
+    run = std::move(resumed.run);
+    main_stage = resumed.main_stage;
+    first_stage = static_cast<int>(run.stages.size());
+    if (log != nullptr)
+      *log << fmt::format("resumed from {} after stage {} (E = {:.8g}, {} nodes)\n", checkpoint->directory.string(), first_stage - 1,
+                          run.stages.back().result.energy, run.stages.back().nodes);
+  } else {
+    nodes = initial_nodes(scene, log);
+  }
+  run.layout = bound.layout;
   const int n_stages = 1 + (model.adaptivity ? static_cast<int>(model.adaptivity->stages.size()) : 0);
-  for (int stage = 0; stage < n_stages; ++stage) {
+  for (int stage = first_stage; stage < n_stages; ++stage) {
     try {
       run.stages.push_back(run_vesicle_stage(comm, bound, model, log, stage, run.stages, main_stage, nodes, run.initial_topology));
     } catch (const std::exception& e) {
@@ -625,6 +638,15 @@ VesicleRun run_vesicle(MPI_Comm comm, const Scene& scene, const VesicleModel& mo
     for (std::size_t i = 0; i + 1 < run.stages.size(); ++i)
       if (i != main_stage) run.stages[i].result.discretization.reset();
     if (!run.stages.back().result.converged) break;
+    if (checkpoint != nullptr) {
+      // A checkpoint that cannot be written costs the restart, not the run.
+      try {
+        write_vesicle_checkpoint(comm, *checkpoint, run, main_stage);
+      } catch (const std::exception& e) {
+        run.warnings.push_back(fmt::format("no checkpoint after stage {}: {}", stage, e.what()));
+        if (log != nullptr) *log << "lmeform: warning: " << run.warnings.back() << "\n";
+      }
+    }
   }
   run.wall_s = clock.seconds();
   return run;

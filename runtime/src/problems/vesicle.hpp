@@ -166,7 +166,7 @@ struct VesicleRun {
   std::optional<LevelSetTopology> initial_topology;
   /// A stage the topology guard rejected (not in `stages`): it ends the run.
   std::optional<StageRecord> rejected;
-  std::vector<std::string> warnings;  ///< changes of topology from one stage to the next
+  std::vector<std::string> warnings;  ///< changes of topology from one stage to the next, checkpoints not written
 };
 
 /// Runs a vesicle scene: binds it with the model's targets filled in, then solves the first stage
@@ -174,7 +174,11 @@ struct VesicleRun {
 /// stage, multipliers warm-started). A stage that cannot run ends the schedule (VesicleRun::failure).
 /// Each stage's membrane topology is compared with the previous stage's (the first: its start's):
 /// a change is a warning, or with topology_guard the end of the run.
-[[nodiscard]] VesicleRun run_vesicle(MPI_Comm comm, const Scene& scene, const VesicleModel& model, std::ostream* log);
+/// With a checkpoint folder, every converged stage that is kept is written there
+/// (vesicle_checkpoint.hpp), and with checkpoint.restart the schedule resumes after the last one.
+struct VesicleCheckpoint;
+[[nodiscard]] VesicleRun run_vesicle(MPI_Comm comm, const Scene& scene, const VesicleModel& model, std::ostream* log,
+                                     const VesicleCheckpoint* checkpoint = nullptr);
 
 /// The scene with what the model derives: the area and volume targets of its sphere, and the
 /// moment's natural size (the volume times the vesicle's half-height, ~ V0).

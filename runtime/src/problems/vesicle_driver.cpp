@@ -6,6 +6,7 @@
 #include "minimization.hpp"
 #include "quantities.hpp"
 #include "vesicle.hpp"
+#include "vesicle_checkpoint.hpp"
 
 namespace lmeform::problems {
 
@@ -84,6 +85,7 @@ class VesicleDriver final : public ProblemDriver {
   [[nodiscard]] std::string_view name() const override { return "vesicle"; }
   [[nodiscard]] std::string_view table() const override { return kVesicleExtension; }
   [[nodiscard]] bool claims(const Scene& scene) const override { return scene.has_extension(kVesicleExtension); }
+  [[nodiscard]] bool restartable() const override { return true; }
 
   void check(const DriverContext& ctx) const override {
     const VesicleModel model = *read_vesicle(*ctx.scene);
@@ -94,7 +96,8 @@ class VesicleDriver final : public ProblemDriver {
   [[nodiscard]] RunReport run(const DriverContext& ctx) const override {
     const Scene& scene = *ctx.scene;
     const VesicleModel model = *read_vesicle(scene);
-    const VesicleRun run = run_vesicle(ctx.comm, scene, model, ctx.log);
+    const VesicleCheckpoint checkpoint{ctx.output_directory, scene.name, ctx.restart};
+    const VesicleRun run = run_vesicle(ctx.comm, scene, model, ctx.log, ctx.output_directory.empty() ? nullptr : &checkpoint);
     // The guard may have rejected the first stage: then that one is written (the status says why).
     const StageRecord& last = run.stages.empty() ? *run.rejected : run.stages.back();
     const ProblemResult& r = last.result;
