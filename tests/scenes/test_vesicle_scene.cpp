@@ -392,6 +392,10 @@ TEST(VesicleScene, AdaptivityStages) {
   t = kVesicle + edit(adapt, "{ eps = 0.04, f = 10.0 }", "{ eps = 0.06, f = 10.0 }");
   expect_error(t, {at_line(t, "{ eps = 0.06"), "key 'vesicle.adaptivity.stages[0].eps' = 0.06 exceeds the previous eps (0.05, "
                                                "constants.eps)"});
+  // The same eps on the same grid repeats the solve before it: refused.
+  t = kVesicle + edit(adapt, "{ eps = 0.03, lloyd_iterations = 0 }", "{ eps = 0.04, lloyd_iterations = 0 }");
+  expect_error(t, {at_line(t, "{ eps = 0.04, lloyd"), "key 'vesicle.adaptivity.stages[1].eps' = 0.04 is the eps of the stage it continues "
+                                                     "from and the stage keeps its grid", "would repeat that solve"});
   // Broken stages and tables.
   t = kVesicle + edit(adapt, "{ eps = 0.04, f = 10.0 }", "{ eps = 0.04 }");
   expect_error(t, {"missing key 'vesicle.adaptivity.stages[0].f' in [vesicle.adaptivity.stages[0]]"});

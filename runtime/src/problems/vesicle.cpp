@@ -144,6 +144,11 @@ void read_adaptivity(const SceneTable& t, VesicleModel& m) {
     if (stage.eps > from)
       st.fail_key("eps", fmt::format("= {} exceeds the previous eps ({}{}): the schedule lowers eps", stage.eps, from,
                                      i == 0 ? ", constants.eps" : ""));
+    // Same eps on the same grid is the solve it continues from, repeated.
+    if (stage.eps == from && !stage.new_grid())
+      st.fail_key("eps", fmt::format("= {} is the eps of the stage it continues from and the stage keeps its grid (lloyd_iterations = 0, "
+                                     "no 'resolve'): it would repeat that solve; lower eps or build a new grid",
+                                     stage.eps));
     previous = stage.eps;
     if (!stage.branch) main_eps = stage.eps;
     a.stages.push_back(stage);
