@@ -45,10 +45,12 @@ std::vector<double> nodal_gradient_norm(const LmeBasis& basis, std::span<const d
   const int dim = nodes.dim;
   std::vector<double> norm(nodes.size(), 0.0);
   std::vector<std::size_t> undefined_at;
+  // All lists in one search: on a graded set a search per point uses the largest support radius.
+  const CsrLists lists = basis.neighbour_lists(nodes.coords);
   for (std::size_t a = 0; a < nodes.size(); ++a) {
     if (!skip.empty() && skip[a] != 0) continue;
     const auto x = nodes.point(a);
-    const auto list = basis.neighbours(x);
+    const std::span<const int> list = lists[a];
     std::vector<double> jet;
     try {
       jet = basis.evaluate(x, list, 1);
@@ -66,7 +68,7 @@ std::vector<double> nodal_gradient_norm(const LmeBasis& basis, std::span<const d
   }
   std::vector<double> filled = norm;
   for (const std::size_t a : undefined_at)
-    for (const int neighbour : basis.neighbours(nodes.point(a))) filled[a] = std::max(filled[a], norm[std::size_t(neighbour)]);
+    for (const int neighbour : lists[a]) filled[a] = std::max(filled[a], norm[std::size_t(neighbour)]);
   if (undefined != nullptr) *undefined = undefined_at.size();
   return filled;
 }
@@ -79,9 +81,10 @@ std::vector<double> interpolate_nodal_field(const NodeSet& old_nodes, std::span<
   const LmeBasis basis(old_nodes, gammas, lme);
   std::vector<double> out(new_nodes.size());
   EnclosingCell enclosing_cell(old_nodes);
+  const CsrLists lists = basis.neighbour_lists(new_nodes.coords);
   for (std::size_t a = 0; a < new_nodes.size(); ++a) {
     const auto x = new_nodes.point(a);
-    auto list = basis.neighbours(x);
+    std::vector<int> list(lists[a].begin(), lists[a].end());
     try {
       // A new node on the boundary between two old ones far apart sees only interior old nodes.
       const auto p = evaluate_with_cell_fallback(basis, x, list, 0, [&] { return enclosing_cell(x); });

@@ -31,9 +31,14 @@ std::vector<double> lme_values_at_nodes(MPI_Comm comm, const LmeBasis& basis, st
   std::vector<double> values(nodes.size());
   std::string failure;
   try {
+    // The block's lists in one search (a search per point uses the largest radius of a graded set).
+    const auto d = static_cast<std::size_t>(nodes.dim);
+    const std::span<const double> block(nodes.coords.data() + std::size_t(block_start(rank)) * d,
+                                        std::size_t(block_start(rank + 1) - block_start(rank)) * d);
+    const CsrLists lists = basis.neighbour_lists(block);
     for (int a = block_start(rank); a < block_start(rank + 1); ++a) {
       const auto x = nodes.point(std::size_t(a));
-      const std::vector<int> list = basis.neighbours(x);
+      const std::span<const int> list = lists[std::size_t(a - block_start(rank))];
       try {
         const std::vector<double> p = basis.evaluate(x, list, 0);
         double v = 0;
