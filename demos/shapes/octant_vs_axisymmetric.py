@@ -120,7 +120,7 @@ def main():
     ax.set_xlabel(f"{args.axis} (3D) = z (axisymmetric)")
     ax.set_ylabel("across the axis")
     ax.set_title(f"E(3D) = {e3:.4f}, E(axisymmetric) = {e2:.4f} ({100 * (e3 - e2) / e2:+.2f} %)")
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.22), fontsize=8, ncol=3)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.32), fontsize=8, ncol=3)
 
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
     octant = zero_surface(nodes3, phi3, tets3)
