@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
 #include <functional>
 #include <numbers>
 #include <string>
@@ -13,6 +14,7 @@
 #include "membrane_topology.hpp"
 #include "problem_registry.hpp"
 #include "vesicle.hpp"
+#include "vesicle_checkpoint.hpp"
 
 namespace lmeform {
 namespace {
@@ -174,7 +176,7 @@ TEST(MembraneTopology, AVesicleOnAQuadrantReportsTheWholeMembrane) {
 
 /// A small vesicle whose start is a torus with a hole narrower than the interface width: the
 /// phase field closes it (a sphere bends less than any torus).
-Scene torus_start(bool guard) {
+Scene torus_start(bool guard, const std::string& schedule = "") {
   const std::string text =
       "[scene]\nname = \"hole\"\ncoordinates = \"axisymmetric\"\n"
       "[domain]\nlower = [0.0, 0.0]\nupper = [1.0, 1.2]\n"
@@ -186,7 +188,7 @@ Scene torus_start(bool guard) {
       "[solver]\naugmented_tolerance = 1e-2\n"
       "[initial]\nphi = \"tanh((0.22 - sqrt((x[0] - 0.3)^2 + (x[1] - 0.6)^2)) / (sqrt(2) * eps))\"\n"
       "[vesicle]\nradius = 0.35\nreduced_volume = 0.9\n" +
-      std::string(guard ? "topology_guard = true\n" : "");
+      std::string(guard ? "topology_guard = true\n" : "") + schedule;
   return parse_scene(text, "hole.toml", problems::driver_tables());
 }
 
@@ -211,6 +213,25 @@ TEST(MembraneTopology, AVesicleWhoseHoleClosesIsWarnedOfAndTheGuardStopsIt) {
   EXPECT_EQ(stopped.rejected->result.energy, run.stages[0].result.energy);
   EXPECT_NE(stopped.failure.find("stage 0: the membrane's topology changed"), std::string::npos) << stopped.failure;
   EXPECT_NE(stopped.failure.find("vesicle.topology_guard"), std::string::npos) << stopped.failure;
+}
+
+// The warning of a stage before a stop is in the report of the run resumed after it.
+TEST(MembraneTopology, AWarningBeforeARestartIsReportedAfterIt) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / "lmeform_topology_restart";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const Scene first = torus_start(false);
+  const problems::VesicleCheckpoint written{dir, first.name, false};
+  const problems::VesicleRun stopped = problems::run_vesicle(PETSC_COMM_SELF, first, *problems::read_vesicle(first), nullptr, &written);
+  ASSERT_EQ(stopped.warnings.size(), 1u);
+  const Scene whole = torus_start(false, "[vesicle.adaptivity]\nstages = [ { eps = 0.14, f = 3.0 } ]\n");
+  const problems::VesicleCheckpoint resume{dir, whole.name, true};
+  const problems::VesicleRun resumed = problems::run_vesicle(PETSC_COMM_SELF, whole, *problems::read_vesicle(whole), nullptr, &resume);
+  ASSERT_EQ(resumed.stages.size(), 2u);
+  EXPECT_TRUE(resumed.failure.empty()) << resumed.failure;
+  ASSERT_FALSE(resumed.warnings.empty());
+  EXPECT_EQ(resumed.warnings[0], stopped.warnings[0]);
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

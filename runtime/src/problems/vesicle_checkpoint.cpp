@@ -164,6 +164,7 @@ void write_vesicle_checkpoint(MPI_Comm comm, const VesicleCheckpoint& checkpoint
                       {"scene", checkpoint.scene_name},
                       {"main_stage", main_stage},
                       {"topology_start", run.initial_topology ? topology_json(*run.initial_topology) : nlohmann::json()},
+                      {"warnings", run.warnings},
                       {"stages", nlohmann::json::array()}};
     for (const StageRecord& s : run.stages) js["stages"].push_back(stage_json(s));
     try {
@@ -197,6 +198,8 @@ ResumedSchedule read_vesicle_checkpoint(const VesicleCheckpoint& checkpoint, con
     for (const auto& s : js.at("stages")) resumed.run.stages.push_back(stage_from_json(s, geometry));
     resumed.main_stage = js.at("main_stage").get<std::size_t>();
     if (!js.at("topology_start").is_null()) resumed.run.initial_topology = topology_from_json(js["topology_start"], geometry);
+    // What was warned of before the stop belongs to the run's report too.
+    resumed.run.warnings = js.value("warnings", std::vector<std::string>{});
   } catch (const nlohmann::json::exception& e) {
     throw std::runtime_error(fmt::format("--restart: {} is malformed: {}", path.string(), e.what()));
   }

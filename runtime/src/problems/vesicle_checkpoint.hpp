@@ -1,6 +1,6 @@
 // Checkpoints of a vesicle schedule: after every converged stage that is kept, the stage's solution
 // (NAME_stage_K.h5, + .xmf for ParaView) and the schedule so far (NAME_stages.json: every finished
-// stage's record, which stage later ones continue from, the start's topology). `lmeform run
+// stage's record, which stage later ones continue from, the start's topology, the warnings). `lmeform run
 // --restart` resumes with the next stage, on any number of ranks: a 3D schedule of several
 // one-hour solves survives the loss of its machine.
 #pragma once
