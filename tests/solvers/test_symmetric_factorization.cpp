@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "lmeform/petsc.hpp"
 #include "lmeform/symmetric_factorization.hpp"
@@ -108,6 +109,59 @@ TEST(SymmetricFactorization, AForgottenMatrixIsAnalysedAfresh) {
   EXPECT_EQ(factorization.negative_eigenvalues(), negative_eigenvalues_of_shifted_laplacian(7, -2.5));
   EXPECT_GT(factorization.negative_eigenvalues(), 0);
   EXPECT_LT(relative_solve_error(factorization, B), 1e-10);
+}
+
+TEST(SymmetricFactorization, SolvesSeveralRightHandSidesAtOnceAsOneByOne) {
+  const PetscInt m = 24;
+  PetscMatrix A = grid_laplacian(m, -1.3);  // indefinite
+  SymmetricFactorization factorization(PETSC_COMM_WORLD, "test_many_");
+  ASSERT_TRUE(factorization.factor(A)) << factorization.failure();
+  std::vector<PetscVector> b(3), together(3), apart(3);
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    LMEFORM_PETSC_CHECK(MatCreateVecs(A, together[i].out(), b[i].out()));
+    LMEFORM_PETSC_CHECK(VecDuplicate(together[i], apart[i].out()));
+    PetscInt begin = 0, end = 0;
+    LMEFORM_PETSC_CHECK(VecGetOwnershipRange(b[i], &begin, &end));
+    for (PetscInt row = begin; row < end; ++row)
+      LMEFORM_PETSC_CHECK(VecSetValue(b[i], row, std::sin(0.1 * double(row) * double(i + 1)) + double(i), INSERT_VALUES));
+    LMEFORM_PETSC_CHECK(VecAssemblyBegin(b[i]));
+    LMEFORM_PETSC_CHECK(VecAssemblyEnd(b[i]));
+    factorization.solve(b[i], apart[i]);
+  }
+  const std::vector<Vec> bs{b[0], b[1], b[2]}, xs{together[0], together[1], together[2]};
+  factorization.solve(bs, xs);
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    PetscReal scale = 0, difference = 0;
+    LMEFORM_PETSC_CHECK(VecNorm(apart[i], NORM_INFINITY, &scale));
+    LMEFORM_PETSC_CHECK(VecAXPY(apart[i], -1.0, together[i]));
+    LMEFORM_PETSC_CHECK(VecNorm(apart[i], NORM_INFINITY, &difference));
+    EXPECT_LT(difference, 1e-12 * scale) << "right-hand side " << i;
+    EXPECT_GT(scale, 0.0);
+  }
+  const std::vector<Vec> one_short{together[0], together[1]};
+  EXPECT_THROW(factorization.solve(bs, one_short), std::invalid_argument);
+}
+
+TEST(SymmetricFactorization, TheOptionsDatabaseStillAppliesAfterAFailedFactorization) {
+  // The factor rebuilt after a failure reads -PREFIX_mat_mumps_icntl_* again (here the ordering):
+  // a user's MUMPS settings are not silently dropped once a factorization failed.
+  LMEFORM_PETSC_CHECK(PetscOptionsSetValue(nullptr, "-test_reread_mat_mumps_icntl_7", "0"));
+  PetscMatrix A;
+  const PetscInt n = 40;
+  LMEFORM_PETSC_CHECK(MatCreateAIJ(PETSC_COMM_WORLD, PETSC_DECIDE, PETSC_DECIDE, n, n, 1, nullptr, 0, nullptr, A.out()));
+  PetscInt begin = 0, end = 0;
+  LMEFORM_PETSC_CHECK(MatGetOwnershipRange(A, &begin, &end));
+  for (PetscInt row = begin; row < end; ++row)
+    LMEFORM_PETSC_CHECK(MatSetValue(A, row, row, row == n / 2 ? 0.0 : 2.0 + static_cast<double>(row), INSERT_VALUES));
+  LMEFORM_PETSC_CHECK(MatAssemblyBegin(A, MAT_FINAL_ASSEMBLY));
+  LMEFORM_PETSC_CHECK(MatAssemblyEnd(A, MAT_FINAL_ASSEMBLY));
+  SymmetricFactorization factorization(PETSC_COMM_WORLD, "test_reread_");
+  ASSERT_FALSE(factorization.factor(A));  // a zero pivot
+  LMEFORM_PETSC_CHECK(MatShift(A, -1.0));
+  ASSERT_TRUE(factorization.factor(A)) << factorization.failure();
+  EXPECT_EQ(factorization.mumps_control(7), 0);  // AMD, as asked; MUMPS's default is 7
+  EXPECT_EQ(factorization.mumps_control(13), 1);  // and this class's own setting stays
+  LMEFORM_PETSC_CHECK(PetscOptionsClearValue(nullptr, "-test_reread_mat_mumps_icntl_7"));
 }
 
 TEST(SymmetricFactorization, AWorkspaceFailureIsRetriedWithMoreWorkspace) {

@@ -9,6 +9,7 @@
 #pragma once
 
 #include <iosfwd>
+#include <span>
 #include <string>
 
 #include "lmeform/petsc.hpp"
@@ -26,6 +27,9 @@ class SymmetricFactorization {
   bool factor(Mat A);
   /// Solves A x = b with the last successful factorization; throws if the solve fails.
   void solve(Vec b, Vec x);
+  /// Solves A x_i = b_i for every pair in one pass over the factors (MUMPS reads its factors once
+  /// for all the right-hand sides, where separate solves read them once each).
+  void solve(std::span<const Vec> b, std::span<const Vec> x);
 
   [[nodiscard]] bool failed() const noexcept { return failed_; }
   /// PETSc's reason, MUMPS's INFOG(1) and whether the matrix has non-finite entries.
@@ -41,6 +45,9 @@ class SymmetricFactorization {
   /// Forgets the last matrix: the next factor() analyses afresh (a new matrix may reuse the
   /// address of a destroyed one).
   void forget_matrix();
+  /// MUMPS's ICNTL(i) of the current factor (as the options database and this class set it);
+  /// -1 without a MUMPS factor.
+  [[nodiscard]] PetscInt mumps_control(PetscInt i) const;
 
  private:
   MPI_Comm comm_;

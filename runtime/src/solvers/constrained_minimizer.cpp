@@ -286,7 +286,15 @@ Eigen::MatrixXd ConstrainedMinimizer::inverse_gram(const std::vector<PetscVector
   const std::size_t k = constraints_.size();
   for (std::size_t i = z.size(); i < k; ++i) z.push_back(energy_->create_vector());
   Eigen::MatrixXd S(index(k), index(k));
-  for (std::size_t i = 0; i < k; ++i) solve(g[i], z[i]);
+  // One solve for all k right-hand sides: MUMPS reads its factors once, not k times.
+  std::vector<Vec> rhs(k), solutions(k);
+  for (std::size_t i = 0; i < k; ++i) {
+    rhs[i] = g[i];
+    solutions[i] = z[i];
+  }
+  const double t0 = MPI_Wtime();
+  factorization_.solve(rhs, solutions);
+  if (counters_ != nullptr) counters_->seconds_factor += MPI_Wtime() - t0;
   for (std::size_t i = 0; i < k; ++i)
     for (std::size_t j = 0; j < k; ++j) S(index(i), index(j)) = dot(g[i], z[j]);
   return S;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <ostream>
 #include <stdexcept>
 #include <string_view>
@@ -106,15 +107,73 @@ void SymmetricFactorization::forget_matrix() {
   matrix_ = nullptr;
 }
 
-void SymmetricFactorization::solve(Vec b, Vec x) {
-  if (failed_) throw std::runtime_error("symmetric factorization: the factorization failed (" + failure_ + ")");
-  LMEFORM_PETSC_CHECK(KSPSolve(ksp_, b, x));
+namespace {
+
+void throw_if_failed(KSP ksp) {
   KSPConvergedReason reason;
-  LMEFORM_PETSC_CHECK(KSPGetConvergedReason(ksp_, &reason));
+  LMEFORM_PETSC_CHECK(KSPGetConvergedReason(ksp, &reason));
   if (reason < 0) {
     throw std::runtime_error(std::string("symmetric factorization: the solve failed (") + KSPConvergedReasons[reason] +
                              "): the matrix is singular");
   }
+}
+
+/// Copies between a vector and a column of a dense matrix with the same row layout.
+void copy_column(Mat dense, PetscInt column, Vec v, bool into_matrix) {
+  Vec col = nullptr;
+  if (into_matrix) {
+    LMEFORM_PETSC_CHECK(MatDenseGetColumnVecWrite(dense, column, &col));
+    LMEFORM_PETSC_CHECK(VecCopy(v, col));
+    LMEFORM_PETSC_CHECK(MatDenseRestoreColumnVecWrite(dense, column, &col));
+  } else {
+    LMEFORM_PETSC_CHECK(MatDenseGetColumnVecRead(dense, column, &col));
+    LMEFORM_PETSC_CHECK(VecCopy(col, v));
+    LMEFORM_PETSC_CHECK(MatDenseRestoreColumnVecRead(dense, column, &col));
+  }
+}
+
+}  // namespace
+
+void SymmetricFactorization::solve(Vec b, Vec x) {
+  if (failed_) throw std::runtime_error("symmetric factorization: the factorization failed (" + failure_ + ")");
+  LMEFORM_PETSC_CHECK(KSPSolve(ksp_, b, x));
+  throw_if_failed(ksp_);
+}
+
+void SymmetricFactorization::solve(std::span<const Vec> b, std::span<const Vec> x) {
+  if (b.size() != x.size())
+    throw std::invalid_argument("symmetric factorization: " + std::to_string(b.size()) + " right-hand sides for " +
+                                std::to_string(x.size()) + " solutions");
+  if (b.size() <= 1) {
+    if (b.size() == 1) solve(b[0], x[0]);
+    return;
+  }
+  if (failed_) throw std::runtime_error("symmetric factorization: the factorization failed (" + failure_ + ")");
+  PetscInt local = 0, global = 0;
+  LMEFORM_PETSC_CHECK(VecGetLocalSize(b[0], &local));
+  LMEFORM_PETSC_CHECK(VecGetSize(b[0], &global));
+  const auto columns = static_cast<PetscInt>(b.size());
+  PetscMatrix B, X;
+  LMEFORM_PETSC_CHECK(MatCreateDense(comm_, local, PETSC_DECIDE, global, columns, nullptr, B.out()));
+  LMEFORM_PETSC_CHECK(MatCreateDense(comm_, local, PETSC_DECIDE, global, columns, nullptr, X.out()));
+  for (PetscInt j = 0; j < columns; ++j) copy_column(B, j, b[std::size_t(j)], true);
+  LMEFORM_PETSC_CHECK(KSPMatSolve(ksp_, B, X));
+  throw_if_failed(ksp_);
+  for (PetscInt j = 0; j < columns; ++j) copy_column(X, j, x[std::size_t(j)], false);
+}
+
+PetscInt SymmetricFactorization::mumps_control(PetscInt i) const {
+  if (!configured_) return -1;
+  PC pc = nullptr;
+  LMEFORM_PETSC_CHECK(KSPGetPC(ksp_, &pc));
+  MatSolverType solver_type = nullptr;
+  LMEFORM_PETSC_CHECK(PCFactorGetMatSolverType(pc, &solver_type));
+  if (solver_type == nullptr || std::string_view(solver_type) != MATSOLVERMUMPS) return -1;
+  Mat F = nullptr;
+  LMEFORM_PETSC_CHECK(PCFactorGetMatrix(pc, &F));
+  PetscInt value = 0;
+  LMEFORM_PETSC_CHECK(MatMumpsGetIcntl(F, i, &value));
+  return value;
 }
 
 }  // namespace lmeform
