@@ -420,6 +420,32 @@ TEST(SecondOrderRefusals, InfeasibleSecondMomentsNameThePointAndTheFix) {
   }
 }
 
+TEST(SecondOrderRefusals, NeighboursOnOneCircleAreNamedAsSuch) {
+  // Sixteen nodes on one circle round x: their second moments are dependent (every node has the
+  // same |x - x_a|² and the same gap), so no second-order basis exists there. The geometry is
+  // checked only when the solve fails, and the message names the conic, not the failed solve.
+  std::vector<double> coords;
+  const double pi = std::numbers::pi;
+  for (int k = 0; k < 16; ++k) {
+    coords.push_back(0.5 + 0.3 * std::cos(2 * pi * k / 16));
+    coords.push_back(0.5 + 0.3 * std::sin(2 * pi * k / 16));
+  }
+  const NodeSet nodes(2, coords);
+  const LmeBasis basis = second_order(nodes, 0.8);
+  std::vector<int> all(16);
+  for (int a = 0; a < 16; ++a) all[static_cast<std::size_t>(a)] = a;
+  const std::vector<double> x = {0.5, 0.5};
+  for (const int order : {0, 2}) {
+    try {
+      (void)basis.evaluate(x, all, order);
+      FAIL() << "no error at order " << order;
+    } catch (const LmeEvaluationError& e) {
+      EXPECT_EQ(e.reason(), LmeFailure::degenerate) << e.what();
+      EXPECT_NE(std::string(e.what()).find("one conic"), std::string::npos) << e.what();
+    }
+  }
+}
+
 TEST(SecondOrderRefusals, TooFewNeighboursForTheQuadraticConstraints) {
   const NodeSet nodes = test::grid(2, 11, 1.0);
   const LmeBasis basis = second_order(nodes, 0.8);

@@ -138,15 +138,39 @@ struct SecondOrder {
         "(wider gaps and supports), more nodes there, or the first-order basis (LmeConsistency::first)");
   }
 
+  // The neighbourhood's geometry (flat, or on one conic) is checked only when the solve or the
+  // record fails, to say why: on a good neighbourhood the checks cost about a tenth of a basis
+  // evaluation and never fire. A neighbourhood that passes them keeps the solve's own message.
+  template <class Step>
+  static auto explained(std::span<const double> x, int n, double len, const LmeWorkspace& ws, const LmeOptions& opt,
+                        Step&& step) {
+    try {
+      return step();
+    } catch (const LmeEvaluationError&) {
+      check_geometry(x, n, len, ws, opt);
+      throw;
+    }
+  }
+
   static FV solve(const SecondOrderNodes& nodes, const LmeOptions& opt, std::span<const double> x,
                   std::span<const int> list, LmeWorkspace& ws, double& len, double& lnz) {
     const int n = static_cast<int>(list.size());
     len = n > 0 ? prepare(nodes, x, list, ws) : 0.0;
-    check_geometry(x, n, len, ws, opt);
+    if (n < K + 1 || !(len > 0.0)) check_geometry(x, n, len, ws, opt);  // throws
     lnz = 0.0;
-    return Dual::newton(x, n, ws.phi.data(), ws.c.data(), ws.p.data(), opt, lnz, [&](const FV& u, double gnorm) {
-      infeasible(x, n, ws, u, gnorm, opt.newton_tolerance);
+    return explained(x, n, len, ws, opt, [&] {
+      return Dual::newton(x, n, ws.phi.data(), ws.c.data(), ws.p.data(), opt, lnz, [&](const FV& u, double gnorm) {
+        infeasible(x, n, ws, u, gnorm, opt.newton_tolerance);
+      });
     });
+  }
+
+  static void solve_and_record(const SecondOrderNodes& nodes, const LmeOptions& opt, std::span<const double> x,
+                               std::span<const int> list, int order, LmeWorkspace& ws, double* record) {
+    double len = 0.0, lnz = 0.0;
+    const auto mu = solve(nodes, opt, x, list, ws, len, lnz);
+    const int n = static_cast<int>(list.size());
+    explained(x, n, len, ws, opt, [&] { build_record(x, n, ws, mu, lnz, len, order, opt.min_rcond, record); });
   }
 
   // a_a (derivative of the exponent at fixed mu) and its mean.
@@ -284,16 +308,16 @@ void second_order_evaluate(int dim, const SecondOrderNodes& nodes, const LmeOpti
     constexpr int D = decltype(dc)::value;
     using S = SecondOrder<D>;
     const int n = static_cast<int>(list.size());
-    double len = 0.0, lnz = 0.0;
-    const auto mu = S::solve(nodes, options, x, list, ws, len, lnz);
     if (order == 0) {
+      double len = 0.0, lnz = 0.0;
+      S::solve(nodes, options, x, list, ws, len, lnz);
       std::copy(ws.p.begin(), ws.p.begin() + n, out);
       return;
     }
     ws.record.resize(static_cast<std::size_t>(lme_second_order_record_size(D, order)));
-    S::build_record(x, n, ws, mu, lnz, len, order, options.min_rcond, ws.record.data());
-    S::jet(n, ws.y.data(), ws.beta.data(), ws.phi.data(), ws.record.data(), order, order, ws.p.data(), 1.0 / len, out,
-           stride, nullptr);
+    S::solve_and_record(nodes, options, x, list, order, ws, ws.record.data());
+    S::jet(n, ws.y.data(), ws.beta.data(), ws.phi.data(), ws.record.data(), order, order, ws.p.data(), 1.0 / ws.record[S::kLen],
+           out, stride, nullptr);
   });
 }
 
@@ -303,9 +327,7 @@ void second_order_solve_record(int dim, const SecondOrderNodes& nodes, const Lme
   dispatch(dim, [&](auto dc) {
     constexpr int D = decltype(dc)::value;
     using S = SecondOrder<D>;
-    double len = 0.0, lnz = 0.0;
-    const auto mu = S::solve(nodes, options, x, list, ws, len, lnz);
-    S::build_record(x, static_cast<int>(list.size()), ws, mu, lnz, len, order, options.min_rcond, record);
+    S::solve_and_record(nodes, options, x, list, order, ws, record);
   });
 }
 
