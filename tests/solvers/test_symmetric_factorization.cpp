@@ -140,6 +140,25 @@ TEST(SymmetricFactorization, SolvesSeveralRightHandSidesAtOnceAsOneByOne) {
   }
   const std::vector<Vec> one_short{together[0], together[1]};
   EXPECT_THROW(factorization.solve(bs, one_short), std::invalid_argument);
+
+  // A Krylov solver from the options database: the columns are solved and checked one by one.
+  LMEFORM_PETSC_CHECK(PetscOptionsSetValue(nullptr, "-test_krylov_ksp_type", "gmres"));
+  LMEFORM_PETSC_CHECK(PetscOptionsSetValue(nullptr, "-test_krylov_ksp_rtol", "1e-13"));
+  SymmetricFactorization krylov(PETSC_COMM_WORLD, "test_krylov_");
+  ASSERT_TRUE(krylov.factor(A)) << krylov.failure();
+  krylov.solve(bs, xs);
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    PetscVector r;
+    LMEFORM_PETSC_CHECK(VecDuplicate(b[i], r.out()));
+    LMEFORM_PETSC_CHECK(MatMult(A, together[i], r));
+    LMEFORM_PETSC_CHECK(VecAXPY(r, -1.0, b[i]));
+    PetscReal residual = 0, scale = 0;
+    LMEFORM_PETSC_CHECK(VecNorm(r, NORM_2, &residual));
+    LMEFORM_PETSC_CHECK(VecNorm(b[i], NORM_2, &scale));
+    EXPECT_LT(residual, 1e-10 * scale) << "right-hand side " << i;
+  }
+  LMEFORM_PETSC_CHECK(PetscOptionsClearValue(nullptr, "-test_krylov_ksp_type"));
+  LMEFORM_PETSC_CHECK(PetscOptionsClearValue(nullptr, "-test_krylov_ksp_rtol"));
 }
 
 TEST(SymmetricFactorization, TheOptionsDatabaseStillAppliesAfterAFailedFactorization) {

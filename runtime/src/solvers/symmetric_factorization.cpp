@@ -144,8 +144,12 @@ void SymmetricFactorization::solve(std::span<const Vec> b, std::span<const Vec> 
   if (b.size() != x.size())
     throw std::invalid_argument("symmetric factorization: " + std::to_string(b.size()) + " right-hand sides for " +
                                 std::to_string(x.size()) + " solutions");
-  if (b.size() <= 1) {
-    if (b.size() == 1) solve(b[0], x[0]);
+  KSPType type = nullptr;
+  LMEFORM_PETSC_CHECK(KSPGetType(ksp_, &type));
+  // A Krylov solver chosen in the options database solves the block column by column, and only
+  // the last column's convergence would be seen: those are solved one by one and each checked.
+  if (b.size() <= 1 || type == nullptr || std::string_view(type) != KSPPREONLY) {
+    for (std::size_t i = 0; i < b.size(); ++i) solve(b[i], x[i]);
     return;
   }
   if (failed_) throw std::runtime_error("symmetric factorization: the factorization failed (" + failure_ + ")");
