@@ -77,13 +77,18 @@ print("saddle", circle["energy"], "minimum", elongated["energy"])
 PY
 
 # Two stages on a finer grid, where the circle's stage converges on its saddle and the next stage
-# starts from it: the earlier stage is warned of by number as well.
+# starts from it: the earlier stage is warned of by number as well. The next stage, started on the
+# saddle, may converge on it or stall a rounding error away from it (|grad L| about 7e-9, the
+# symmetry broken by round-off that depends on the BLAS kernels): like the circle's run, it may end
+# with exit code 2; the warnings are what is checked.
 sed -e 's/^spacing = 0.05$/spacing = 0.025/' -e 's/^eps = 0.1$/eps = 0.05/' -e "s|$out/circle\"|$out/staged\"|" \
   -e 's/^reduced_volume = 0.9$/reduced_volume = 0.9\nresolution_factor = 1.6/' \
   "$out/circle.toml" > "$out/staged.toml"
 printf '[vesicle.adaptivity]\nstages = [{ eps = 0.045, lloyd_iterations = 0 }]\n' >> "$out/staged.toml"
-"$lmeform" run "$out/staged.toml" --json "$out/staged.json" > "$out/staged.log" 2> "$out/staged.err" ||
-  fail "the staged run failed: $(cat "$out/staged.err")"
+staged_status=0
+"$lmeform" run "$out/staged.toml" --json "$out/staged.json" > "$out/staged.log" 2> "$out/staged.err" || staged_status=$?
+[[ $staged_status == 0 || $staged_status == 2 ]] || fail "the staged run failed (exit code $staged_status): $(cat "$out/staged.err")"
+grep -E "^status" "$out/staged.log"
 cat "$out/staged.err"
 grep -q "lmeform: warning: stage 0 ended on a saddle (1 direction of negative curvature along the constraints)" "$out/staged.err" ||
   fail "no warning for stage 0"
