@@ -46,6 +46,20 @@ PetscInt negative_eigenvalues_of_shifted_laplacian(PetscInt m, double diagonal) 
   return count;
 }
 
+/// The diagonal matrix diag(first + i) of order n with a zero in row n/2: an exact zero pivot
+/// for the LDLᵀ (INFOG(1) = -10).
+PetscMatrix diagonal_with_a_zero(PetscInt n, double first) {
+  PetscMatrix A;
+  LMEFORM_PETSC_CHECK(MatCreateAIJ(PETSC_COMM_WORLD, PETSC_DECIDE, PETSC_DECIDE, n, n, 1, nullptr, 0, nullptr, A.out()));
+  PetscInt begin = 0, end = 0;
+  LMEFORM_PETSC_CHECK(MatGetOwnershipRange(A, &begin, &end));
+  for (PetscInt row = begin; row < end; ++row)
+    LMEFORM_PETSC_CHECK(MatSetValue(A, row, row, row == n / 2 ? 0.0 : first + static_cast<double>(row), INSERT_VALUES));
+  LMEFORM_PETSC_CHECK(MatAssemblyBegin(A, MAT_FINAL_ASSEMBLY));
+  LMEFORM_PETSC_CHECK(MatAssemblyEnd(A, MAT_FINAL_ASSEMBLY));
+  return A;
+}
+
 /// max |A x − b| / max |b| after solving with the factorization.
 double relative_solve_error(SymmetricFactorization& factorization, Mat A) {
   PetscVector b, x, r;
@@ -73,15 +87,7 @@ TEST(SymmetricFactorization, CountsTheNegativeEigenvaluesOfAnIndefiniteMatrix) {
 
 TEST(SymmetricFactorization, AFailedFactorizationDoesNotSkipTheNextOne) {
   // A diagonal matrix with one zero entry: the LDLᵀ meets an exact zero pivot (INFOG(1) = -10).
-  PetscMatrix A;
-  const PetscInt n = 50;
-  LMEFORM_PETSC_CHECK(MatCreateAIJ(PETSC_COMM_WORLD, PETSC_DECIDE, PETSC_DECIDE, n, n, 1, nullptr, 0, nullptr, A.out()));
-  PetscInt begin = 0, end = 0;
-  LMEFORM_PETSC_CHECK(MatGetOwnershipRange(A, &begin, &end));
-  for (PetscInt row = begin; row < end; ++row)
-    LMEFORM_PETSC_CHECK(MatSetValue(A, row, row, row == n / 2 ? 0.0 : 1.0 + static_cast<double>(row), INSERT_VALUES));
-  LMEFORM_PETSC_CHECK(MatAssemblyBegin(A, MAT_FINAL_ASSEMBLY));
-  LMEFORM_PETSC_CHECK(MatAssemblyEnd(A, MAT_FINAL_ASSEMBLY));
+  PetscMatrix A = diagonal_with_a_zero(50, 1.0);
   SymmetricFactorization factorization(PETSC_COMM_WORLD, "test_failure_");
   ASSERT_FALSE(factorization.factor(A));
   EXPECT_TRUE(factorization.failed());
@@ -165,15 +171,7 @@ TEST(SymmetricFactorization, TheOptionsDatabaseStillAppliesAfterAFailedFactoriza
   // The factor rebuilt after a failure reads -PREFIX_mat_mumps_icntl_* again (here the ordering):
   // a user's MUMPS settings are not silently dropped once a factorization failed.
   LMEFORM_PETSC_CHECK(PetscOptionsSetValue(nullptr, "-test_reread_mat_mumps_icntl_7", "0"));
-  PetscMatrix A;
-  const PetscInt n = 40;
-  LMEFORM_PETSC_CHECK(MatCreateAIJ(PETSC_COMM_WORLD, PETSC_DECIDE, PETSC_DECIDE, n, n, 1, nullptr, 0, nullptr, A.out()));
-  PetscInt begin = 0, end = 0;
-  LMEFORM_PETSC_CHECK(MatGetOwnershipRange(A, &begin, &end));
-  for (PetscInt row = begin; row < end; ++row)
-    LMEFORM_PETSC_CHECK(MatSetValue(A, row, row, row == n / 2 ? 0.0 : 2.0 + static_cast<double>(row), INSERT_VALUES));
-  LMEFORM_PETSC_CHECK(MatAssemblyBegin(A, MAT_FINAL_ASSEMBLY));
-  LMEFORM_PETSC_CHECK(MatAssemblyEnd(A, MAT_FINAL_ASSEMBLY));
+  PetscMatrix A = diagonal_with_a_zero(40, 2.0);
   SymmetricFactorization factorization(PETSC_COMM_WORLD, "test_reread_");
   ASSERT_FALSE(factorization.factor(A));  // a zero pivot
   LMEFORM_PETSC_CHECK(MatShift(A, -1.0));
