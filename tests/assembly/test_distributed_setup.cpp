@@ -44,13 +44,21 @@ DiscretizationOptions options_of(const Setting& s) {
   return o;
 }
 
-// Element e's jet per original node: (point, original node) -> jet entries.
+// The number every rank gives the first point of element e (ranks number the points they hold
+// locally): cell × points per cell for a cell, the point's own for a per-point element.
+int global_first_point(const Discretization& disc, const ElementSet& domain, int e) {
+  const bool per_point = disc.options().strategy == NeighbourhoodStrategy::PerPoint;
+  return per_point ? domain.element_id(e) : domain.element_id(e) * disc.quadrature().points_per_cell;
+}
+
+// Element e's jet per original node: (global point, original node) -> jet entries.
 std::map<std::pair<int, int>, std::vector<double>> jets_of(const Discretization& disc, const ElementSet& domain, int e) {
   const auto nodes = domain.element_nodes(e);
   const int points = domain.element_point_count(e);
   const auto J = static_cast<std::size_t>(kernel::jet_size(disc.dim(), 2));
   const bool per_point = disc.options().strategy == NeighbourhoodStrategy::PerPoint;
   const auto first = domain.element_first_point(e);
+  const int global_first = global_first_point(disc, domain, e);
   // Per-point elements are tabulated against the point's own list.
   const auto columns = per_point ? domain.point_lists()[static_cast<std::size_t>(first)] : nodes;
   std::vector<double> tab(static_cast<std::size_t>(points) * J * columns.size());
@@ -61,7 +69,7 @@ std::map<std::pair<int, int>, std::vector<double>> jets_of(const Discretization&
     for (std::size_t a = 0; a < columns.size(); ++a) {
       std::vector<double> jet(J);
       for (std::size_t s = 0; s < J; ++s) jet[s] = tab[(static_cast<std::size_t>(k) * J + s) * columns.size() + a];
-      out[{first + k, disc.original_index()[static_cast<std::size_t>(columns[a])]}] = std::move(jet);
+      out[{global_first + k, disc.original_index()[static_cast<std::size_t>(columns[a])]}] = std::move(jet);
     }
   return out;
 }
@@ -92,20 +100,31 @@ TEST(DistributedSetup, EveryElementHasTheSerialBasis) {
     const ElementSet& pd = parallel.cells_domain();
     // The serial run has every element, in point order: the element of point q is found by q.
     std::map<int, int> serial_element_of_point;
-    for (int e = 0; e < sd.n_elements(); ++e) serial_element_of_point[sd.element_first_point(e)] = e;
+    for (int e = 0; e < sd.n_elements(); ++e) {
+      EXPECT_EQ(sd.element_first_point(e), global_first_point(serial, sd, e)) << s.name << ": one rank numbers points as the cells";
+      serial_element_of_point[sd.element_first_point(e)] = e;
+    }
     double worst = 0, largest = 0;
     long long owned = 0;
     for (int e = 0; e < pd.n_elements(); ++e) {
       owned += pd.element_owned(e) ? 1 : 0;
-      const auto it = serial_element_of_point.find(pd.element_first_point(e));
-      ASSERT_NE(it, serial_element_of_point.end()) << s.name << ": element of point " << pd.element_first_point(e);
+      const int point = global_first_point(parallel, pd, e);
+      const auto it = serial_element_of_point.find(point);
+      ASSERT_NE(it, serial_element_of_point.end()) << s.name << ": element of point " << point;
       // The same node list, in original numbering.
       std::vector<int> mine, theirs;
       for (const int v : pd.element_nodes(e)) mine.push_back(parallel.original_index()[static_cast<std::size_t>(v)]);
       for (const int v : sd.element_nodes(it->second)) theirs.push_back(serial.original_index()[static_cast<std::size_t>(v)]);
       std::sort(mine.begin(), mine.end());
       std::sort(theirs.begin(), theirs.end());
-      ASSERT_EQ(mine, theirs) << s.name << ": element of point " << pd.element_first_point(e);
+      ASSERT_EQ(mine, theirs) << s.name << ": element of point " << point;
+      // The same points and weights, to the last bit.
+      const auto d = static_cast<std::size_t>(parallel.dim());
+      for (int k = 0; k < pd.element_point_count(e); ++k) {
+        const auto q = static_cast<std::size_t>(pd.element_first_point(e) + k), r = static_cast<std::size_t>(point + k);
+        ASSERT_EQ(pd.weights()[q], sd.weights()[r]) << s.name;
+        for (std::size_t i = 0; i < d; ++i) ASSERT_EQ(pd.points()[q * d + i], sd.points()[r * d + i]) << s.name;
+      }
       const auto a = jets_of(parallel, pd, e), b = jets_of(serial, sd, it->second);
       ASSERT_EQ(a.size(), b.size()) << s.name;
       for (const auto& [key, jet] : a) {
@@ -125,8 +144,9 @@ TEST(DistributedSetup, EveryElementHasTheSerialBasis) {
 }
 
 TEST(DistributedSetup, NoRankHoldsEveryPointsList) {
-  // The per-point lists are the largest per-point array of the setup: on 3 ranks each holds the
-  // lists of its own cells and a halo one support wide, well under the serial total.
+  // The quadrature points, their weights and lists are the per-point arrays of the setup: on 3
+  // ranks each holds those of its own cells and a halo one support wide, well under the serial
+  // total; what every rank holds (nodes and cells) weighs less than the points of one rank alone.
   const Box box = Box::unit(2);
   const NodeSet nodes = jitter_interior(uniform_grid(box, {61, 61, 1}), box, 0.2 / 60, 3);
   for (const PartitionMethod partition : {PartitionMethod::Metis, PartitionMethod::Hilbert}) {
@@ -140,9 +160,34 @@ TEST(DistributedSetup, NoRankHoldsEveryPointsList) {
     EXPECT_LT(share, 0.5) << to_string(partition) << ": this rank holds " << share << " of the lists";
     EXPECT_LT(cells, 0.5) << to_string(partition);
     EXPECT_EQ(serial.cells_searched(), serial.cells().size());
+    EXPECT_TRUE(serial.points_on_every_rank());
+    EXPECT_FALSE(parallel.points_on_every_rank());
+    EXPECT_EQ(parallel.quadrature().size(), parallel.cells_searched() * std::size_t(parallel.quadrature().points_per_cell));
+    EXPECT_LT(double(parallel.quadrature().size()), 0.5 * double(serial.quadrature().size())) << to_string(partition);
+    EXPECT_EQ(parallel.cells_domain().n_points(), parallel.quadrature().size());
     const auto memory = parallel.memory_report(), whole = serial.memory_report();
     EXPECT_LT(memory.local_bytes, 0.5 * whole.local_bytes) << to_string(partition);
+    EXPECT_EQ(memory.replicated_bytes, whole.replicated_bytes);
+    const double serial_points_bytes = double(serial.quadrature().points.size() + serial.quadrature().weights.size()) * sizeof(double);
+    EXPECT_LT(memory.replicated_bytes, serial_points_bytes) << to_string(partition) << ": replicated arrays outweigh the points";
   }
+}
+
+TEST(DistributedSetup, ARunThatCarriesItsPointsKeepsThemAllOnEveryRank) {
+  const Box box = Box::unit(2);
+  const NodeSet nodes = jitter_interior(uniform_grid(box, {21, 21, 1}), box, 0.2 / 20, 5);
+  DiscretizationOptions o;
+  o.gamma = {1.6};
+  o.partition = PartitionMethod::Hilbert;
+  o.every_point_on_every_rank = true;
+  const Discretization serial(PETSC_COMM_SELF, nodes, o);
+  const Discretization parallel(PETSC_COMM_WORLD, nodes, o);
+  EXPECT_TRUE(parallel.points_on_every_rank());
+  ASSERT_EQ(parallel.quadrature().size(), serial.quadrature().size());
+  EXPECT_EQ(parallel.quadrature().points, serial.quadrature().points);
+  EXPECT_EQ(parallel.quadrature().weights, serial.quadrature().weights);
+  for (int e = 0; e < parallel.n_elements(); ++e)
+    EXPECT_EQ(parallel.element_first_point(e), parallel.cells_domain().element_id(e) * parallel.quadrature().points_per_cell);
 }
 
 }  // namespace

@@ -2,8 +2,8 @@
 //
 //   nodes ─► LME basis (spacing h_a, β_a = γ_a/h_a², kd-tree, support radii)
 //         ─► partition (METIS on rank 0, or a Hilbert curve), renumbering to contiguous row ranges
-//         ─► Delaunay background cells + Gauss rule per cell
-//         ─► primal lists of the points of the cells near this rank's nodes ─► elements
+//         ─► Delaunay background cells ─► the cells near this rank's nodes
+//         ─► their Gauss points and the points' primal lists ─► elements
 //         ─► this rank's elements, ghost nodes, sparsity pattern of its rows
 //         ─► basis storage (full or compressed) for the points of this rank's elements
 //
@@ -13,11 +13,13 @@
 // evaluate every point against its own primal list, so they assemble the same operator and a
 // comparison between them measures the algorithm alone.
 //
-// Replicated on every rank: the nodes (coordinates, spacing, β, support radii, kd-tree), the
-// background cells and the quadrature points with their weights, a few numbers per node or point.
-// Distributed: the primal lists (a rank searches the neighbours of the points of the cells that can
-// reach one of its nodes only: tens of indices per point), elements, pattern, basis storage and
-// assembly. A rank works only on the elements that touch its rows.
+// Replicated on every rank: the nodes (coordinates, spacing, β, support radii, kd-tree) and the
+// background cells (connectivity and measures), a few numbers per node or cell. Distributed: the
+// quadrature points, their weights and primal lists (a rank maps the rule onto the cells that can
+// reach one of its nodes only, and numbers their points locally), elements, pattern, basis storage
+// and assembly. A rank works only on the elements that touch its rows. A Lagrangian run, which
+// carries the points from one reference configuration to the next, keeps every point on every
+// rank (DiscretizationOptions::every_point_on_every_rank).
 #pragma once
 
 #include <mpi.h>
@@ -85,6 +87,10 @@ struct DiscretizationOptions {
   /// rank first; the Hilbert curve needs the coordinates only.
   PartitionMethod partition = PartitionMethod::Metis;
   std::optional<CarriedQuadrature> carried;  ///< set: these cells and points, no triangulation
+  /// Every rank holds the points of every cell, numbered as the cells (set by a run that carries
+  /// its points to a new reference configuration, and implied by `carried`). Otherwise a rank holds
+  /// the points of the cells that can reach its nodes.
+  bool every_point_on_every_rank = false;
   /// Background cells flatter than this (area over longest edge squared, DelaunayOptions) are
   /// dropped. Nodes that moved off a straight boundary leave slivers along it whose quadrature
   /// points lie on the hull to round-off, where the LME derivatives are undefined: a moving node
@@ -119,7 +125,8 @@ class ElementSet {
   [[nodiscard]] const std::string& name() const noexcept { return name_; }
   [[nodiscard]] bool boundary() const noexcept { return boundary_; }
 
-  /// Every point of the domain (global numbering, the same on every rank).
+  /// The points of the domain this rank holds: for the cells, those of Discretization::local_cells()
+  /// (every point on one rank); for a boundary part, every point (the same on every rank).
   [[nodiscard]] std::size_t n_points() const noexcept { return weights_.size(); }
   [[nodiscard]] std::span<const double> points() const noexcept { return points_; }
   [[nodiscard]] std::span<const double> weights() const noexcept { return weights_; }
@@ -136,7 +143,10 @@ class ElementSet {
   [[nodiscard]] std::span<const int> element_nodes(int e) const noexcept { return element_nodes_[static_cast<std::size_t>(e)]; }
   /// The same nodes as positions in the local (owned + ghost) numbering.
   [[nodiscard]] std::span<const int> element_local_nodes(int e) const noexcept { return element_local_[static_cast<std::size_t>(e)]; }
-  /// Points of element e: [first, first + count).
+  /// The element's number on every rank: its cell (cell-based) or point (per point, as the cells
+  /// number their points: cell × points per cell + k), or its facet or facet point on a boundary.
+  [[nodiscard]] int element_id(int e) const noexcept { return element_id_[static_cast<std::size_t>(e)]; }
+  /// Points of element e, in this rank's numbering of the domain's points: [first, first + count).
   [[nodiscard]] int element_first_point(int e) const noexcept { return element_first_point_[static_cast<std::size_t>(e)]; }
   [[nodiscard]] int element_point_count(int e) const noexcept { return element_point_count_[static_cast<std::size_t>(e)]; }
   /// True on exactly one rank per element: that rank counts it for energies and, in
@@ -154,7 +164,8 @@ class ElementSet {
 
  private:
   friend class Discretization;
-  void select_local_elements(const CsrLists& all_elements, int points_per_element, int begin, int end);
+  /// `ids`: the elements' numbers on every rank (empty: their positions in `all_elements`).
+  void select_local_elements(const CsrLists& all_elements, int points_per_element, int begin, int end, std::span<const int> ids = {});
   void number_locally(std::span<const int> ghosts, int begin, int end);
   void build_storage(const LmeBasis& basis, BasisStorage storage, int order, NeighbourhoodStrategy strategy);
 
@@ -169,6 +180,7 @@ class ElementSet {
   const CsrLists* point_lists_ = nullptr;
   CsrLists element_nodes_;
   CsrLists element_local_;
+  std::vector<int> element_id_;
   std::vector<int> element_first_point_;
   std::vector<int> element_point_count_;
   std::vector<char> element_owned_;
@@ -215,12 +227,20 @@ class Discretization {
 
   [[nodiscard]] const LmeBasis& basis() const noexcept { return *basis_; }
   /// Background cells with renumbered connectivity (triangulated in the original numbering, so
-  /// the same cells and quadrature points whatever the number of ranks).
+  /// the same cells and quadrature points whatever the number of ranks), all of them on every rank.
   [[nodiscard]] const BackgroundCells& cells() const noexcept { return cells_; }
   [[nodiscard]] const QuadratureRule& rule() const noexcept { return rule_; }
+  /// The cells whose points this rank holds, ascending: those that can reach one of its nodes
+  /// (every cell on one rank, or with every_point_on_every_rank).
+  [[nodiscard]] std::span<const int> local_cells() const noexcept { return local_cells_; }
+  /// True when this rank holds every cell's points, numbered as the cells number them.
+  [[nodiscard]] bool points_on_every_rank() const noexcept { return local_cells_.size() == cells_.size(); }
+  /// The points of local_cells(), cell after cell: local point q lies in cell point_cell(q).
   [[nodiscard]] const CellQuadrature& quadrature() const noexcept { return quadrature_; }
-  /// Primal list of every quadrature point (renumbered nodes) whose cell can reach one of this
-  /// rank's nodes; the lists of the other points are empty (on one rank, none is).
+  [[nodiscard]] int point_cell(std::size_t q) const noexcept {
+    return local_cells_[q / static_cast<std::size_t>(quadrature_.points_per_cell)];
+  }
+  /// Primal list (renumbered nodes) of every point of quadrature().
   [[nodiscard]] const CsrLists& point_lists() const noexcept { return point_lists_; }
   /// Carried quadrature: points the map moved out of their cells, whose lists were given the
   /// vertices of a Delaunay cell of the current nodes holding them.
@@ -263,15 +283,15 @@ class Discretization {
   [[nodiscard]] const StageTimes& times() const noexcept { return times_; }
 
   /// Bytes this rank holds, by kind: what every rank holds whatever the number of ranks (nodes,
-  /// cells, quadrature points, list offsets, partition), and what falls with the ranks (primal lists
-  /// of this rank's points, elements, pattern, basis storage).
+  /// cells, partition), and what falls with the ranks (quadrature points, weights and primal lists
+  /// of this rank's cells, elements, pattern, basis storage).
   struct MemoryReport {
     double replicated_bytes = 0;
     double local_bytes = 0;
   };
   [[nodiscard]] MemoryReport memory_report() const noexcept;
-  /// Cells whose points this rank searched the neighbours of (all of them on one rank).
-  [[nodiscard]] std::size_t cells_searched() const noexcept { return cells_searched_; }
+  /// Cells whose points this rank holds and searched the neighbours of (all of them on one rank).
+  [[nodiscard]] std::size_t cells_searched() const noexcept { return local_cells_.size(); }
 
   /// Original index of each renumbered node, and the reverse.
   [[nodiscard]] std::span<const int> original_index() const noexcept { return partition_.old_index; }
@@ -293,11 +313,11 @@ class Discretization {
   NodePartition partition_;
   std::optional<LmeBasis> basis_;  // built after renumbering
   BackgroundCells cells_;
+  std::vector<int> local_cells_;
   QuadratureRule rule_;
   CellQuadrature quadrature_;
   CsrLists point_lists_;
   std::size_t points_outside_carried_cells_ = 0;
-  std::size_t cells_searched_ = 0;
   std::vector<CsrLists> boundary_point_lists_;  // per options_.boundary entry
   std::shared_ptr<const detail::CellFacets> facets_;  // consistent integration only
   CsrLists facet_point_lists_;

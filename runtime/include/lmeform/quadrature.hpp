@@ -55,7 +55,8 @@ struct QuadratureRule {
 /// skipped: they can make a discrete energy or mass matrix indefinite. Throws if none is available.
 [[nodiscard]] QuadratureRule simplex_rule(int dim, int degree, bool positive_weights_only = true);
 
-/// A rule mapped onto every cell of a BackgroundCells: cell c owns points [c*nq, (c+1)*nq).
+/// A rule mapped onto cells of a BackgroundCells, in the order mapped: the k-th cell mapped owns
+/// points [k*nq, (k+1)*nq).
 struct CellQuadrature {
   int dim = 0;
   int points_per_cell = 0;
@@ -74,5 +75,8 @@ struct CellQuadrature {
 /// Vertex k of a cell is the image of reference vertex k (origin first, then the unit vectors).
 [[nodiscard]] CellQuadrature map_to_cells(const BackgroundCells& cells, const NodeSet& nodes,
                                           const QuadratureRule& rule);
+/// The rule on the cells `which` only, in that order (a rank's share of the cells).
+[[nodiscard]] CellQuadrature map_to_cells(const BackgroundCells& cells, const NodeSet& nodes, const QuadratureRule& rule,
+                                          std::span<const int> which);
 
 }  // namespace lmeform

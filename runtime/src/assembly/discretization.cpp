@@ -85,21 +85,13 @@ CsrLists with_vertices(const CsrLists& lists, ExtraVertices&& extra) {
   return out;
 }
 
-// Every quadrature point's list also holds the vertices of its cell, so the point lies in the
-// convex hull of its list and the LME problem there has a solution. The support cutoff alone does
-// not guarantee it on strongly graded grids: a fine node's support can end short of a point in a
-// long triangle it shares with coarse nodes (measured: a dumbbell CVT with h from 0.004 to 0.09,
-// "point outside the convex hull of its neighbours" at 41 neighbours). A vertex added this way
-// contributes its Gaussian factor, below tol0 there.
-CsrLists with_cell_vertices(const CsrLists& lists, const BackgroundCells& cells, int points_per_cell) {
-  return with_vertices(lists, [&](std::size_t q) { return cells.cell(q / static_cast<std::size_t>(points_per_cell)); });
-}
-
 // Each cell's list with the lists of its facets' points merged in: a node whose support reaches a
 // facet of the cell but none of its interior points still gets the cell's gradient correction.
-CsrLists with_facet_lists(const CsrLists& cell_lists, const detail::CellFacets& facets, const CsrLists& facet_point_lists) {
+CsrLists with_facet_lists(const CsrLists& cell_lists, const detail::CellFacets& facets, const CsrLists& facet_point_lists,
+                          std::span<const int> local_cells) {
   const auto per_cell = static_cast<std::size_t>(facets.dim + 1), per_facet = static_cast<std::size_t>(facets.points_per_facet);
-  return with_vertices(cell_lists, [&, row = std::vector<int>()](std::size_t c) mutable {
+  return with_vertices(cell_lists, [&, row = std::vector<int>()](std::size_t local) mutable {
+    const auto c = static_cast<std::size_t>(local_cells[local]);
     row.clear();
     for (std::size_t k = 0; k < per_cell; ++k) {
       const auto f = static_cast<std::size_t>(facets.cell_facets[c * per_cell + k]);
@@ -120,12 +112,14 @@ CsrLists with_facet_lists(const CsrLists& cell_lists, const detail::CellFacets& 
 // triangulation of the current nodes (in the original numbering, so independent of the ranks)
 // that holds it. Returns the number of points given them.
 std::size_t add_enclosing_cells(CsrLists& lists, const CellQuadrature& quadrature, const BackgroundCells& cells,
-                                const NodeSet& nodes, const NodeSet& original_nodes, std::span<const int> new_index) {
+                                std::span<const int> local_cells, const NodeSet& nodes, const NodeSet& original_nodes,
+                                std::span<const int> new_index) {
   const auto dim = static_cast<std::size_t>(nodes.dim);
   std::vector<std::size_t> outside;
   for (std::size_t q = 0; q < quadrature.size(); ++q) {
     const std::span<const double> x(quadrature.points.data() + q * dim, dim);
-    const auto b = barycentric(cells, nodes, q / static_cast<std::size_t>(quadrature.points_per_cell), x);
+    const auto cell = static_cast<std::size_t>(local_cells[q / static_cast<std::size_t>(quadrature.points_per_cell)]);
+    const auto b = barycentric(cells, nodes, cell, x);
     if (std::any_of(b.begin(), b.begin() + static_cast<std::ptrdiff_t>(dim + 1), [](double v) { return v < -1e-10; }))
       outside.push_back(q);
   }
@@ -145,40 +139,18 @@ std::size_t add_enclosing_cells(CsrLists& lists, const CellQuadrature& quadratur
   return added;
 }
 
-// The primal lists of the points of the cells marked in `searched` (all cells when it is empty),
-// each with its cell's vertices; the other points get empty lists. The neighbour search is the
-// costliest part of the setup and the lists the largest per-point array: a rank builds them only
-// where its elements can be.
+// The primal list of every point of `quadrature` (the points of `local_cells`), each with its
+// cell's vertices, so that the point lies in the convex hull of its list and the LME problem there
+// has a solution. The support cutoff alone does not guarantee it on strongly graded grids: a fine
+// node's support can end short of a point in a long triangle it shares with coarse nodes
+// (measured: a dumbbell CVT with h from 0.004 to 0.09, "point outside the convex hull of its
+// neighbours" at 41 neighbours). A vertex added this way contributes its Gaussian factor, below
+// tol0 there.
 CsrLists point_lists_of_cells(const LmeBasis& basis, const CellQuadrature& quadrature, const BackgroundCells& cells,
-                              std::span<const char> searched) {
+                              std::span<const int> local_cells) {
   const auto per_cell = static_cast<std::size_t>(quadrature.points_per_cell);
-  if (searched.empty()) return with_cell_vertices(basis.neighbour_lists(quadrature.points), cells, quadrature.points_per_cell);
-  const auto d = static_cast<std::size_t>(quadrature.dim);
-  std::vector<double> points;
-  for (std::size_t c = 0; c < cells.size(); ++c)
-    if (searched[c]) points.insert(points.end(), quadrature.points.begin() + std::ptrdiff_t(c * per_cell * d),
-                                   quadrature.points.begin() + std::ptrdiff_t((c + 1) * per_cell * d));
-  const CsrLists found = basis.neighbour_lists(points);
-  CsrLists out;
-  out.offsets.assign(quadrature.size() + 1, 0);
-  out.indices.reserve(found.indices.size() + found.size() * (d + 1));
-  std::vector<int> row;
-  std::size_t k = 0;
-  for (std::size_t c = 0; c < cells.size(); ++c) {
-    for (std::size_t g = 0; g < per_cell; ++g) {
-      const std::size_t q = c * per_cell + g;
-      if (searched[c]) {
-        const auto list = found[k++];
-        row.assign(list.begin(), list.end());
-        for (const int v : cells.cell(c)) row.push_back(v);
-        std::sort(row.begin(), row.end());
-        row.erase(std::unique(row.begin(), row.end()), row.end());
-        out.indices.insert(out.indices.end(), row.begin(), row.end());
-      }
-      out.offsets[q + 1] = static_cast<int>(out.indices.size());
-    }
-  }
-  return out;
+  return with_vertices(basis.neighbour_lists(quadrature.points),
+                       [&](std::size_t q) { return cells.cell(static_cast<std::size_t>(local_cells[q / per_cell])); });
 }
 
 // Every facet point's neighbours and its facet's vertices. The point lies inside its facet, so it
@@ -317,10 +289,10 @@ Discretization::MemoryReport Discretization::memory_report() const noexcept {
   // Coordinates (the node set, the basis' copy, the kd-tree's copy), gamma, spacing, beta, radius,
   // the partition's three maps.
   m.replicated_bytes = n * (3 * d + 4) * kDouble + n * 3 * kInt;
-  m.replicated_bytes += double(cells_.connectivity.size()) * kInt;
-  m.replicated_bytes += double(quadrature_.points.size() + quadrature_.weights.size()) * kDouble;
-  m.replicated_bytes += double(point_lists_.offsets.size()) * kInt;
-  m.local_bytes = double(point_lists_.indices.size()) * kInt + double(basis_storage_doubles()) * kDouble;
+  m.replicated_bytes += double(cells_.connectivity.size()) * kInt + double(cells_.measures.size()) * kDouble;
+  m.local_bytes = double(quadrature_.points.size() + quadrature_.weights.size()) * kDouble;
+  m.local_bytes += double(point_lists_.offsets.size() + point_lists_.indices.size() + local_cells_.size()) * kInt;
+  m.local_bytes += double(basis_storage_doubles()) * kDouble;
   for (const ElementSet& e : domains_)
     m.local_bytes += double(e.element_lists().indices.size() * 2 + e.element_lists().offsets.size() * 2) * kInt +
                      double(e.n_elements()) * (3 * kInt + 1);
@@ -403,9 +375,7 @@ Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, Discretizati
       delaunay_options.flat_tolerance = options_.flat_cell_tolerance;
       // A node whose only cells were dropped as flat still has its support: other cells' points.
       delaunay_options.allow_unused_nodes = options_.flat_cell_tolerance > DelaunayOptions{}.flat_tolerance;
-      const BackgroundCells original_cells = delaunay(nodes, delaunay_options);
-      quadrature_ = map_to_cells(original_cells, nodes, rule_);
-      cells_ = original_cells;
+      cells_ = delaunay(nodes, delaunay_options);
     }
     for (int& v : cells_.connectivity) v = partition_.new_index[static_cast<std::size_t>(v)];
   }
@@ -426,21 +396,33 @@ Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, Discretizati
     }
     nodes_ = NodeSet(nodes.dim, std::move(coords));
     if (!basis_) basis_.emplace(nodes_, renumbered_gamma, std::move(renumbered_spacing), options_.lme);
-    // A carried point can take the vertices of a cell other than its own (add_enclosing_cells):
-    // its cell is searched on every rank.
     if (options_.consistent_integration > 0) {
       const int m = options_.consistent_integration;
       facets_ = std::make_shared<const detail::CellFacets>(
           detail::cell_facets(cells_, nodes_, nodes.dim == 2 ? gauss_legendre(m) : triangle_rule(m)));
       facet_point_lists_ = facet_point_lists(*basis_, *facets_, cells_, nodes_);
     }
-    std::vector<char> searched = size_ > 1 && !options_.carried ? cells_reaching_owned_nodes() : std::vector<char>();
-    if (facets_ && !searched.empty()) search_cells_whose_facets_list_owned_nodes(searched);
-    point_lists_ = point_lists_of_cells(*basis_, quadrature_, cells_, searched);
-    cells_searched_ = searched.empty() ? cells_.size() : static_cast<std::size_t>(std::count(searched.begin(), searched.end(), 1));
+    // The neighbour search is the costliest part of the setup, and the points and their lists the
+    // largest per-point arrays: a rank maps the rule onto the cells where its elements can be only.
+    const bool every_cell = size_ == 1 || options_.carried || options_.every_point_on_every_rank;
+    std::vector<char> searched = every_cell ? std::vector<char>(cells_.size(), 1) : cells_reaching_owned_nodes();
+    if (facets_ && !every_cell) search_cells_whose_facets_list_owned_nodes(searched);
+    local_cells_.clear();
+    for (std::size_t c = 0; c < cells_.size(); ++c)
+      if (searched[c]) local_cells_.push_back(static_cast<int>(c));
+  }
+  if (!options_.carried) {
+    StageClock clock(times_.cells);
+    // The renumbered connectivity lists each cell's vertices in the triangulation's order: the
+    // points are those of the original numbering to the last bit.
+    quadrature_ = map_to_cells(cells_, nodes_, rule_, local_cells_);
+  }
+  {
+    StageClock clock(times_.neighbour_search);
+    point_lists_ = point_lists_of_cells(*basis_, quadrature_, cells_, local_cells_);
     if (options_.carried)
       points_outside_carried_cells_ =
-          add_enclosing_cells(point_lists_, quadrature_, cells_, nodes_, nodes, partition_.new_index);
+          add_enclosing_cells(point_lists_, quadrature_, cells_, local_cells_, nodes_, nodes, partition_.new_index);
   }
 
   // Elements of every integration domain; ghosts and the pattern of their union; basis storage.
@@ -481,8 +463,12 @@ void Discretization::build_cell_domain() {
   const bool cell_based = options_.strategy == NeighbourhoodStrategy::CellBased;
   const int points_per_element = cell_based ? quadrature_.points_per_cell : 1;
   CsrLists all_elements = cell_based ? union_of_groups(point_lists_, points_per_element, n_nodes()) : point_lists_;
-  if (facets_) all_elements = with_facet_lists(all_elements, *facets_, facet_point_lists_);
-  cells.select_local_elements(all_elements, points_per_element, owned_begin(), owned_end());
+  std::vector<int> ids(all_elements.size());
+  const auto per_cell = static_cast<std::size_t>(quadrature_.points_per_cell);
+  for (std::size_t e = 0; e < ids.size(); ++e)
+    ids[e] = cell_based ? local_cells_[e] : local_cells_[e / per_cell] * static_cast<int>(per_cell) + static_cast<int>(e % per_cell);
+  if (facets_) all_elements = with_facet_lists(all_elements, *facets_, facet_point_lists_, local_cells_);
+  cells.select_local_elements(all_elements, points_per_element, owned_begin(), owned_end(), ids);
   domains_.push_back(std::move(cells));
 }
 
@@ -525,7 +511,7 @@ void Discretization::build_gradient_correction() {
       for (std::size_t slot = 0; slot < (hessians ? packed : 0); ++slot)
         for (std::size_t a = 0; a < n; ++a) h[a * packed + slot] -= w * tabulation[(k * jet + 1 + d + slot) * n + a];
     }
-    const std::size_t cell = first / points_per_cell;
+    const auto cell = static_cast<std::size_t>(point_cell(first));
     for (std::size_t k = 0; k < per_cell; ++k) {
       const auto f = static_cast<std::size_t>(facets.cell_facets[cell * per_cell + k]);
       const double sign = facets.cell_signs[cell * per_cell + k];
@@ -609,8 +595,10 @@ const ElementSet& Discretization::boundary_domain(std::string_view part) const {
   throw std::out_of_range("Discretization: no boundary domain '" + std::string(part) + "'");
 }
 
-void ElementSet::select_local_elements(const CsrLists& all_elements, int points_per_element, int begin, int end) {
+void ElementSet::select_local_elements(const CsrLists& all_elements, int points_per_element, int begin, int end,
+                                       std::span<const int> ids) {
   element_nodes_ = CsrLists{};
+  element_id_.clear();
   element_first_point_.clear();
   element_point_count_.clear();
   element_owned_.clear();
@@ -626,6 +614,7 @@ void ElementSet::select_local_elements(const CsrLists& all_elements, int points_
     // holds the element. It counts the element's energy and, in PetscExchange mode, is the only
     // rank that computes it.
     element_nodes_.push_back(list);
+    element_id_.push_back(ids.empty() ? static_cast<int>(e) : ids[e]);
     element_first_point_.push_back(static_cast<int>(e) * points_per_element);
     element_point_count_.push_back(points_per_element);
     element_owned_.push_back(list.front() >= begin ? 1 : 0);

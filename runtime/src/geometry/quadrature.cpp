@@ -353,6 +353,13 @@ QuadratureRule simplex_rule(int dim, int degree, bool positive_weights_only) {
 }
 
 CellQuadrature map_to_cells(const BackgroundCells& cells, const NodeSet& nodes, const QuadratureRule& rule) {
+  std::vector<int> every(cells.size());
+  for (std::size_t c = 0; c < every.size(); ++c) every[c] = static_cast<int>(c);
+  return map_to_cells(cells, nodes, rule, every);
+}
+
+CellQuadrature map_to_cells(const BackgroundCells& cells, const NodeSet& nodes, const QuadratureRule& rule,
+                            std::span<const int> which) {
   if (cells.dim != nodes.dim || rule.dim != cells.dim) {
     throw std::invalid_argument("map_to_cells: dimensions differ (cells " + std::to_string(cells.dim) + ", nodes " +
                                 std::to_string(nodes.dim) + ", rule " + std::to_string(rule.dim) + ")");
@@ -363,9 +370,12 @@ CellQuadrature map_to_cells(const BackgroundCells& cells, const NodeSet& nodes, 
   CellQuadrature out;
   out.dim = cells.dim;
   out.points_per_cell = static_cast<int>(nq);
-  out.points.resize(cells.size() * nq * d);
-  out.weights.resize(cells.size() * nq);
-  for (std::size_t c = 0; c < cells.size(); ++c) {
+  out.points.resize(which.size() * nq * d);
+  out.weights.resize(which.size() * nq);
+  for (std::size_t slot = 0; slot < which.size(); ++slot) {
+    if (which[slot] < 0 || static_cast<std::size_t>(which[slot]) >= cells.size())
+      throw std::out_of_range("map_to_cells: no cell " + std::to_string(which[slot]) + " of " + std::to_string(cells.size()));
+    const auto c = static_cast<std::size_t>(which[slot]);
     const auto v = cells.cell(c);
     for (int k : v) {
       if (k < 0 || static_cast<std::size_t>(k) >= nodes.size())
@@ -377,13 +387,13 @@ CellQuadrature map_to_cells(const BackgroundCells& cells, const NodeSet& nodes, 
     const double scale = cells.measures[c] / ref;
     for (std::size_t q = 0; q < nq; ++q) {
       const auto xi = rule.point(q);
-      double* x = out.points.data() + (c * nq + q) * d;
+      double* x = out.points.data() + (slot * nq + q) * d;
       for (std::size_t i = 0; i < d; ++i) x[i] = x0[i];
       for (std::size_t k = 0; k < d; ++k) {
         const auto xk = nodes.point(static_cast<std::size_t>(v[k + 1]));
         for (std::size_t i = 0; i < d; ++i) x[i] += xi[k] * (xk[i] - x0[i]);
       }
-      out.weights[c * nq + q] = rule.weights[q] * scale;
+      out.weights[slot * nq + q] = rule.weights[q] * scale;
     }
   }
   return out;

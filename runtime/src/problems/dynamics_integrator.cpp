@@ -134,6 +134,7 @@ std::unique_ptr<ReferenceConfiguration> DynamicsIntegrator::build_reference(
   input.lme = bound_.lme(AxisParity::odd);  // y_r is odd in r: no mirror
   input.initial = state;
   input.carried = std::move(carried);
+  input.every_point_on_every_rank = true;  // resets carry every point (carry_reference)
   input.qdata_values = std::move(qdata);
   input.coefficient_values = std::move(coefficients);
   input.dirichlet_nodes = dirichlet_sets_;

@@ -38,8 +38,12 @@ struct ProblemInput {
   bool clamp_start_to_bounds = false;
   /// Cells and quadrature points carried from a previous reference configuration (a reset).
   std::optional<CarriedQuadrature> carried;
-  /// Quadrature data given by value, by name (every global point, the datum's size each): they
-  /// replace the scene's source (a reset's pushed-forward reference field).
+  /// Every rank holds every quadrature point (DiscretizationOptions::every_point_on_every_rank):
+  /// a run that carries its points to a later reference configuration.
+  bool every_point_on_every_rank = false;
+  /// Quadrature data given by value, by name (every point of every cell, the datum's size each;
+  /// with every_point_on_every_rank or carried): they replace the scene's source (a reset's
+  /// pushed-forward reference field).
   std::map<std::string, std::vector<double>, std::less<>> qdata_values;
   /// Nodal values of scalar [coefficients] fields, by name (input.nodes order): they replace the
   /// scene's (a re-mesh's projected reference field).

@@ -9,9 +9,13 @@ namespace lmeform::problems {
 
 namespace {
 
-/// φ, ∇φ or ∇∇φ of a scalar nodal field (original node order) at every quadrature point (each rank
-/// computes the points of the elements it owns; summed over the ranks), jet-size values each: the
-/// reference field of a Lagrangian form. `field_basis` interpolates (its nodes in the original
+/// Whether every rank holds every point of the domain in one numbering: then each rank computes
+/// the points of the elements it owns and the ranks sum them; otherwise each rank computes the
+/// points it holds.
+bool shared_points(const Discretization& disc, const ElementSet& domain) { return domain.boundary() || disc.points_on_every_rank(); }
+
+/// φ, ∇φ or ∇∇φ of a scalar nodal field (original node order) at the domain's points,
+/// jet-size values each: the reference field of a Lagrangian form. `field_basis` interpolates (its nodes in the original
 /// numbering); with a null basis the discretization's own.
 std::vector<double> interpolated_field_qdata(const Discretization& disc, const ElementSet& domain, std::span<const double> original_values,
                                              int derivative, const LmeBasis* field_basis) {
@@ -20,14 +24,14 @@ std::vector<double> interpolated_field_qdata(const Discretization& disc, const E
   // A cell's vertices restore the hull of a point's list where the field's own basis sees too few
   // neighbours (boundary points lie on the hull of their lists' facets already).
   const bool cells = !domain.boundary();
-  const int points_per_cell = disc.quadrature().points_per_cell;
   const std::size_t size = derivative == 0 ? 1 : derivative == 1 ? std::size_t(dim) : std::size_t(dim * dim);
   const std::size_t first = derivative == 0 ? 0 : derivative == 1 ? 1 : 1 + std::size_t(dim);
   const auto original = disc.original_index();
   std::vector<double> out(domain.n_points() * size, 0.0);
   std::vector<int> own_list;
+  const bool shared = shared_points(disc, domain);
   for (int e = 0; e < domain.n_elements(); ++e) {
-    if (!domain.element_owned(e)) continue;
+    if (shared && !domain.element_owned(e)) continue;
     for (int q = domain.element_first_point(e); q < domain.element_first_point(e) + domain.element_point_count(e); ++q) {
       const auto x = domain.point(std::size_t(q));
       std::span<const int> list = lists[std::size_t(q)];
@@ -37,7 +41,7 @@ std::vector<double> interpolated_field_qdata(const Discretization& disc, const E
         jet = evaluate_with_cell_fallback(*field_basis, x, own_list, derivative, [&] {
           std::vector<int> vertices;
           if (cells)
-            for (const int v : disc.cells().cell(std::size_t(q) / std::size_t(points_per_cell))) vertices.push_back(original[std::size_t(v)]);
+            for (const int v : disc.cells().cell(std::size_t(disc.point_cell(std::size_t(q))))) vertices.push_back(original[std::size_t(v)]);
           return vertices;
         });
         list = own_list;
@@ -61,7 +65,7 @@ std::vector<double> interpolated_field_qdata(const Discretization& disc, const E
       }
     }
   }
-  MPI_Allreduce(MPI_IN_PLACE, out.data(), static_cast<int>(out.size()), MPI_DOUBLE, MPI_SUM, disc.comm());
+  if (shared) MPI_Allreduce(MPI_IN_PLACE, out.data(), static_cast<int>(out.size()), MPI_DOUBLE, MPI_SUM, disc.comm());
   return out;
 }
 
@@ -76,10 +80,10 @@ std::vector<double> support_size_qdata(const Discretization& disc, const Element
   const auto h = disc.basis().spacing();
   std::vector<double> tabulation(static_cast<std::size_t>(domain.max_element_points()) * static_cast<std::size_t>(domain.max_element_nodes()));
   LmeWorkspace ws;
-  // Each rank tabulates the elements it owns only: the sum over the ranks has every point once.
   std::vector<double> out(domain.n_points(), 0.0);
+  const bool shared = shared_points(disc, domain);
   for (int e = 0; e < domain.n_elements(); ++e) {
-    if (!domain.element_owned(e)) continue;
+    if (shared && !domain.element_owned(e)) continue;
     const auto nodes = domain.element_nodes(e);
     const std::size_t n = nodes.size();
     domain.tabulate(e, 0, tabulation, ws);
@@ -89,7 +93,7 @@ std::vector<double> support_size_qdata(const Discretization& disc, const Element
       out[static_cast<std::size_t>(domain.element_first_point(e) + k)] = s;
     }
   }
-  MPI_Allreduce(MPI_IN_PLACE, out.data(), static_cast<int>(out.size()), MPI_DOUBLE, MPI_SUM, disc.comm());
+  if (shared) MPI_Allreduce(MPI_IN_PLACE, out.data(), static_cast<int>(out.size()), MPI_DOUBLE, MPI_SUM, disc.comm());
   return out;
 }
 
