@@ -1,7 +1,8 @@
 // Run with 3 ranks: the distributed setup (each rank searches the neighbours of the points of the
 // cells that can reach its nodes only) gives every element the basis the serial setup gives it,
 // to 1e-12 at every point, for every partition method, both neighbourhood strategies, the
-// second-order basis and a mirrored (axisymmetric) basis; and the per-point lists really are split.
+// second-order basis, a mirrored (axisymmetric) basis and the consistent integration's corrections;
+// and the points, their lists and the facets really are split.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -30,16 +31,21 @@ struct Setting {
   NeighbourhoodStrategy strategy;
   LmeConsistency consistency;
   bool mirrored;
+  int consistent_integration = 0;  ///< facet points (0: Gauss rule alone)
+  double tol0 = 1e-6;              ///< support cutoff
+  int basis_order = 2;             ///< derivatives tabulated and compared
 };
 
 DiscretizationOptions options_of(const Setting& s) {
   DiscretizationOptions o;
   o.gamma = {s.consistency == LmeConsistency::second ? 0.5 : 1.6};
   o.quadrature_points = 3;
-  o.basis_order = 2;
   o.strategy = s.strategy;
   o.partition = s.partition;
   o.lme.consistency = s.consistency;
+  o.consistent_integration = s.consistent_integration;
+  o.lme.tol0 = s.tol0;
+  o.basis_order = s.basis_order;
   if (s.mirrored) o.lme.mirrors = {MirrorPlane{0, 0.0}};
   return o;
 }
@@ -55,7 +61,8 @@ int global_first_point(const Discretization& disc, const ElementSet& domain, int
 std::map<std::pair<int, int>, std::vector<double>> jets_of(const Discretization& disc, const ElementSet& domain, int e) {
   const auto nodes = domain.element_nodes(e);
   const int points = domain.element_point_count(e);
-  const auto J = static_cast<std::size_t>(kernel::jet_size(disc.dim(), 2));
+  const int order = disc.options().basis_order;
+  const auto J = static_cast<std::size_t>(kernel::jet_size(disc.dim(), order));
   const bool per_point = disc.options().strategy == NeighbourhoodStrategy::PerPoint;
   const auto first = domain.element_first_point(e);
   const int global_first = global_first_point(disc, domain, e);
@@ -63,7 +70,7 @@ std::map<std::pair<int, int>, std::vector<double>> jets_of(const Discretization&
   const auto columns = per_point ? domain.point_lists()[static_cast<std::size_t>(first)] : nodes;
   std::vector<double> tab(static_cast<std::size_t>(points) * J * columns.size());
   LmeWorkspace ws;
-  domain.tabulate(e, 2, tab, ws);
+  domain.tabulate(e, order, tab, ws);
   std::map<std::pair<int, int>, std::vector<double>> out;
   for (int k = 0; k < points; ++k)
     for (std::size_t a = 0; a < columns.size(); ++a) {
@@ -84,6 +91,19 @@ TEST(DistributedSetup, EveryElementHasTheSerialBasis) {
       {"block, per point", PartitionMethod::Block, NeighbourhoodStrategy::PerPoint, LmeConsistency::first, false},
       {"hilbert, second order", PartitionMethod::Hilbert, NeighbourhoodStrategy::CellBased, LmeConsistency::second, false},
       {"metis, mirrored", PartitionMethod::Metis, NeighbourhoodStrategy::CellBased, LmeConsistency::first, true},
+      // Gradients and Hessians corrected cell by cell against facet rules: a rank builds the facets
+      // of its cells and their neighbours only.
+      {"hilbert, consistent integration", PartitionMethod::Hilbert, NeighbourhoodStrategy::CellBased, LmeConsistency::first, false, 2},
+      {"metis, second order, consistent integration", PartitionMethod::Metis, NeighbourhoodStrategy::CellBased, LmeConsistency::second,
+       false, 3},
+      // A compact support: facet points see few nodes, and their lists take the vertices of the
+      // cells beside them, which can reach a rank's nodes from a cell no support reaches. Gradients
+      // only: the Hessian correction evaluates hull facets just inside the hull, where the dual
+      // problem is ill-conditioned, and the serial and distributed setups, which sum over the nodes
+      // in different orders, then differ by 5e-10 of the largest entry (measured, before and after
+      // the points were distributed).
+      {"hilbert, compact support, consistent integration", PartitionMethod::Hilbert, NeighbourhoodStrategy::CellBased,
+       LmeConsistency::first, false, 2, 1e-3, 1},
   };
   for (const Setting& s : settings) {
     const DiscretizationOptions o = options_of(s);
@@ -149,10 +169,12 @@ TEST(DistributedSetup, NoRankHoldsEveryPointsList) {
   // total; what every rank holds (nodes and cells) weighs less than the points of one rank alone.
   const Box box = Box::unit(2);
   const NodeSet nodes = jitter_interior(uniform_grid(box, {61, 61, 1}), box, 0.2 / 60, 3);
-  for (const PartitionMethod partition : {PartitionMethod::Metis, PartitionMethod::Hilbert}) {
+  for (const auto& [partition, facet_points] : {std::pair{PartitionMethod::Metis, 0}, std::pair{PartitionMethod::Hilbert, 0},
+                                                std::pair{PartitionMethod::Hilbert, 2}}) {
     DiscretizationOptions o;
     o.gamma = {1.6};
     o.partition = partition;
+    o.consistent_integration = facet_points;  // the facets and their points' lists are split too
     const Discretization serial(PETSC_COMM_SELF, nodes, o);
     const Discretization parallel(PETSC_COMM_WORLD, nodes, o);
     const double share = double(parallel.point_lists().total()) / double(serial.point_lists().total());

@@ -284,7 +284,7 @@ class Discretization {
 
   /// Bytes this rank holds, by kind: what every rank holds whatever the number of ranks (nodes,
   /// cells, partition), and what falls with the ranks (quadrature points, weights and primal lists
-  /// of this rank's cells, elements, pattern, basis storage).
+  /// of this rank's cells, the facets of consistent integration, elements, pattern, basis storage).
   struct MemoryReport {
     double replicated_bytes = 0;
     double local_bytes = 0;
@@ -298,6 +298,7 @@ class Discretization {
   [[nodiscard]] std::span<const int> renumbered_index() const noexcept { return partition_.new_index; }
 
  private:
+  void select_local_cells();
   [[nodiscard]] std::vector<char> cells_reaching_owned_nodes() const;
   void search_cells_whose_facets_list_owned_nodes(std::vector<char>& searched) const;
   void build_cell_domain();

@@ -30,25 +30,37 @@
 
 namespace lmeform::detail {
 
+/// The facets of some of the cells (a rank's share and a layer around it; all of them on one rank).
 struct CellFacets {
   int dim = 0;
   int points_per_facet = 0;
+  std::vector<int> cells;         ///< the cells whose facets these are, ascending (global numbers)
   std::vector<int> vertices;      ///< facet f: vertices[f * dim + k], sorted
   std::vector<double> points;     ///< facet f, point g: points[(f * ng + g) * dim + i]
   std::vector<double> weights;    ///< [f * ng + g]
-  std::vector<double> normals;    ///< facet f: unit normal, outward of the facet's first cell
-  std::vector<int> cell_facets;   ///< cell c, facet k (opposite vertex k): cell_facets[c * (dim + 1) + k]
-  std::vector<signed char> cell_signs;  ///< +1 where the facet's normal points out of cell c, -1 otherwise
+  std::vector<double> normals;    ///< facet f: unit normal, outward of the first of `cells` that has it
+  std::vector<int> cell_facets;   ///< cells[s], facet k (opposite vertex k): cell_facets[s * (dim + 1) + k]
+  std::vector<signed char> cell_signs;  ///< +1 where the facet's normal points out of cells[s], -1 otherwise
+  /// Facet f lies between cells sharing[2f] and sharing[2f + 1] of all the cells (global numbers,
+  /// -1 on the hull), whether or not both are among `cells`.
+  std::vector<int> sharing;
 
   [[nodiscard]] std::size_t size() const noexcept { return normals.size() / static_cast<std::size_t>(dim); }
   [[nodiscard]] std::span<const int> facet_vertices(std::size_t f) const noexcept {
     return {vertices.data() + f * static_cast<std::size_t>(dim), static_cast<std::size_t>(dim)};
   }
+  /// The position of global cell c in `cells`; throws std::out_of_range if it is not there.
+  [[nodiscard]] std::size_t slot(int c) const;
+  /// 1 for a hull facet, 2 for an interior one.
+  [[nodiscard]] int cells_sharing(std::size_t f) const noexcept { return (sharing[2 * f] >= 0 ? 1 : 0) + (sharing[2 * f + 1] >= 0 ? 1 : 0); }
 };
 
-/// Every facet of the cells once, with `rule` (Gauss–Legendre on [0, 1] in 2D, a triangle rule in
-/// 3D) mapped onto it: segment points x_0 + ξ (x_1 − x_0) and weights w |e|, as the boundary
-/// quadrature of the domain maps them, so that a hull facet carries the points of `ds`.
-[[nodiscard]] CellFacets cell_facets(const BackgroundCells& cells, const NodeSet& nodes, const QuadratureRule& rule);
+/// Every facet of the cells `which` (ascending) once, with `rule` (Gauss–Legendre on [0, 1] in 2D,
+/// a triangle rule in 3D) mapped onto it: segment points x_0 + ξ (x_1 − x_0) and weights w |e|, as
+/// the boundary quadrature of the domain maps them, so that a hull facet carries the points of `ds`.
+/// Whichever of its two cells a facet is first met from, its points and the products of its
+/// normal with the cells' signs are the same to the last bit.
+[[nodiscard]] CellFacets cell_facets(const BackgroundCells& cells, const NodeSet& nodes, const QuadratureRule& rule,
+                                     std::span<const int> which);
 
 }  // namespace lmeform::detail

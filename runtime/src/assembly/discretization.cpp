@@ -91,10 +91,10 @@ CsrLists with_facet_lists(const CsrLists& cell_lists, const detail::CellFacets& 
                           std::span<const int> local_cells) {
   const auto per_cell = static_cast<std::size_t>(facets.dim + 1), per_facet = static_cast<std::size_t>(facets.points_per_facet);
   return with_vertices(cell_lists, [&, row = std::vector<int>()](std::size_t local) mutable {
-    const auto c = static_cast<std::size_t>(local_cells[local]);
+    const std::size_t slot = facets.slot(local_cells[local]);
     row.clear();
     for (std::size_t k = 0; k < per_cell; ++k) {
-      const auto f = static_cast<std::size_t>(facets.cell_facets[c * per_cell + k]);
+      const auto f = static_cast<std::size_t>(facets.cell_facets[slot * per_cell + k]);
       for (std::size_t g = 0; g < per_facet; ++g) {
         const auto list = facet_point_lists[f * per_facet + g];
         row.insert(row.end(), list.begin(), list.end());
@@ -165,12 +165,6 @@ CsrLists facet_point_lists(const LmeBasis& basis, const detail::CellFacets& face
   const CsrLists own = basis.neighbour_lists(facets.points);
   const auto per_facet = static_cast<std::size_t>(facets.points_per_facet);
   const auto dim = static_cast<std::size_t>(nodes.dim);
-  std::vector<std::array<long, 2>> facet_cells(facets.size(), {-1, -1});
-  for (std::size_t c = 0; c < cells.size(); ++c)
-    for (std::size_t k = 0; k <= dim; ++k) {
-      auto& sharing = facet_cells[static_cast<std::size_t>(facets.cell_facets[c * (dim + 1) + k])];
-      (sharing[0] < 0 ? sharing[0] : sharing[1]) = static_cast<long>(c);
-    }
   // -1, 0 or +1: the side of the facet's plane a node lies on (0 within rounding of the plane).
   auto side = [&](std::size_t f, int node) {
     const auto v0 = nodes.point(static_cast<std::size_t>(facets.facet_vertices(f)[0])), x = nodes.point(static_cast<std::size_t>(node));
@@ -192,7 +186,7 @@ CsrLists facet_point_lists(const LmeBasis& basis, const detail::CellFacets& face
       above = above || s > 0;
       below = below || s < 0;
     }
-    for (const long c : facet_cells[f]) {
+    for (const int c : {facets.sharing[2 * f], facets.sharing[2 * f + 1]}) {
       if (c < 0) continue;
       const auto vertices = cells.cell(static_cast<std::size_t>(c));
       int cell_side = 0;
@@ -210,11 +204,14 @@ void Discretization::search_cells_whose_facets_list_owned_nodes(std::vector<char
   // facet_point_lists), which the other cell sharing the facet merges into its element: that
   // element can reach an owned node no support of its own reaches (measured: SENT on 2 ranks with
   // support_tolerance = 1e-3, a cell point with an empty list). Its points are searched too.
+  // Such a cell shares a facet with a cell that has an owned vertex, which the centroid test has
+  // searched: it is among the cells whose facets were built (the searched ones and their neighbours).
   const auto per_cell = static_cast<std::size_t>(dim() + 1), per_facet = static_cast<std::size_t>(facets_->points_per_facet);
-  for (std::size_t c = 0; c < cells_.size(); ++c) {
+  for (std::size_t slot = 0; slot < facets_->cells.size(); ++slot) {
+    const auto c = static_cast<std::size_t>(facets_->cells[slot]);
     if (searched[c]) continue;
     for (std::size_t k = 0; k < per_cell && !searched[c]; ++k) {
-      const auto f = static_cast<std::size_t>(facets_->cell_facets[c * per_cell + k]);
+      const auto f = static_cast<std::size_t>(facets_->cell_facets[slot * per_cell + k]);
       for (std::size_t g = 0; g < per_facet && !searched[c]; ++g)
         for (const int a : facet_point_lists_[f * per_facet + g])
           if (owns(a)) {
@@ -293,6 +290,12 @@ Discretization::MemoryReport Discretization::memory_report() const noexcept {
   m.local_bytes = double(quadrature_.points.size() + quadrature_.weights.size()) * kDouble;
   m.local_bytes += double(point_lists_.offsets.size() + point_lists_.indices.size() + local_cells_.size()) * kInt;
   m.local_bytes += double(basis_storage_doubles()) * kDouble;
+  if (facets_) {
+    const detail::CellFacets& f = *facets_;
+    m.local_bytes += double(f.points.size() + f.weights.size() + f.normals.size()) * kDouble;
+    m.local_bytes += double(f.cells.size() + f.vertices.size() + f.cell_facets.size() + f.sharing.size()) * kInt + double(f.cell_signs.size());
+    m.local_bytes += double(facet_point_lists_.offsets.size() + facet_point_lists_.indices.size()) * kInt;
+  }
   for (const ElementSet& e : domains_)
     m.local_bytes += double(e.element_lists().indices.size() * 2 + e.element_lists().offsets.size() * 2) * kInt +
                      double(e.n_elements()) * (3 * kInt + 1);
@@ -396,20 +399,7 @@ Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, Discretizati
     }
     nodes_ = NodeSet(nodes.dim, std::move(coords));
     if (!basis_) basis_.emplace(nodes_, renumbered_gamma, std::move(renumbered_spacing), options_.lme);
-    if (options_.consistent_integration > 0) {
-      const int m = options_.consistent_integration;
-      facets_ = std::make_shared<const detail::CellFacets>(
-          detail::cell_facets(cells_, nodes_, nodes.dim == 2 ? gauss_legendre(m) : triangle_rule(m)));
-      facet_point_lists_ = facet_point_lists(*basis_, *facets_, cells_, nodes_);
-    }
-    // The neighbour search is the costliest part of the setup, and the points and their lists the
-    // largest per-point arrays: a rank maps the rule onto the cells where its elements can be only.
-    const bool every_cell = size_ == 1 || options_.carried || options_.every_point_on_every_rank;
-    std::vector<char> searched = every_cell ? std::vector<char>(cells_.size(), 1) : cells_reaching_owned_nodes();
-    if (facets_ && !every_cell) search_cells_whose_facets_list_owned_nodes(searched);
-    local_cells_.clear();
-    for (std::size_t c = 0; c < cells_.size(); ++c)
-      if (searched[c]) local_cells_.push_back(static_cast<int>(c));
+    select_local_cells();
   }
   if (!options_.carried) {
     StageClock clock(times_.cells);
@@ -452,6 +442,39 @@ Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, Discretizati
   }
 }
 
+// The cells whose points this rank holds (local_cells_): those that can reach one of its nodes, and
+// with consistent integration those that reach one through a facet point's list, whose facets it
+// builds with the searched cells' neighbours (facets_, facet_point_lists_).
+void Discretization::select_local_cells() {
+  // The neighbour search is the costliest part of the setup, and the points and their lists the
+  // largest per-point arrays: a rank maps the rule onto the cells where its elements can be only.
+  const bool every_cell = size_ == 1 || options_.carried || options_.every_point_on_every_rank;
+  std::vector<char> searched = every_cell ? std::vector<char>(cells_.size(), 1) : cells_reaching_owned_nodes();
+  const auto marked = [&] {
+    std::vector<int> ids;
+    for (std::size_t c = 0; c < cells_.size(); ++c)
+      if (searched[c]) ids.push_back(static_cast<int>(c));
+    return ids;
+  };
+  if (options_.consistent_integration > 0) {
+    // The facets of the searched cells and of their neighbours, with their points' lists.
+    const int m = options_.consistent_integration;
+    const QuadratureRule facet_rule = dim() == 2 ? gauss_legendre(m) : triangle_rule(m);
+    std::vector<int> near = marked();
+    if (!every_cell) {
+      const detail::CellFacets inner = detail::cell_facets(cells_, nodes_, facet_rule, near);
+      near.insert(near.end(), inner.sharing.begin(), inner.sharing.end());
+      std::sort(near.begin(), near.end());
+      near.erase(std::unique(near.begin(), near.end()), near.end());
+      if (!near.empty() && near.front() < 0) near.erase(near.begin());
+    }
+    facets_ = std::make_shared<const detail::CellFacets>(detail::cell_facets(cells_, nodes_, facet_rule, near));
+    facet_point_lists_ = facet_point_lists(*basis_, *facets_, cells_, nodes_);
+    if (!every_cell) search_cells_whose_facets_list_owned_nodes(searched);
+  }
+  local_cells_ = marked();
+}
+
 void Discretization::build_cell_domain() {
   ElementSet cells;
   cells.name_ = "cells";
@@ -488,9 +511,6 @@ void Discretization::build_gradient_correction() {
   std::vector<double> hessian_correction(hessians ? cells.element_nodes_.indices.size() * packed : 0, 0.0);
   // Hull facets belong to one cell. Exactly on the hull the derivatives are the limit of a singular
   // solve: their gradients are taken a thousandth of the facet inside, as on the boundary domains.
-  std::vector<int> facet_cells(facets.size(), 0);
-  if (hessians)
-    for (const int f : facets.cell_facets) ++facet_cells[static_cast<std::size_t>(f)];
   std::vector<double> tabulation, inner(d);
   LmeWorkspace ws;
   for (int e = 0; e < cells.n_elements(); ++e) {
@@ -511,18 +531,19 @@ void Discretization::build_gradient_correction() {
       for (std::size_t slot = 0; slot < (hessians ? packed : 0); ++slot)
         for (std::size_t a = 0; a < n; ++a) h[a * packed + slot] -= w * tabulation[(k * jet + 1 + d + slot) * n + a];
     }
-    const auto cell = static_cast<std::size_t>(point_cell(first));
+    const std::size_t cell_slot = facets.slot(point_cell(first));
     for (std::size_t k = 0; k < per_cell; ++k) {
-      const auto f = static_cast<std::size_t>(facets.cell_facets[cell * per_cell + k]);
-      const double sign = facets.cell_signs[cell * per_cell + k];
+      const auto f = static_cast<std::size_t>(facets.cell_facets[cell_slot * per_cell + k]);
+      const double sign = facets.cell_signs[cell_slot * per_cell + k];
+      const bool hull = facets.cells_sharing(f) == 1;
       const double* normal = facets.normals.data() + f * d;
       for (std::size_t g = 0; g < per_facet; ++g) {
         const std::size_t p = f * per_facet + g;
         const auto list = facet_point_lists_[p];
         const std::size_t m_count = list.size();
         const std::span<const double> x(facets.points.data() + p * d, d);
-        std::vector<double> values = basis_->evaluate(x, list, hessians && facet_cells[f] != 1 ? 1 : 0);
-        if (hessians && facet_cells[f] == 1) {
+        std::vector<double> values = basis_->evaluate(x, list, hessians && !hull ? 1 : 0);
+        if (hessians && hull) {
           double size = 0;
           for (std::size_t q = 0; q < per_facet; ++q) size += facets.weights[f * per_facet + q];
           for (std::size_t i = 0; i < d; ++i) inner[i] = x[i] - 1e-3 * std::pow(size, 1.0 / double(d - 1)) * sign * normal[i];
