@@ -206,6 +206,31 @@ double support_radius(double beta, double tol0) {
   return std::sqrt(-std::log(tol0) / beta);
 }
 
+namespace {
+
+// The lists of points 0..n-1 appended to `lists`, list_of(q, list) writing point q's. The index
+// array is reserved from a sample of the points: grown by doubling it would leave freed copies of
+// up to its whole size in the heap (which PETSc's SuperLU_DIST keeps from being returned).
+template <class ListOf>
+CsrLists lists_of_points(std::size_t n, CsrLists& lists, ListOf&& list_of) {
+  std::vector<int> list;
+  const std::size_t samples = std::min<std::size_t>(n, 256);
+  std::size_t sampled = 0;
+  for (std::size_t k = 0; k < samples; ++k) {
+    list_of(k * n / samples, list);
+    sampled += list.size();
+  }
+  if (samples > 0) lists.indices.reserve(static_cast<std::size_t>(1.1 * double(sampled) * double(n) / double(samples)) + 64);
+  for (std::size_t q = 0; q < n; ++q) {
+    list_of(q, list);
+    lists.indices.insert(lists.indices.end(), list.begin(), list.end());
+    lists.offsets.push_back(static_cast<int>(lists.indices.size()));
+  }
+  return std::move(lists);
+}
+
+}  // namespace
+
 CsrLists primal_lists(const KdTree& tree, std::span<const double> points, std::span<const double> radii) {
   const auto d = static_cast<std::size_t>(tree.dim());
   if (points.size() % d != 0) {
@@ -254,8 +279,7 @@ CsrLists primal_lists(const KdTree& tree, std::span<const double> points, std::s
     }
     std::erase_if(classes, [](const RadiusClass& c) { return c.members.empty(); });
     for (RadiusClass& c : classes) c.tree = std::make_unique<KdTree>(NodeSet(tree.dim(), std::move(c.coords)));
-    std::vector<int> list;
-    for (std::size_t q = 0; q < nq; ++q) {
+    return lists_of_points(nq, lists, [&](std::size_t q, std::vector<int>& list) {
       const auto x = points.subspan(q * d, d);
       list.clear();
       for (const RadiusClass& c : classes) {
@@ -266,23 +290,19 @@ CsrLists primal_lists(const KdTree& tree, std::span<const double> points, std::s
         }
       }
       std::sort(list.begin(), list.end());
-      lists.indices.insert(lists.indices.end(), list.begin(), list.end());
-      lists.offsets.push_back(static_cast<int>(lists.indices.size()));
-    }
-    return lists;
+    });
   }
-  for (std::size_t q = 0; q < nq; ++q) {
+  return lists_of_points(nq, lists, [&](std::size_t q, std::vector<int>& list) {
     const auto x = points.subspan(q * d, d);
     tree.radius_search(x, rmax, cand);
+    list.clear();
     if (radii.size() == 1) {
-      lists.indices.insert(lists.indices.end(), cand.begin(), cand.end());
+      list.assign(cand.begin(), cand.end());
     } else {
       for (const int b : cand)
-        if (within_own_support(x, b)) lists.indices.push_back(b);
+        if (within_own_support(x, b)) list.push_back(b);
     }
-    lists.offsets.push_back(static_cast<int>(lists.indices.size()));
-  }
-  return lists;
+  });
 }
 
 }  // namespace lmeform
