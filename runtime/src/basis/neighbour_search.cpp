@@ -208,11 +208,13 @@ double support_radius(double beta, double tol0) {
 
 namespace {
 
-// The lists of points 0..n-1 appended to `lists`, list_of(q, list) writing point q's. The index
-// array is reserved from a sample of the points: grown by doubling it would leave freed copies of
-// up to its whole size in the heap (which PETSc's SuperLU_DIST keeps from being returned).
+// The lists of points 0..n-1, list_of(q, list) writing point q's. The index array is reserved from
+// a sample of the points: grown by doubling it would leave freed copies of up to its whole size in
+// the heap (which PETSc's SuperLU_DIST keeps from being returned to the system).
 template <class ListOf>
-CsrLists lists_of_points(std::size_t n, CsrLists& lists, ListOf&& list_of) {
+CsrLists lists_of_points(std::size_t n, ListOf&& list_of) {
+  CsrLists lists;
+  lists.offsets.reserve(n + 1);
   std::vector<int> list;
   const std::size_t samples = std::min<std::size_t>(n, 256);
   std::size_t sampled = 0;
@@ -226,7 +228,7 @@ CsrLists lists_of_points(std::size_t n, CsrLists& lists, ListOf&& list_of) {
     lists.indices.insert(lists.indices.end(), list.begin(), list.end());
     lists.offsets.push_back(static_cast<int>(lists.indices.size()));
   }
-  return std::move(lists);
+  return lists;
 }
 
 }  // namespace
@@ -245,8 +247,6 @@ CsrLists primal_lists(const KdTree& tree, std::span<const double> points, std::s
   const double rmin = *std::min_element(radii.begin(), radii.end());
   const NodeSet& nodes = tree.nodes();
   const std::size_t nq = points.size() / d;
-  CsrLists lists;
-  lists.offsets.reserve(nq + 1);
   std::vector<int> cand;
   const auto within_own_support = [&](std::span<const double> x, int b) {
     const auto xb = nodes.point(static_cast<std::size_t>(b));
@@ -279,7 +279,7 @@ CsrLists primal_lists(const KdTree& tree, std::span<const double> points, std::s
     }
     std::erase_if(classes, [](const RadiusClass& c) { return c.members.empty(); });
     for (RadiusClass& c : classes) c.tree = std::make_unique<KdTree>(NodeSet(tree.dim(), std::move(c.coords)));
-    return lists_of_points(nq, lists, [&](std::size_t q, std::vector<int>& list) {
+    return lists_of_points(nq, [&](std::size_t q, std::vector<int>& list) {
       const auto x = points.subspan(q * d, d);
       list.clear();
       for (const RadiusClass& c : classes) {
@@ -292,7 +292,7 @@ CsrLists primal_lists(const KdTree& tree, std::span<const double> points, std::s
       std::sort(list.begin(), list.end());
     });
   }
-  return lists_of_points(nq, lists, [&](std::size_t q, std::vector<int>& list) {
+  return lists_of_points(nq, [&](std::size_t q, std::vector<int>& list) {
     const auto x = points.subspan(q * d, d);
     tree.radius_search(x, rmax, cand);
     list.clear();
