@@ -15,8 +15,8 @@ namespace {
 bool shared_points(const Discretization& disc, const ElementSet& domain) { return domain.boundary() || disc.points_on_every_rank(); }
 
 /// φ, ∇φ or ∇∇φ of a scalar nodal field (original node order) at the domain's points,
-/// jet-size values each: the reference field of a Lagrangian form. `field_basis` interpolates (its nodes in the original
-/// numbering); with a null basis the discretization's own.
+/// jet-size values each: the reference field of a Lagrangian form. `field_basis` interpolates (its
+/// nodes in the original numbering); with a null basis the discretization's own.
 std::vector<double> interpolated_field_qdata(const Discretization& disc, const ElementSet& domain, std::span<const double> original_values,
                                              int derivative, const LmeBasis* field_basis) {
   const auto& lists = domain.point_lists();
