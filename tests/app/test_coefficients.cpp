@@ -41,7 +41,7 @@ problems::ProblemResult solve(const fs::path& path) {
   const Scene s = load_scene(path);
   const problems::BoundScene bound = problems::bind_scene(s, PETSC_COMM_WORLD, nullptr);
   problems::ProblemInput input;
-  input.nodes = problems::initial_nodes(s);
+  input.nodes = problems::initial_nodes(s, PETSC_COMM_WORLD);
   return problems::solve_problem(PETSC_COMM_WORLD, bound, input);
 }
 
@@ -92,7 +92,7 @@ EvaluatedStart evaluate_start(const std::string& name, const std::string& basis,
   const Scene s = load_scene(path);
   const problems::BoundScene bound = problems::bind_scene(s, PETSC_COMM_WORLD, nullptr);
   problems::ProblemInput input;
-  input.nodes = problems::initial_nodes(s);
+  input.nodes = problems::initial_nodes(s, PETSC_COMM_WORLD);
   input.evaluate_only = true;
   input.lme = bound.lme(problems::AxisParity::even);
   return {problems::solve_problem(PETSC_COMM_WORLD, bound, input), input.nodes};

@@ -259,7 +259,7 @@ TEST(Dynamics, AResetKeepsTheMaterialBoundaryWhereACoefficientLeavesTheBox) {
   problems::OutputRoles dissipation;
   dissipation.auxiliary = {r.settings.dissipation};
   const problems::BoundScene b = problems::bind_scene(r.scene, PETSC_COMM_WORLD, nullptr, dissipation);
-  const NodeSet material = problems::initial_nodes(r.scene);
+  const NodeSet material = problems::initial_nodes(r.scene, PETSC_COMM_WORLD);
   const std::vector<std::vector<int>> sets = problems::dirichlet_nodes(b, material);
   ASSERT_EQ(sets.size(), 2u);
   std::vector<double> coords = material.coords;

@@ -3,8 +3,9 @@
 # ranks (METIS and Hilbert partitions; 4 and 8 oversubscribe two cores), the same schedule's first stage
 # on 2 ranks resumed on 1 from its checkpoint, and a dynamics run on 1 and
 # 4 ranks reach the same energies to 1e-10 (relative); a dynamics run checkpointed on 2 ranks and
-# resumed on 1 ends where the uninterrupted 1-rank run ends; more ranks than nodes is refused with
-# a message.
+# resumed on 1 ends where the uninterrupted 1-rank run ends; a scene whose nodes and initial field
+# come from the first run's output file gives the same energy on 1 and 2 ranks; more ranks than
+# nodes is refused with a message.
 #
 #   test_rank_counts.sh LMEFORM OUT_DIR
 set -euo pipefail
@@ -40,6 +41,17 @@ mpirun -n 2 "$lmeform" run "$here/tiny_scene.toml" --output "$out/sr" > "$out/st
 "$lmeform" run "$out/statics.toml" --output "$out/sr" --restart --json "$out/statics_resumed.json" > "$out/statics_resumed.log" 2>&1 ||
   { tail -20 "$out/statics_resumed.log"; fail "the 1-rank restart of a 2-rank schedule checkpoint"; }
 grep -q "resumed from $out/sr after stage 0" "$out/statics_resumed.log" || { cat "$out/statics_resumed.log"; fail "the schedule did not resume"; }
+
+# The first run's nodes and field as a node file and an initial field (read collectively on 2
+# ranks, a block of rows each): the converged vesicle read back, on 1 and 2 ranks.
+sed -e '/^\[vesicle.initial\]/,$d' -e "s|^spacing = 0.06$|file = \"$out/s1/tiny.h5\"|" -e 's/^eps = 0.14$/eps = 0.12/' \
+    "$here/tiny_scene.toml" > "$out/from_file.toml"
+printf '[initial]\nphi = { file = "%s", field = "phi" }\n' "$out/s1/tiny.h5" >> "$out/from_file.toml"
+grep -q '^file = ' "$out/from_file.toml" || fail "could not make the node-file scene"
+"$lmeform" run "$out/from_file.toml" --json "$out/from_file_1.json" --output "$out/f1" > "$out/from_file_1.log" 2>&1 ||
+  { tail -20 "$out/from_file_1.log"; fail "the node-file scene on 1 rank"; }
+mpirun -n 2 "$lmeform" run "$out/from_file.toml" --json "$out/from_file_2.json" --output "$out/f2" > "$out/from_file_2.log" 2>&1 ||
+  { tail -20 "$out/from_file_2.log"; fail "the node-file scene on 2 ranks"; }
 
 # Dynamics: the oblate relaxation on a coarse box, 10 steps.
 sed -e 's/^upper = \[1.0, 1.6\]/upper = [1.0, 1.5]/' -e 's/^spacing = 0.025/spacing = 0.0625/' -e 's/^eps = 0.05/eps = 0.125/' \
@@ -104,6 +116,16 @@ if not resumed["converged"] or len(resumed["stages"]) != 2:
     print("FAIL: the resumed schedule did not finish both stages"); ok = False
 for a, b in zip(resumed["stages"], one["stages"]):
     close(a["energy"], b["energy"], f"statics stage {b['stage']}, stage 0 on 2 ranks, resumed on 1")
+f1, f2 = (json.load(open(f"{out}/from_file_{p}.json")) for p in (1, 2))
+last = one["stages"][-1]
+if not (f1["converged"] and f2["converged"]) or f1["nodes"] != last["nodes"] or f2["nodes"] != last["nodes"]:
+    print(f"FAIL: the node-file runs: converged {f1['converged']} / {f2['converged']}, nodes {f1['nodes']} / {f2['nodes']} "
+          f"(the file holds {last['nodes']})"); ok = False
+close(f2["energy"], f1["energy"], "nodes and field from a file, 2 ranks")
+# The field read back is the converged state on its own nodes: no Newton step, the same energy.
+close(f1["energy"], last["energy"], "nodes and field from a file against the run that wrote them")
+if f1["newton_iterations"] != 0 or f2["newton_iterations"] != 0:
+    print(f"FAIL: the converged state read back took {f1['newton_iterations']} / {f2['newton_iterations']} Newton steps"); ok = False
 d1, d4, resumed = (json.load(open(f"{out}/{n}.json")) for n in ("dynamics_1", "dynamics_4", "resumed"))
 if d1["steps"] != d4["steps"] or d1["steps"] != resumed["steps"]:
     print(f"FAIL: steps 1 rank {d1['steps']}, 4 ranks {d4['steps']}, resumed {resumed['steps']}"); ok = False

@@ -96,7 +96,7 @@ TEST(Stokes, ThreeDimensionalPatchTest) {
   const Scene scene = parse_scene(text, "patch3d.toml");
   const problems::BoundScene bound = problems::bind_scene(scene, PETSC_COMM_WORLD, nullptr);
   problems::ProblemInput input;
-  input.nodes = problems::initial_nodes(scene);
+  input.nodes = problems::initial_nodes(scene, PETSC_COMM_WORLD);
   const problems::ProblemResult r = problems::solve_problem(PETSC_COMM_WORLD, bound, input);
   ASSERT_TRUE(r.converged) << r.message;
   ASSERT_EQ(r.errors.size(), 2u);

@@ -2,7 +2,7 @@
 // read back equals the one the serial writer makes from the gathered data, bit for bit; a rank that
 // owns no rows takes part; a part that does not add up is refused on every rank and leaves nothing
 // behind; a time series written collectively lists its steps; fields every rank holds whole are
-// written by blocks of rows and give the same file.
+// written by blocks of rows and give the same file. Read collectively, a file equals its serial read.
 #include <gtest/gtest.h>
 #include <mpi.h>
 
@@ -230,6 +230,60 @@ TEST(CollectiveOutput, ATimeSeriesWrittenCollectivelyListsItsSteps) {
   EXPECT_NE(collection.find("run_000002.h5"), std::string::npos);
   const FieldFile second = read_field_hdf5(dir / series.file_of(2));
   EXPECT_EQ(second.fields.at("phi").values, s.phi);
+}
+
+// Every rank reads a block of each dataset's rows and receives the whole file: equal to the serial
+// read bit for bit, with more ranks than rows too; what the selection leaves out is not read, a
+// named field that is not there is refused on every rank.
+TEST(CollectiveInput, EveryRankReadsABlockAndReceivesTheWholeFile) {
+  const fs::path dir = scratch("read");
+  for (const int dim : {2, 3}) {
+    const Sample s = make_sample(dim);
+    const std::string stem = "state_" + std::to_string(dim) + "d";
+    write_both(dir, s, part_of(s, rank_of_world(), ranks_of_world()), stem);
+    const FieldFile serial = read_field_hdf5(dir / (stem + "_serial.h5"));
+    const FieldFile all = read_field_hdf5(dir / (stem + ".h5"), MPI_COMM_WORLD);
+    EXPECT_EQ(all.nodes.dim, dim);
+    EXPECT_EQ(all.nodes.coords, serial.nodes.coords);
+    EXPECT_EQ(all.cells.connectivity, serial.cells.connectivity);
+    EXPECT_EQ(all.cells.measures, serial.cells.measures);
+    ASSERT_EQ(all.fields.size(), 2u);
+    for (const auto& [name, field] : serial.fields) {
+      EXPECT_EQ(all.fields.at(name).components, field.components) << name;
+      EXPECT_EQ(std::memcmp(all.fields.at(name).values.data(), field.values.data(), field.values.size() * sizeof(double)), 0) << name;
+    }
+    EXPECT_EQ(all.attributes, serial.attributes);
+
+    const FieldFile nodes_only = read_field_hdf5(dir / (stem + ".h5"), MPI_COMM_WORLD, {.cells = false, .fields = std::vector<std::string>{},
+                                                                                        .attributes = false});
+    EXPECT_EQ(nodes_only.nodes.coords, serial.nodes.coords);
+    EXPECT_TRUE(nodes_only.cells.connectivity.empty());
+    EXPECT_TRUE(nodes_only.fields.empty());
+    EXPECT_TRUE(nodes_only.attributes.empty());
+    const FieldFile one = read_field_hdf5(dir / (stem + ".h5"), MPI_COMM_WORLD, {.cells = false, .fields = std::vector<std::string>{"grad_phi"}});
+    ASSERT_EQ(one.fields.size(), 1u);
+    EXPECT_EQ(one.fields.at("grad_phi").values, serial.fields.at("grad_phi").values);
+    try {
+      (void)read_field_hdf5(dir / (stem + ".h5"), MPI_COMM_WORLD, {.fields = std::vector<std::string>{"psi"}});
+      ADD_FAILURE() << "a missing field read on rank " << rank_of_world();
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find("missing dataset /fields/psi"), std::string::npos) << e.what();
+    }
+  }
+  // Two nodes on three ranks: a rank reads no row and still takes part.
+  const NodeSet two(2, {0.0, 0.0, 1.0, 0.5});
+  const std::vector<double> values{1.5, 2.5};
+  if (rank_of_world() == 0) write_field_hdf5(dir / "two.h5", two, BackgroundCells{}, {{"phi", {values}}}, {});
+  MPI_Barrier(MPI_COMM_WORLD);
+  const FieldFile tiny = read_field_hdf5(dir / "two.h5", MPI_COMM_WORLD);
+  EXPECT_EQ(tiny.nodes.coords, two.coords);
+  EXPECT_EQ(tiny.fields.at("phi").values, values);
+  try {
+    (void)read_field_hdf5(dir / "absent.h5", MPI_COMM_WORLD);
+    ADD_FAILURE() << "a missing file read on rank " << rank_of_world();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("no such file"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace

@@ -76,7 +76,7 @@ struct Problem {
   explicit Problem(const SphereBox& box) : scene(box.scene()), bound(problems::bind_scene(scene, PETSC_COMM_SELF, nullptr)) {}
   [[nodiscard]] problems::ProblemInput input(const SphereBox& box) const {
     problems::ProblemInput in;
-    in.nodes = problems::initial_nodes(scene);
+    in.nodes = problems::initial_nodes(scene, PETSC_COMM_SELF);
     problems::VesicleModel model;
     model.eps = box.eps;
     model.center = {0.0, 0.6, 0.0};

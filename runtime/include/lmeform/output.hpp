@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <span>
 #include <string>
 #include <string_view>
@@ -101,6 +102,20 @@ struct FieldFile {
 /// Reads a file written by write_field_hdf5 (for tests and restarts). Throws std::runtime_error
 /// naming the path and what is missing or malformed (e.g. "missing dataset /nodes").
 [[nodiscard]] FieldFile read_field_hdf5(const std::filesystem::path& path);
+
+/// What a read takes from a field file besides its nodes.
+struct FieldFileSelection {
+  bool cells = true;
+  std::optional<std::vector<std::string>> fields;  ///< these fields (each must exist); none given: all
+  bool attributes = true;
+};
+
+/// The same, collectively: every rank of comm calls it with the same path and selection, and every
+/// rank receives the selected parts whole. The ranks read through MPI-IO, each a contiguous block of
+/// every dataset's rows (the metadata read by one for all), and gather the blocks: no rank reads a
+/// whole dataset, and what the selection leaves out is not read at all. The errors are those of
+/// the serial form, on every rank.
+[[nodiscard]] FieldFile read_field_hdf5(const std::filesystem::path& path, MPI_Comm comm, const FieldFileSelection& selection = {});
 
 /// One step of a time series: a file written by write_field_hdf5 and its time.
 struct TimeSeriesStep {

@@ -5,6 +5,7 @@
 #include <cstring>
 #include <limits>
 #include <stdexcept>
+#include <type_traits>
 #include <string>
 #include <utility>
 #include <vector>
@@ -499,7 +500,88 @@ ReplicatedShare::ReplicatedShare(MPI_Comm comm, std::size_t nodes, const FieldVi
   }
 }
 
-FieldFile read_field_hdf5(const std::filesystem::path& path) {
+namespace {
+
+/// Reads whole datasets of N rows: all at once on one rank; on several, each rank reads a
+/// contiguous block of the rows through MPI-IO (collective transfers) and the blocks are gathered,
+/// so that every rank holds the dataset and none read it whole.
+class RowReader {
+ public:
+  RowReader(const Checker& check, MPI_Comm comm)
+      : check_(check), comm_(comm), size_(size_of(comm)), transfer_(collective_transfer(check, size_)) {
+    if (size_ > 1) MPI_Comm_rank(comm, &rank_);
+  }
+
+  /// The file access: MPI-IO on several ranks, with the metadata read by one rank for all.
+  Handle access() const {
+    Handle a = check_.handle(H5Pcreate(H5P_FILE_ACCESS), H5Pclose, "cannot create file access properties");
+    if (size_ > 1) {
+      check_.status(H5Pset_fapl_mpio(a.get(), comm_, MPI_INFO_NULL), "cannot open the file through MPI-IO");
+      check_.status(H5Pset_all_coll_metadata_ops(a.get(), true), "cannot ask for collective metadata reads");
+    }
+    return a;
+  }
+
+  /// Reads `set` (dims[0] rows of `row_size` values) into `out`, which holds dims[0] * row_size values.
+  template <class T>
+  void read(hid_t set, hid_t mem_type, const std::vector<hsize_t>& dims, std::vector<T>& out, const std::string& shown) const {
+    if (out.empty()) return;
+    if (size_ == 1) {
+      check_.status(H5Dread(set, mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, out.data()), "cannot read " + shown);
+      return;
+    }
+    const hsize_t rows = dims[0];
+    const std::size_t row_size = out.size() / static_cast<std::size_t>(rows);
+    if (out.size() > static_cast<std::size_t>(std::numeric_limits<int>::max()))
+      throw std::runtime_error(check_.context + ": " + shown + " holds more than 2^31 values, more than one gather can take");
+    auto first_row = [&](int r) { return rows * static_cast<hsize_t>(r) / static_cast<hsize_t>(size_); };
+    const hsize_t begin = first_row(rank_), count = first_row(rank_ + 1) - begin;
+    const Handle file_space = check_.handle(H5Dget_space(set), H5Sclose, "cannot read the dataspace of " + shown);
+    const hsize_t memory_dims = std::max<hsize_t>(count * row_size, 1);
+    const Handle memory_space = check_.handle(H5Screate_simple(1, &memory_dims, nullptr), H5Sclose, "cannot create a memory dataspace");
+    if (count > 0) {
+      std::vector<hsize_t> start(dims.size(), 0), block(dims);
+      start[0] = begin;
+      block[0] = count;
+      check_.status(H5Sselect_hyperslab(file_space.get(), H5S_SELECT_SET, start.data(), nullptr, block.data(), nullptr),
+                    "cannot select rows of " + shown);
+    } else {
+      check_.status(H5Sselect_none(file_space.get()), "cannot select " + shown);
+      check_.status(H5Sselect_none(memory_space.get()), "cannot select " + shown);
+    }
+    std::vector<T> mine(static_cast<std::size_t>(count) * row_size);
+    check_.status(H5Dread(set, mem_type, memory_space.get(), file_space.get(), transfer_.get(), mine.empty() ? nullptr : mine.data()),
+                  "cannot read " + shown);
+    std::vector<int> counts(static_cast<std::size_t>(size_)), displacements(static_cast<std::size_t>(size_));
+    for (int r = 0; r < size_; ++r) {
+      displacements[std::size_t(r)] = static_cast<int>(first_row(r) * row_size);
+      counts[std::size_t(r)] = static_cast<int>((first_row(r + 1) - first_row(r)) * row_size);
+    }
+    const MPI_Datatype type = std::is_same_v<T, double> ? MPI_DOUBLE : MPI_INT;
+    MPI_Allgatherv(mine.data(), static_cast<int>(mine.size()), type, out.data(), counts.data(), displacements.data(), type, comm_);
+  }
+
+ private:
+  static int size_of(MPI_Comm comm) {
+    int initialized = 0, size = 1;
+    MPI_Initialized(&initialized);  // the serial form serves programs without MPI too
+    if (initialized != 0) MPI_Comm_size(comm, &size);
+    return size;
+  }
+  static Handle collective_transfer(const Checker& check, int size) {
+    if (size == 1) return {};
+    Handle transfer = check.handle(H5Pcreate(H5P_DATASET_XFER), H5Pclose, "cannot create transfer properties");
+    check.status(H5Pset_dxpl_mpio(transfer.get(), H5FD_MPIO_COLLECTIVE), "cannot ask for collective transfers");
+    return transfer;
+  }
+
+  const Checker& check_;
+  MPI_Comm comm_;
+  int size_ = 1, rank_ = 0;
+  Handle transfer_;
+};
+
+FieldFile read_field_file(const std::filesystem::path& path, MPI_Comm comm, const FieldFileSelection& selection) {
   const std::string context = "read_field_hdf5: " + path.string();
   const QuietHdf5Errors quiet;
   const Checker check{context};
@@ -507,7 +589,9 @@ FieldFile read_field_hdf5(const std::filesystem::path& path) {
   if (!std::filesystem::is_regular_file(path, ec)) throw std::runtime_error(context + ": no such file");
   const htri_t is_hdf5 = H5Fis_hdf5(path.c_str());
   if (is_hdf5 <= 0) throw std::runtime_error(context + ": not an HDF5 file");
-  const Handle h5 = check.handle(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose, "cannot open");
+  const RowReader reader(check, comm);
+  const Handle access = reader.access();
+  const Handle h5 = check.handle(H5Fopen(path.c_str(), H5F_ACC_RDONLY, access.get()), H5Fclose, "cannot open");
 
   FieldFile out;
   // /nodes: N x d
@@ -521,14 +605,11 @@ FieldFile read_field_hdf5(const std::filesystem::path& path) {
     n = static_cast<std::size_t>(dims[0]);
     const int d = static_cast<int>(dims[1]);
     std::vector<double> coords(n * static_cast<std::size_t>(d));
-    if (!coords.empty()) {
-      check.status(H5Dread(set.get(), H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, coords.data()),
-                   "cannot read /nodes");
-    }
+    reader.read(set.get(), H5T_NATIVE_DOUBLE, dims, coords, "/nodes");
     out.nodes = NodeSet(d, std::move(coords));
   }
   // /cells: M x (d+1)
-  {
+  if (selection.cells) {
     const int d = out.nodes.dim;
     const Handle set = open_dataset(check, h5.get(), "cells", "/cells");
     const auto dims = shape_of(check, set.get(), "/cells").dims;
@@ -538,10 +619,7 @@ FieldFile read_field_hdf5(const std::filesystem::path& path) {
     out.cells.dim = d;
     out.cells.vertices_per_cell = d + 1;
     out.cells.connectivity.resize(static_cast<std::size_t>(dims[0] * dims[1]));
-    if (!out.cells.connectivity.empty()) {
-      check.status(H5Dread(set.get(), H5T_NATIVE_INT, H5S_ALL, H5S_ALL, H5P_DEFAULT, out.cells.connectivity.data()),
-                   "cannot read /cells");
-    }
+    reader.read(set.get(), H5T_NATIVE_INT, dims, out.cells.connectivity, "/cells");
     for (const int v : out.cells.connectivity) {
       if (v < 0 || static_cast<std::size_t>(v) >= n) {
         throw std::runtime_error(context + ": /cells refers to node " + std::to_string(v) + " of " + std::to_string(n));
@@ -552,21 +630,27 @@ FieldFile read_field_hdf5(const std::filesystem::path& path) {
     for (std::size_t c = 0; c < m; ++c) out.cells.measures[c] = simplex_signed_measure(out.nodes, out.cells.cell(c));
   }
   // /fields/<name>
-  {
+  if (!selection.fields || !selection.fields->empty()) {
     if (!link_exists(h5.get(), "fields")) throw std::runtime_error(context + ": missing group /fields");
     const Handle group = check.handle(H5Gopen2(h5.get(), "fields", H5P_DEFAULT), H5Gclose, "cannot open /fields");
-    H5G_info_t info{};
-    check.status(H5Gget_info(group.get(), &info), "cannot list /fields");
-    for (hsize_t i = 0; i < info.nlinks; ++i) {
-      const ssize_t length =
-          H5Lget_name_by_idx(group.get(), ".", H5_INDEX_NAME, H5_ITER_INC, i, nullptr, 0, H5P_DEFAULT);
-      if (length < 0) check.fail("cannot list /fields");
-      std::string name(static_cast<std::size_t>(length) + 1, '\0');
-      if (H5Lget_name_by_idx(group.get(), ".", H5_INDEX_NAME, H5_ITER_INC, i, name.data(), name.size(),
-                             H5P_DEFAULT) < 0) {
-        check.fail("cannot list /fields");
+    std::vector<std::string> names;
+    if (selection.fields) {
+      names = *selection.fields;
+    } else {
+      H5G_info_t info{};
+      check.status(H5Gget_info(group.get(), &info), "cannot list /fields");
+      for (hsize_t i = 0; i < info.nlinks; ++i) {
+        const ssize_t length = H5Lget_name_by_idx(group.get(), ".", H5_INDEX_NAME, H5_ITER_INC, i, nullptr, 0, H5P_DEFAULT);
+        if (length < 0) check.fail("cannot list /fields");
+        std::string name(static_cast<std::size_t>(length) + 1, '\0');
+        if (H5Lget_name_by_idx(group.get(), ".", H5_INDEX_NAME, H5_ITER_INC, i, name.data(), name.size(), H5P_DEFAULT) < 0) {
+          check.fail("cannot list /fields");
+        }
+        name.resize(static_cast<std::size_t>(length));
+        names.push_back(std::move(name));
       }
-      name.resize(static_cast<std::size_t>(length));
+    }
+    for (std::string& name : names) {
       const std::string shown = "/fields/" + name;
       const Handle set = open_dataset(check, group.get(), name, shown);
       const auto dims = shape_of(check, set.get(), shown).dims;
@@ -577,15 +661,12 @@ FieldFile read_field_hdf5(const std::filesystem::path& path) {
       FieldData field;
       field.components = dims.size() == 2 ? static_cast<int>(dims[1]) : 1;
       field.values.resize(n * static_cast<std::size_t>(field.components));
-      if (!field.values.empty()) {
-        check.status(H5Dread(set.get(), H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, field.values.data()),
-                     "cannot read " + shown);
-      }
+      reader.read(set.get(), H5T_NATIVE_DOUBLE, dims, field.values, shown);
       out.fields.emplace(std::move(name), std::move(field));
     }
   }
   // Root attributes.
-  {
+  if (selection.attributes) {
     std::vector<std::string> names;
     hsize_t index = 0;
     check.status(H5Aiterate2(h5.get(), H5_INDEX_NAME, H5_ITER_INC, &index, collect_name, &names),
@@ -593,6 +674,14 @@ FieldFile read_field_hdf5(const std::filesystem::path& path) {
     for (const auto& name : names) out.attributes.emplace(name, read_attribute(check, h5.get(), name));
   }
   return out;
+}
+
+}  // namespace
+
+FieldFile read_field_hdf5(const std::filesystem::path& path) { return read_field_file(path, MPI_COMM_SELF, {}); }
+
+FieldFile read_field_hdf5(const std::filesystem::path& path, MPI_Comm comm, const FieldFileSelection& selection) {
+  return read_field_file(path, comm, selection);
 }
 
 }  // namespace lmeform

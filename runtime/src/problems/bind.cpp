@@ -537,7 +537,7 @@ constexpr double kEvaluatedNodes = 4e6;
 /// or nodes.counts) of at most kEvaluatedNodes nodes, or a node file, read now so that a file that
 /// cannot be read, or holds too few points to triangulate, is refused before the solve. A CVT
 /// (nodes.count) is built by the run.
-std::optional<NodeSet> known_nodes(const Scene& scene) {
+std::optional<NodeSet> known_nodes(const Scene& scene, MPI_Comm comm) {
   const SceneNodes& n = scene.nodes;
   const bool grid = n.kind == SceneNodes::Kind::counts || (n.kind == SceneNodes::Kind::spacing && scene.geometry.is_box() && n.refine.empty());
   if (grid) {
@@ -551,7 +551,7 @@ std::optional<NodeSet> known_nodes(const Scene& scene) {
     return n.kind == SceneNodes::Kind::counts ? uniform_grid(scene.domain, n.counts) : uniform_grid(scene.domain, n.spacing);
   }
   if (n.kind == SceneNodes::Kind::file) {
-    NodeSet nodes = initial_nodes(scene);  // SceneError naming 'nodes.file' when it cannot be read
+    NodeSet nodes = initial_nodes(scene, comm);  // SceneError naming 'nodes.file' when it cannot be read
     if (nodes.size() < static_cast<std::size_t>(scene.dim() + 1))
       throw SceneError(fmt::format("{}: key 'nodes.file': {} holds {} point{}; a triangulation of a {}D domain needs at least {}",
                                    scene.source, n.file.string(), nodes.size(), nodes.size() == 1 ? "" : "s", scene.dim(),
@@ -599,7 +599,7 @@ void check_expression_at(const BoundScene& b, const BoundValue& value, const std
 
 /// The expressions of the nodal fields and Dirichlet values, at the nodes when they are known.
 void check_expression_values(const Scene& scene, const BoundScene& b) {
-  const std::optional<NodeSet> nodes = known_nodes(scene);
+  const std::optional<NodeSet> nodes = known_nodes(scene, b.comm);
   if (!nodes) return;
   auto all = [](int n) {
     std::vector<int> c(static_cast<std::size_t>(n));
@@ -658,6 +658,7 @@ BoundScene bind_scene(const Scene& scene, MPI_Comm comm, std::ostream* log, cons
   BoundScene b;
   b.scene = &scene;
   b.source = scene.source;
+  b.comm = comm;
   b.dim = scene.dim();
   b.axisymmetric = scene.axisymmetric();
   b.domain = scene.domain;

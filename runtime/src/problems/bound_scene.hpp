@@ -150,6 +150,7 @@ struct DiscretizationSettings {
 struct BoundScene {
   const Scene* scene = nullptr;  ///< for drivers that read their own tables; lower layers do not
   std::string source;            ///< the scene file, for messages
+  MPI_Comm comm = MPI_COMM_SELF; ///< the ranks it was bound on, which read its field files together
   int dim = 2;
   bool axisymmetric = false;
   Box domain;                    ///< the box, or the bounding box of the geometry

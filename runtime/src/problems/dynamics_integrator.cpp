@@ -403,7 +403,7 @@ bool DynamicsIntegrator::advance() {
 }
 
 DynamicsRun DynamicsIntegrator::run() {
-  material_nodes_ = initial_nodes(scene_, log_);
+  material_nodes_ = initial_nodes(scene_, comm_, log_);
   run_.cells = delaunay(material_nodes_);
   // The material boundary: found once on the material nodes and kept by resets (a node's
   // coefficient may leave the box, LME not being interpolating; it stays free).

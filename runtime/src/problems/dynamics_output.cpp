@@ -211,7 +211,7 @@ void DynamicsIntegrator::resume() {
   if (!fs::exists(checkpoint_path_) || !fs::exists(history_path_))
     throw std::runtime_error(fmt::format("--restart: no checkpoint in {} (expected {} and {})", output_->directory.string(),
                                          checkpoint_path_.filename().string(), history_path_.filename().string()));
-  const Checkpoint cp{checkpoint_path_, read_field_hdf5(checkpoint_path_)};
+  const Checkpoint cp{checkpoint_path_, read_field_hdf5(checkpoint_path_, comm_)};
   step_ = cp.integer("step");
   run_.resets = cp.integer("resets");
   run_.remeshes = cp.integer_or("remeshes", 0);
@@ -230,7 +230,7 @@ void DynamicsIntegrator::resume() {
   }
   for (std::size_t i = 0; i < k_; ++i) targets_[i] = cp.number(fmt::format("target_{}", i));
   if (run_.resets > 0 || run_.remeshes > 0) {
-    const Checkpoint qf{quadrature_path_, read_field_hdf5(quadrature_path_)};
+    const Checkpoint qf{quadrature_path_, read_field_hdf5(quadrature_path_, comm_)};
     if (qf.integer("step") != step_)
       throw std::runtime_error(fmt::format("--restart: {} belongs to another step than {}", quadrature_path_.string(), checkpoint_path_.string()));
     CarriedQuadrature carried;

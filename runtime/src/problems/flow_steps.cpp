@@ -229,7 +229,7 @@ class FlowStepper {
 };
 
 void FlowStepper::setup() {
-  input_.nodes = initial_nodes(*ctx_.scene, ctx_.log);
+  input_.nodes = initial_nodes(*ctx_.scene, ctx_.comm, ctx_.log);
   input_.log = nullptr;  // a rebuild per step: its lines would drown the step lines
   input_.lme = bound_.lme(AxisParity::odd);  // a velocity is odd in r: no mirror across the axis
   input_.flat_cell_tolerance = settings_.sliver_tolerance;
@@ -660,7 +660,7 @@ void FlowStepper::resume() {
   if (!fs::exists(checkpoint) || !fs::exists(history))
     throw std::runtime_error(fmt::format("--restart: no checkpoint in {} (expected {} and history.json)", ctx_.output_directory.string(),
                                          checkpoint.filename().string()));
-  const FieldFile cp = read_field_hdf5(checkpoint);
+  const FieldFile cp = read_field_hdf5(checkpoint, ctx_.comm);
   if (cp.nodes.dim != input_.nodes.dim)
     throw std::runtime_error(fmt::format("--restart: {} holds {}D nodes, the scene is {}D", checkpoint.string(), cp.nodes.dim, input_.nodes.dim));
   const int step = static_cast<int>(std::get<std::int64_t>(cp.attributes.at("step")));
@@ -680,7 +680,7 @@ void FlowStepper::resume() {
   anisotropy_ = std::get<double>(cp.attributes.at("anisotropy"));
   time_ = std::get<double>(cp.attributes.at("time"));
   run_.history = read_step_history(ctx_.output_directory, kHistoryFormat, step);
-  series_->restore(restored_series(*series_, ctx_.output_directory, run_.history, bound_.layout, bound_.dim));
+  series_->restore(restored_series(ctx_.comm, *series_, ctx_.output_directory, run_.history, bound_.layout, bound_.dim));
   first_step_ = step + 1;
   if (ctx_.log != nullptr) *ctx_.log << fmt::format("resumed from {} at step {} (time {:.6g})\n", checkpoint.string(), step, time_);
 }

@@ -171,7 +171,7 @@ void LoadStepper::setup() {
   set_load(0.0);  // the expressions of the start and the Dirichlet values at step 0
   // Nodes that follow a field are judged (the forms' requirements) once they have followed it.
   input_.log = adapting() ? nullptr : ctx_.log;
-  rebuild(initial_nodes(*ctx_.scene, ctx_.log), {});
+  rebuild(initial_nodes(*ctx_.scene, ctx_.comm, ctx_.log), {});
   input_.log = ctx_.log;
   if (!ctx_.output_directory.empty()) series_.emplace(ctx_.output_directory, ctx_.scene->name);
   // A restart takes the checkpoint's nodes and state: the scene's unrefined start, built here only
@@ -484,7 +484,7 @@ void LoadStepper::resume() {
   if (!fs::exists(checkpoint) || !fs::exists(history))
     throw std::runtime_error(fmt::format("--restart: no checkpoint in {} (expected {} and history.json)", ctx_.output_directory.string(),
                                          checkpoint.filename().string()));
-  const FieldFile cp = read_field_hdf5(checkpoint);
+  const FieldFile cp = read_field_hdf5(checkpoint, ctx_.comm);
   const int step = static_cast<int>(std::get<std::int64_t>(cp.attributes.at("step")));
   lambda_ = std::get<double>(cp.attributes.at("load"));
   set_load(lambda_);
@@ -501,7 +501,7 @@ void LoadStepper::resume() {
     if (fallback_use(row) == FallbackUse::kept)
       run_.fallback_kept[row.step] = fmt::format("step {} keeps the solution of the fallback constants {} (before the restart: history.json)",
                                                  row.step, listed(settings_.fallback));
-  series_->restore(restored_series(*series_, ctx_.output_directory, run_.history, bound_.layout, bound_.dim));
+  series_->restore(restored_series(ctx_.comm, *series_, ctx_.output_directory, run_.history, bound_.layout, bound_.dim));
   first_step_ = step + 1;
   if (ctx_.log != nullptr) *ctx_.log << fmt::format("resumed from {} at step {} (load {:.6g})\n", checkpoint.string(), step, lambda_);
 }

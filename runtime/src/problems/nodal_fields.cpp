@@ -1,12 +1,14 @@
 // Node sets and nodal fields of a bound scene: the initial nodes, the nodes of boundary parts, the
 // values of [initial] and [coefficients] entries at the nodes.
 #include <algorithm>
+#include <exception>
 #include <set>
 
 #include <fmt/ranges.h>
 
 #include <fmt/format.h>
 
+#include "lmeform/collective_error.hpp"
 #include "lmeform/convex_hull.hpp"
 #include "lmeform/cvt.hpp"
 #include "lmeform/domain.hpp"
@@ -21,11 +23,16 @@ namespace lmeform::problems {
 namespace {
 
 /// The values of a field read from a previous run's output, which must hold the same nodes.
-void read_field_file(const BoundNodalField& f, const UnknownField& u, const NodeSet& nodes, std::size_t per_node,
+void read_field_file(MPI_Comm comm, const BoundNodalField& f, const UnknownField& u, const NodeSet& nodes, std::size_t per_node,
                      std::vector<double>& state) {
-  const FieldFile file = read_field_hdf5(f.file);
+  FieldFile file;
+  try {
+    // Only the nodes (to check them) and this field.
+    file = read_field_hdf5(f.file, comm, {.cells = false, .fields = std::vector<std::string>{f.dataset}, .attributes = false});
+  } catch (const std::runtime_error& e) {
+    throw SceneError(fmt::format("{}: field '{}': {}", f.where, f.dataset, e.what()));
+  }
   const auto it = file.fields.find(f.dataset);
-  if (it == file.fields.end()) throw SceneError(fmt::format("{}: {} has no field '{}'", f.where, f.file.string(), f.dataset));
   if (it->second.components != u.components)
     throw SceneError(fmt::format("{}: field '{}' of {} has {} components, '{}' has {}", f.where, f.dataset, f.file.string(),
                                  it->second.components, u.name, u.components));
@@ -49,7 +56,7 @@ std::vector<double> nodal_values(const BoundScene& b, const std::vector<BoundNod
     if (!layout.has(f.name)) continue;
     const UnknownField& u = layout.field(f.name);
     if (!f.file.empty()) {
-      read_field_file(f, u, nodes, bs, state);
+      read_field_file(b.comm, f, u, nodes, bs, state);
       continue;
     }
     for (std::size_t a = 0; a < nodes.size(); ++a) {
@@ -86,18 +93,41 @@ void check_inside(const Scene& scene, const NodeSet& nodes) {
                                            -scene.geometry.depth(nodes.point(a))));
 }
 
-NodeSet file_nodes(const Scene& scene) {
+NodeSet file_nodes(const Scene& scene, MPI_Comm comm) {
   try {
-    // A previous run's output (HDF5): its nodes, so that its fields can be read back on them.
+    // A previous run's output (HDF5): its nodes, so that its fields can be read back on them. The
+    // ranks read a block of rows each; the file's cells and fields are not read.
     if (scene.nodes.file.extension() == ".h5") {
-      NodeSet nodes = read_field_hdf5(scene.nodes.file).nodes;
+      NodeSet nodes =
+          read_field_hdf5(scene.nodes.file, comm, {.cells = false, .fields = std::vector<std::string>{}, .attributes = false}).nodes;
       if (nodes.dim != scene.dim())
         throw std::runtime_error(fmt::format("{} holds {}D nodes, the scene is {}D", scene.nodes.file.string(), nodes.dim, scene.dim()));
       check_inside(scene, nodes);
       return nodes;
     }
-    if (scene.geometry.is_box()) return read_points(scene.nodes.file, scene.dim(), &scene.domain);
-    return read_points(scene.nodes.file, scene.dim(), scene.geometry);
+    // A text file: parsed by one rank and sent to the others.
+    int rank = 0;
+    MPI_Comm_rank(comm, &rank);
+    NodeSet nodes;
+    std::exception_ptr failure;
+    if (rank == 0) {
+      try {
+        nodes = scene.geometry.is_box() ? read_points(scene.nodes.file, scene.dim(), &scene.domain)
+                                        : read_points(scene.nodes.file, scene.dim(), scene.geometry);
+      } catch (...) {
+        failure = std::current_exception();
+      }
+    }
+    throw_on_every_rank(comm, failure);
+    unsigned long long count = nodes.coords.size();
+    MPI_Bcast(&count, 1, MPI_UNSIGNED_LONG_LONG, 0, comm);
+    nodes.dim = scene.dim();
+    nodes.coords.resize(static_cast<std::size_t>(count));
+    // In pieces: one broadcast carries at most 2^31 values.
+    constexpr std::size_t piece = std::size_t{1} << 30;
+    for (std::size_t at = 0; at < nodes.coords.size(); at += piece)
+      MPI_Bcast(nodes.coords.data() + at, static_cast<int>(std::min(piece, nodes.coords.size() - at)), MPI_DOUBLE, 0, comm);
+    return nodes;
   } catch (const std::runtime_error& e) {
     throw SceneError(fmt::format("{}: key 'nodes.file': {}", scene.source, e.what()));
   }
@@ -105,7 +135,7 @@ NodeSet file_nodes(const Scene& scene) {
 
 }  // namespace
 
-NodeSet initial_nodes(const Scene& scene, std::ostream* log) {
+NodeSet initial_nodes(const Scene& scene, MPI_Comm comm, std::ostream* log) {
   switch (scene.nodes.kind) {
     case SceneNodes::Kind::spacing:
       // A box without refinement keeps its uniform grid; anything else is generated for the domain.
@@ -113,7 +143,7 @@ NodeSet initial_nodes(const Scene& scene, std::ostream* log) {
       return domain_nodes(scene.geometry, scene_spacing(scene));
     case SceneNodes::Kind::counts: return uniform_grid(scene.domain, scene.nodes.counts);
     case SceneNodes::Kind::count: return cvt_nodes(scene, log);
-    case SceneNodes::Kind::file: return file_nodes(scene);
+    case SceneNodes::Kind::file: return file_nodes(scene, comm);
   }
   throw std::logic_error("unknown node kind");
 }

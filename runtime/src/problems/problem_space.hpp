@@ -155,6 +155,6 @@ struct ProblemSpace {
 
 /// The scene's initial node set (uniform grid, uniform CVT of a node count, or a point file whose
 /// points must lie in the domain).
-[[nodiscard]] NodeSet initial_nodes(const Scene& scene, std::ostream* log = nullptr);
+[[nodiscard]] NodeSet initial_nodes(const Scene& scene, MPI_Comm comm, std::ostream* log = nullptr);
 
 }  // namespace lmeform::problems

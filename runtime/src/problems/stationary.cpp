@@ -194,7 +194,7 @@ RunReport StationaryDriver::run(const DriverContext& ctx) const {
   const Scene& scene = *ctx.scene;
   const BoundScene bound = bind_scene(scene, ctx.comm, ctx.log, *this);
   ProblemInput input;
-  input.nodes = initial_nodes(scene, ctx.log);
+  input.nodes = initial_nodes(scene, ctx.comm, ctx.log);
   input.log = ctx.log;
   input.lme = bound.lme(AxisParity::even);
   const double h_min = spacing_summary(input.nodes).h_min;

@@ -91,11 +91,13 @@ std::vector<StepRow> read_step_history(const fs::path& directory, const StepHist
   return rows;
 }
 
-std::vector<TimeSeriesStep> restored_series(const TimeSeriesWriter& series, const fs::path& directory, const std::vector<StepRow>& rows,
-                                            const StateLayout& layout, int dim) {
+std::vector<TimeSeriesStep> restored_series(MPI_Comm comm, const TimeSeriesWriter& series, const fs::path& directory,
+                                            const std::vector<StepRow>& rows, const StateLayout& layout, int dim) {
   std::vector<TimeSeriesStep> out;
   for (const StepRow& s : rows) {
-    const FieldFile written = read_field_hdf5(directory / series.file_of(s.step));
+    // Only its sizes are needed: the nodes and cells are read, not the fields.
+    const FieldFile written =
+        read_field_hdf5(directory / series.file_of(s.step), comm, {.cells = true, .fields = std::vector<std::string>{}, .attributes = false});
     TimeSeriesStep entry{s.position, series.file_of(s.step), dim, written.nodes.size(), written.cells.size(), {}};
     for (const auto& f : layout.fields) entry.fields.emplace_back(f.name, f.components);
     std::sort(entry.fields.begin(), entry.fields.end());

@@ -3,6 +3,8 @@
 // and the time-series entries of the steps a restart keeps.
 #pragma once
 
+#include <mpi.h>
+
 #include <filesystem>
 #include <string>
 #include <string_view>
@@ -44,8 +46,8 @@ void write_step_history(const std::filesystem::path& directory, const std::strin
 [[nodiscard]] std::vector<StepRow> read_step_history(const std::filesystem::path& directory, const StepHistoryFormat& format, int last_step);
 
 /// The time-series entries of restored rows: each step's file as `series` names it, its node and cell
-/// counts read from it (a node set may change between steps), the fields of `layout`.
-[[nodiscard]] std::vector<TimeSeriesStep> restored_series(const TimeSeriesWriter& series, const std::filesystem::path& directory,
+/// counts read from it (a node set may change between steps; collective over comm), the fields of `layout`.
+[[nodiscard]] std::vector<TimeSeriesStep> restored_series(MPI_Comm comm, const TimeSeriesWriter& series, const std::filesystem::path& directory,
                                                           const std::vector<StepRow>& rows, const StateLayout& layout, int dim);
 
 /// The run report's JSON "steps" (step, position, counts, quantities per row) and, with an output

@@ -615,7 +615,7 @@ VesicleRun run_vesicle(MPI_Comm comm, const Scene& scene, const VesicleModel& mo
   int first_stage = 0;
   NodeSet nodes;
   if (checkpoint != nullptr && checkpoint->restart) {
-    ResumedSchedule resumed = read_vesicle_checkpoint(*checkpoint, model, level_set_geometry(bound.dim, bound.axisymmetric));
+    ResumedSchedule resumed = read_vesicle_checkpoint(comm, *checkpoint, model, level_set_geometry(bound.dim, bound.axisymmetric));
     run = std::move(resumed.run);
     main_stage = resumed.main_stage;
     first_stage = static_cast<int>(run.stages.size());
@@ -623,7 +623,7 @@ VesicleRun run_vesicle(MPI_Comm comm, const Scene& scene, const VesicleModel& mo
       *log << fmt::format("resumed from {} after stage {} (E = {:.8g}, {} nodes)\n", checkpoint->directory.string(), first_stage - 1,
                           run.stages.back().result.energy, run.stages.back().nodes);
   } else {
-    nodes = initial_nodes(scene, log);
+    nodes = initial_nodes(scene, comm, log);
   }
   run.layout = bound.layout;
   const int n_stages = 1 + (model.adaptivity ? static_cast<int>(model.adaptivity->stages.size()) : 0);

@@ -132,11 +132,11 @@ StageRecord stage_from_json(const nlohmann::json& js, LevelSetGeometry geometry)
 }
 
 /// The fields a later stage continues from: nodes, cells, the state and |∇φ| (a CVT's density).
-void read_stage_fields(const VesicleCheckpoint& checkpoint, StageRecord& s) {
+void read_stage_fields(MPI_Comm comm, const VesicleCheckpoint& checkpoint, StageRecord& s) {
   const fs::path path = stage_path(checkpoint, s.stage);
   if (!fs::exists(path)) throw std::runtime_error(fmt::format("--restart: {} names stage {}, whose file {} is missing",
                                                               schedule_path(checkpoint).string(), s.stage, path.string()));
-  FieldFile file = read_field_hdf5(path);
+  FieldFile file = read_field_hdf5(path, comm);
   if (file.nodes.size() != static_cast<std::size_t>(s.nodes) || !file.fields.contains("state"))
     throw std::runtime_error(fmt::format("--restart: {} does not hold the {} nodes and the state of stage {}", path.string(), s.nodes, s.stage));
   s.result.nodes = std::move(file.nodes);
@@ -179,7 +179,7 @@ void write_vesicle_checkpoint(MPI_Comm comm, const VesicleCheckpoint& checkpoint
   if (failed != 0) throw std::runtime_error(failure.empty() ? fmt::format("{} could not be written", schedule_path(checkpoint).string()) : failure);
 }
 
-ResumedSchedule read_vesicle_checkpoint(const VesicleCheckpoint& checkpoint, const VesicleModel& model, LevelSetGeometry geometry) {
+ResumedSchedule read_vesicle_checkpoint(MPI_Comm comm, const VesicleCheckpoint& checkpoint, const VesicleModel& model, LevelSetGeometry geometry) {
   const fs::path path = schedule_path(checkpoint);
   if (!fs::exists(path))
     throw std::runtime_error(fmt::format("--restart: no checkpoint in {} (expected {}, written after each converged stage)",
@@ -217,8 +217,8 @@ ResumedSchedule read_vesicle_checkpoint(const VesicleCheckpoint& checkpoint, con
                                            "another schedule",
                                            k, path.string(), stages[k].eps, eps));
   }
-  read_stage_fields(checkpoint, stages[resumed.main_stage]);
-  if (resumed.main_stage + 1 != stages.size()) read_stage_fields(checkpoint, stages.back());
+  read_stage_fields(comm, checkpoint, stages[resumed.main_stage]);
+  if (resumed.main_stage + 1 != stages.size()) read_stage_fields(comm, checkpoint, stages.back());
   return resumed;
 }
 

@@ -35,7 +35,9 @@ void write_vesicle_checkpoint(MPI_Comm comm, const VesicleCheckpoint& checkpoint
 
 /// Reads the checkpoint of `checkpoint.directory` back for the schedule of `model`. Throws
 /// std::runtime_error naming the file when it is missing or belongs to another scene or schedule,
-/// or when every stage of the schedule is already in it.
-[[nodiscard]] ResumedSchedule read_vesicle_checkpoint(const VesicleCheckpoint& checkpoint, const VesicleModel& model, LevelSetGeometry geometry);
+/// or when every stage of the schedule is already in it. Collective over comm (the stage files are
+/// read by blocks of rows).
+[[nodiscard]] ResumedSchedule read_vesicle_checkpoint(MPI_Comm comm, const VesicleCheckpoint& checkpoint, const VesicleModel& model,
+                                                      LevelSetGeometry geometry);
 
 }  // namespace lmeform::problems
