@@ -5,7 +5,7 @@
 # 4 ranks reach the same energies to 1e-10 (relative); a dynamics run checkpointed on 2 ranks and
 # resumed on 1 ends where the uninterrupted 1-rank run ends; a scene whose nodes and initial field
 # come from the first run's output file gives the same energy on 1 and 2 ranks; more ranks than
-# nodes is refused with a message.
+# nodes, and a bad text node file on 2 ranks, are refused with a message.
 #
 #   test_rank_counts.sh LMEFORM OUT_DIR
 set -euo pipefail
@@ -92,6 +92,16 @@ if mpirun -n 12 "$lmeform" run "$out/few.toml" --output "$out/few" > "$out/few.l
 grep -q "12 MPI ranks for 9 nodes; every rank needs at least one node: run on at most 9 ranks" "$out/few.log" ||
   { cat "$out/few.log"; fail "no message for more ranks than nodes"; }
 [ -e "$out/few/few.h5" ] && fail "a refused run wrote its fields"
+
+# A text node file with a point outside the domain, on 2 ranks: rank 0 parses it, and every rank
+# stops with its message (no rank left waiting).
+printf '0.1, 0.1\n0.5, 0.5\n0.9, 0.2\n2.5, 7.0\n' > "$out/outside.txt"
+sed "s|^counts = \[3, 3\]$|file = \"$out/outside.txt\"|" "$out/few.toml" > "$out/outside.toml"
+grep -q '^file = ' "$out/outside.toml" || fail "could not make the bad node-file scene"
+if timeout 120 mpirun -n 2 "$lmeform" run "$out/outside.toml" --output "$out/outside" > "$out/outside.log" 2>&1; then
+  fail "a node file with a point outside the domain ran on 2 ranks"
+fi
+grep -q "key 'nodes.file'.*lies outside the domain" "$out/outside.log" || { cat "$out/outside.log"; fail "no message for the bad node file on 2 ranks"; }
 
 /usr/bin/python3 - "$out" <<'PY'
 import json, sys
