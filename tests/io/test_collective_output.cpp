@@ -4,6 +4,7 @@
 // behind; a time series written collectively lists its steps; fields every rank holds whole are
 // written by blocks of rows and give the same file. Read collectively, a file equals its serial read.
 #include <gtest/gtest.h>
+#include <hdf5.h>
 #include <mpi.h>
 
 #include <algorithm>
@@ -283,6 +284,28 @@ TEST(CollectiveInput, EveryRankReadsABlockAndReceivesTheWholeFile) {
     ADD_FAILURE() << "a missing file read on rank " << rank_of_world();
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("no such file"), std::string::npos) << e.what();
+  }
+  // A node set larger than the machine's free memory (declared, never written): every rank refuses
+  // it, none is left in a collective read.
+  if (rank_of_world() == 0) {
+    const hid_t f = H5Fcreate((dir / "huge.h5").c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+    const hsize_t dims[2] = {hsize_t{1} << 40, 3};
+    const hid_t space = H5Screate_simple(2, dims, nullptr);
+    const hid_t create = H5Pcreate(H5P_DATASET_CREATE);
+    H5Pset_alloc_time(create, H5D_ALLOC_TIME_LATE);
+    H5Dclose(H5Dcreate2(f, "nodes", H5T_IEEE_F64LE, space, H5P_DEFAULT, create, H5P_DEFAULT));
+    H5Pclose(create);
+    H5Sclose(space);
+    H5Fclose(f);
+  }
+  MPI_Barrier(MPI_COMM_WORLD);
+  try {
+    (void)read_field_hdf5(dir / "huge.h5", MPI_COMM_WORLD);
+    ADD_FAILURE() << "a 24 TiB node set read on rank " << rank_of_world();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("free for each of the " + std::to_string(ranks_of_world()) + " ranks on this machine"),
+              std::string::npos)
+        << e.what();
   }
 }
 

@@ -481,6 +481,36 @@ TEST(ReadFieldFile, ErrorsNameThePathAndWhatIsMissing) {
   EXPECT_NE(no_cells.find("missing dataset /cells"), std::string::npos) << no_cells;
 }
 
+// A node set larger than the memory left on this machine: refused with the sizes before anything is
+// allocated, not a crash. The dataset's extent is declared but never written, so the file is small.
+TEST(ReadFieldFile, ADatasetLargerThanTheFreeMemoryIsRefusedBeforeItIsAllocated) {
+  const fs::path dir = scratch("too_large");
+  const fs::path huge = dir / "huge.h5";
+  {
+    const hid_t f = H5Fcreate(huge.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+    const hsize_t dims[2] = {hsize_t{1} << 40, 3};  // 24 TiB of coordinates
+    const hid_t space = H5Screate_simple(2, dims, nullptr);
+    const hid_t create = H5Pcreate(H5P_DATASET_CREATE);
+    H5Pset_alloc_time(create, H5D_ALLOC_TIME_LATE);
+    const hid_t set = H5Dcreate2(f, "nodes", H5T_IEEE_F64LE, space, H5P_DEFAULT, create, H5P_DEFAULT);
+    ASSERT_GE(set, 0);
+    H5Dclose(set);
+    H5Pclose(create);
+    H5Sclose(space);
+    H5Fclose(f);
+  }
+  ASSERT_LT(fs::file_size(huge), std::uintmax_t{1} << 20);
+  try {
+    (void)read_field_hdf5(huge);
+    ADD_FAILURE() << "a 24 TiB node set was read";
+  } catch (const std::runtime_error& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find(huge.string()), std::string::npos) << what;
+    EXPECT_NE(what.find("/nodes holds 2.46e+04 GiB, more than the"), std::string::npos) << what;
+    EXPECT_NE(what.find("every rank holds a file's nodes and fields whole"), std::string::npos) << what;
+  }
+}
+
 // ---- atomic text files -----------------------------------------------------------------------------
 
 TEST(AtomicText, WritesAndReplaces) {

@@ -5,13 +5,16 @@
 #include <cstring>
 #include <limits>
 #include <stdexcept>
-#include <type_traits>
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
+#include <fmt/format.h>
+
 #include "io_detail.hpp"
 #include "lmeform/output.hpp"
+#include "lmeform/resource_usage.hpp"
 
 namespace lmeform {
 namespace {
@@ -510,6 +513,11 @@ class RowReader {
   RowReader(const Checker& check, MPI_Comm comm)
       : check_(check), comm_(comm), size_(size_of(comm)), transfer_(collective_transfer(check, size_)) {
     if (size_ > 1) MPI_Comm_rank(comm, &rank_);
+    ranks_here_ = ranks_on_this_machine(comm);
+    // The smallest share of any rank, so that all ranks refuse a dataset or none.
+    double share = static_cast<double>(available_memory_bytes()) / ranks_here_;
+    if (size_ > 1) MPI_Allreduce(MPI_IN_PLACE, &share, 1, MPI_DOUBLE, MPI_MIN, comm);
+    available_ = share;
   }
 
   /// The file access: MPI-IO on several ranks, with the metadata read by one rank for all.
@@ -522,18 +530,31 @@ class RowReader {
     return a;
   }
 
-  /// Reads `set` (dims[0] rows of `row_size` values) into `out`, which holds dims[0] * row_size values.
+  /// Reads `set` (dims[0] rows, the product of the other dims per row) whole. A dataset larger
+  /// than the memory this machine can still give each of its ranks is refused before anything is
+  /// allocated (every rank receives it whole).
   template <class T>
-  void read(hid_t set, hid_t mem_type, const std::vector<hsize_t>& dims, std::vector<T>& out, const std::string& shown) const {
-    if (out.empty()) return;
+  [[nodiscard]] std::vector<T> read(hid_t set, hid_t mem_type, const std::vector<hsize_t>& dims, const std::string& shown) const {
+    long double values = 1;
+    for (const hsize_t d : dims) values *= static_cast<long double>(d);
+    const long double bytes = values * sizeof(T);
+    if (available_ > 0 && bytes > available_)
+      throw std::runtime_error(fmt::format("{}: {} holds {:.3g} GiB, more than the {:.3g} GiB {}: every rank holds a file's nodes and "
+                                           "fields whole; use a machine with more memory per rank, or fewer ranks per machine",
+                                           check_.context, shown, static_cast<double>(bytes / 1073741824.0L),
+                                           static_cast<double>(available_ / 1073741824.0L),
+                                           ranks_here_ == 1 ? std::string("this machine has free")
+                                                            : fmt::format("free for each of the {} ranks on this machine", ranks_here_)));
+    if (size_ > 1 && values > static_cast<long double>(std::numeric_limits<int>::max()))
+      throw std::runtime_error(fmt::format("{}: {} holds more than 2^31 values, more than one gather can take", check_.context, shown));
+    std::vector<T> out(static_cast<std::size_t>(values));
+    if (out.empty()) return out;
     if (size_ == 1) {
       check_.status(H5Dread(set, mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, out.data()), "cannot read " + shown);
-      return;
+      return out;
     }
     const hsize_t rows = dims[0];
     const std::size_t row_size = out.size() / static_cast<std::size_t>(rows);
-    if (out.size() > static_cast<std::size_t>(std::numeric_limits<int>::max()))
-      throw std::runtime_error(check_.context + ": " + shown + " holds more than 2^31 values, more than one gather can take");
     auto first_row = [&](int r) { return rows * static_cast<hsize_t>(r) / static_cast<hsize_t>(size_); };
     const hsize_t begin = first_row(rank_), count = first_row(rank_ + 1) - begin;
     const Handle file_space = check_.handle(H5Dget_space(set), H5Sclose, "cannot read the dataspace of " + shown);
@@ -559,6 +580,7 @@ class RowReader {
     }
     const MPI_Datatype type = std::is_same_v<T, double> ? MPI_DOUBLE : MPI_INT;
     MPI_Allgatherv(mine.data(), static_cast<int>(mine.size()), type, out.data(), counts.data(), displacements.data(), type, comm_);
+    return out;
   }
 
  private:
@@ -575,10 +597,25 @@ class RowReader {
     return transfer;
   }
 
+  /// The ranks of comm that share this machine's memory (1 without MPI).
+  static int ranks_on_this_machine(MPI_Comm comm) {
+    int initialized = 0;
+    MPI_Initialized(&initialized);
+    if (initialized == 0) return 1;
+    MPI_Comm here = MPI_COMM_NULL;
+    MPI_Comm_split_type(comm, MPI_COMM_TYPE_SHARED, 0, MPI_INFO_NULL, &here);
+    int n = 1;
+    MPI_Comm_size(here, &n);
+    MPI_Comm_free(&here);
+    return n;
+  }
+
   const Checker& check_;
   MPI_Comm comm_;
   int size_ = 1, rank_ = 0;
   Handle transfer_;
+  int ranks_here_ = 1;
+  long double available_ = 0;  ///< bytes per rank of this machine; 0: unknown (no limit)
 };
 
 FieldFile read_field_file(const std::filesystem::path& path, MPI_Comm comm, const FieldFileSelection& selection) {
@@ -604,9 +641,7 @@ FieldFile read_field_file(const std::filesystem::path& path, MPI_Comm comm, cons
     }
     n = static_cast<std::size_t>(dims[0]);
     const int d = static_cast<int>(dims[1]);
-    std::vector<double> coords(n * static_cast<std::size_t>(d));
-    reader.read(set.get(), H5T_NATIVE_DOUBLE, dims, coords, "/nodes");
-    out.nodes = NodeSet(d, std::move(coords));
+    out.nodes = NodeSet(d, reader.read<double>(set.get(), H5T_NATIVE_DOUBLE, dims, "/nodes"));
   }
   // /cells: M x (d+1)
   if (selection.cells) {
@@ -618,8 +653,7 @@ FieldFile read_field_file(const std::filesystem::path& path, MPI_Comm comm, cons
     }
     out.cells.dim = d;
     out.cells.vertices_per_cell = d + 1;
-    out.cells.connectivity.resize(static_cast<std::size_t>(dims[0] * dims[1]));
-    reader.read(set.get(), H5T_NATIVE_INT, dims, out.cells.connectivity, "/cells");
+    out.cells.connectivity = reader.read<int>(set.get(), H5T_NATIVE_INT, dims, "/cells");
     for (const int v : out.cells.connectivity) {
       if (v < 0 || static_cast<std::size_t>(v) >= n) {
         throw std::runtime_error(context + ": /cells refers to node " + std::to_string(v) + " of " + std::to_string(n));
@@ -660,8 +694,7 @@ FieldFile read_field_file(const std::filesystem::path& path, MPI_Comm comm, cons
       }
       FieldData field;
       field.components = dims.size() == 2 ? static_cast<int>(dims[1]) : 1;
-      field.values.resize(n * static_cast<std::size_t>(field.components));
-      reader.read(set.get(), H5T_NATIVE_DOUBLE, dims, field.values, shown);
+      field.values = reader.read<double>(set.get(), H5T_NATIVE_DOUBLE, dims, shown);
       out.fields.emplace(std::move(name), std::move(field));
     }
   }
