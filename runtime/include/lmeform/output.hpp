@@ -5,7 +5,8 @@
 //
 // The HDF5 writer comes in two forms: serial (one rank, the data gathered in the original node
 // order) and collective (every rank writes the rows it owns into the same file through MPI-IO; the
-// file is the same). Library `lmeform_io` (alias `lmeform::io`); see docs/output.md for the layout.
+// file is the same). The reader too: serial, or collective (every rank reads a block of the rows and
+// receives the whole). Library `lmeform_io` (alias `lmeform::io`); see docs/output.md for the layout.
 #pragma once
 
 #include <cstdint>
