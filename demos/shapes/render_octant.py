@@ -1,6 +1,7 @@
 # ParaView picture of a 3D vesicle computed on one octant (three mirror planes): the octant's field
 # file is mirrored into the whole body, its membrane drawn as the surface phi = 0, and beside it
-# the diffuse interface in the plane y = 0 (phi from -1 outside to 1 inside).
+# the diffuse interface in the plane y = 0 (phi from -1 outside to 1 inside). Takes a run's closing
+# file or a schedule's stage file (NAME_stage_K.xmf).
 #
 #   xvfb-run -a pvbatch demos/shapes/render_octant.py build/demo/dumbbell_octant/dumbbell_octant.xmf OUT.png
 #
@@ -22,12 +23,16 @@ parser.add_argument("--height", type=int, default=700)
 args = parser.parse_args()
 
 octant = XDMFReader(registrationName=os.path.basename(args.xmf), FileNames=[os.path.abspath(args.xmf)])
-octant.PointArrayStatus = ["phi"]
+# A run's closing file names the phase field phi; a schedule's stage checkpoint holds it as its state.
+field = next((name for name in ("phi", "state") if name in octant.PointData.keys()), None)
+if field is None:
+    raise SystemExit(f"{args.xmf} holds neither phi nor state: {', '.join(octant.PointData.keys())}")
+octant.PointArrayStatus = [field]
 body = octant
 for plane in ("X Min", "Y Min", "Z Min"):  # each mirror plane doubles the body
     body = Reflect(Input=body, Plane=plane, CopyInput=1)
 
-membrane = Contour(Input=body, ContourBy=["POINTS", "phi"], Isosurfaces=[0.0], ComputeNormals=1)
+membrane = Contour(Input=body, ContourBy=["POINTS", field], Isosurfaces=[0.0], ComputeNormals=1)
 section = Slice(Input=body)
 section.SliceType = "Plane"
 section.SliceType.Origin = [0.0, 0.0, 0.0]
@@ -58,8 +63,8 @@ left.CameraViewUp = [0.0, 0.0, 1.0]
 left.ResetCamera()
 
 shown = Show(section, right)
-shown.ColorArrayName = ["POINTS", "phi"]
-phi_colours = GetColorTransferFunction("phi")
+shown.ColorArrayName = ["POINTS", field]
+phi_colours = GetColorTransferFunction(field)
 phi_colours.ApplyPreset("Cool to Warm", True)
 phi_colours.RescaleTransferFunction(-1.0, 1.0)
 shown.SetScalarBarVisibility(right, True)
@@ -72,7 +77,7 @@ bar.WindowLocation = "Any Location"
 bar.Position = [0.78, 0.08]
 bar.ScalarBarLength = 0.45
 bar.RangeLabelFormat = "%.0f"
-zero = Show(Contour(Input=section, ContourBy=["POINTS", "phi"], Isosurfaces=[0.0]), right)
+zero = Show(Contour(Input=section, ContourBy=["POINTS", field], Isosurfaces=[0.0]), right)
 zero.ColorArrayName = [None, ""]
 zero.DiffuseColor = [0.0, 0.0, 0.0]
 zero.AmbientColor = [0.0, 0.0, 0.0]
