@@ -15,7 +15,7 @@ from paraview.simple import (  # noqa: F401  (pvbatch's module)
     Contour, CreateLayout, CreateView, GetColorTransferFunction, GetScalarBar, Reflect, Render, SaveScreenshot, Show,
     Slice, XDMFReader)
 
-parser = argparse.ArgumentParser(description=__doc__)
+parser = argparse.ArgumentParser(description="ParaView picture of a 3D vesicle computed on one octant")
 parser.add_argument("xmf", help="the octant run's .xmf (its .h5 beside it)")
 parser.add_argument("png", help="the picture to write")
 parser.add_argument("--width", type=int, default=1600)
