@@ -40,6 +40,7 @@
 #include "lmeform/petsc.hpp"
 #include "lmeform/scene.hpp"
 #include "problem_registry.hpp"
+#include "problem_space.hpp"
 
 namespace {
 
@@ -552,9 +553,47 @@ TEST(SceneMutations, TheReaderRefusesGridsAndBasesThatCannotRun) {
                  {"key 'nodes.spacing' = 1e-08 gives 100000000 intervals on axis x"});
   expect_refused(p, replaced(p.text, "spacing = 0.05 ", "counts = [60000, 60000] "),
                  {"key 'nodes.counts' gives a grid of 3600000000 nodes", "32-bit"});
+  // Nested grids: a box's graded set; not a polygon, not another kind of node set, not with adapt.
+  const std::string graded = "spacing = 0.05\nrefine = [{ path = [[0.0, 0.25], [0.5, 0.25]], spacing = 0.0125, width = 0.02 }]\n";
+  EXPECT_EQ(refusal(p, replaced(p.text, "spacing = 0.05 ", graded + "sampling = \"grids\" ")), "");
+  EXPECT_EQ(refusal(p, replaced(p.text, "spacing = 0.05 ", graded + "sampling = \"poisson\" ")), "");
+  expect_refused(p, replaced(p.text, "spacing = 0.05 ", graded + "sampling = \"hexagons\" "), {"key 'nodes.sampling'", "grids"});
+  expect_refused(p, replaced(p.text, "spacing = 0.05 ", "counts = [21, 21]\nsampling = \"grids\" "),
+                 {"key 'nodes.sampling' chooses how the nodes for 'nodes.spacing' are generated"});
+  expect_refused(p,
+                 replaced(replaced(p.text, "lower = [0.0, 0.0]\nupper = [1.0, 1.0]", "polygon = [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]"),
+                          "spacing = 0.05 ", graded + "sampling = \"grids\" "),
+                 {"key 'nodes.sampling' = \"grids\" nests uniform grids in a box"});
   const Source v = tiny_vesicle();
   expect_refused(v, replaced(v.text, "augmented_tolerance = 1e-2", "augmented_tolerance = 1e-12"),
                  {"key 'solver.augmented_tolerance' = 1e-12", "give at least 1e-10"});
+}
+
+TEST(SceneNodes, GridsSamplingNestsUniformRowsAlongARefinedLine) {
+  // The unit square at 0.05, refined to 0.0125 within 0.02 of y = 0.5: nested grids put a row of
+  // nodes 0.0125 apart on that line, the Poisson-disk sample (the default) does not align with it.
+  const Source p = poisson();
+  const std::string graded = "spacing = 0.05\nrefine = [{ path = [[0.0, 0.5], [1.0, 0.5]], spacing = 0.0125, width = 0.02 }]\n";
+  auto on_line = [](const NodeSet& nodes) {
+    std::set<double> xs;
+    for (std::size_t a = 0; a < nodes.size(); ++a)
+      if (std::abs(nodes.point(a)[1] - 0.5) < 1e-12) xs.insert(nodes.point(a)[0]);
+    return xs;
+  };
+  const Scene grids = parse_scene(replaced(p.text, "spacing = 0.05 ", graded + "sampling = \"grids\" "), p.file, problems::driver_tables());
+  const NodeSet nested = problems::initial_nodes(grids, PETSC_COMM_WORLD);
+  const std::set<double> row = on_line(nested);
+  ASSERT_EQ(row.size(), 81u);  // x = 0, 0.0125, ..., 1
+  double largest_gap = 0;
+  for (auto a = row.begin(), b = std::next(row.begin()); b != row.end(); ++a, ++b) largest_gap = std::max(largest_gap, *b - *a);
+  EXPECT_NEAR(largest_gap, 0.0125, 1e-12);
+  // Far from the line the level-0 grid: the corner cell's nodes 0.05 apart.
+  std::size_t corner = 0;
+  for (std::size_t a = 0; a < nested.size(); ++a)
+    if (nested.point(a)[0] < 0.06 && nested.point(a)[1] < 0.06) ++corner;
+  EXPECT_EQ(corner, 4u);
+  const Scene poisson_disk = parse_scene(replaced(p.text, "spacing = 0.05 ", graded), p.file, problems::driver_tables());
+  EXPECT_LT(on_line(problems::initial_nodes(poisson_disk, PETSC_COMM_WORLD)).size(), 10u);
 }
 
 TEST(SceneMutations, BindingRefusesExpressionsWithoutAFiniteValueAtANode) {

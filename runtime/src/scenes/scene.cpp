@@ -44,7 +44,7 @@ void read_scene_section(const Section& root, Scene& s) {
 
 void read_nodes(const Section& root, const std::filesystem::path& folder, Scene& s) {
   const Section t = root.table("nodes", {"spacing", "counts", "count", "lloyd_iterations", "file", "gamma", "spacing_smoothing",
-                                         "quadrature_points", "refine", "adapt", "boundary_points", "integration", "basis", "partition", "support_tolerance"});
+                                         "quadrature_points", "refine", "adapt", "boundary_points", "integration", "basis", "partition", "support_tolerance", "sampling"});
   SceneNodes& n = s.nodes;
   const char* const kinds[] = {"spacing", "counts", "count", "file"};
   std::vector<std::string> present;
@@ -120,6 +120,17 @@ void read_nodes(const Section& root, const std::filesystem::path& folder, Scene&
     n.refine = scene_detail::read_refinements(t, s);
     for (const auto& r : n.refine)
       if (r.spacing > n.spacing) t.fail_key("refine", "asks for a spacing " + format_number(r.spacing) + " coarser than nodes.spacing = " + format_number(n.spacing));
+  }
+  if (t.has("sampling")) {
+    if (n.kind != SceneNodes::Kind::spacing) t.fail_key("sampling", "chooses how the nodes for 'nodes.spacing' are generated");
+    if (t.choice_of("sampling", t.string("sampling"), {"poisson", "grids"}) == "grids") {
+      if (!s.geometry.is_box())
+        t.fail_key("sampling", "= \"grids\" nests uniform grids in a box; a polygon or polyhedron is sampled by \"poisson\"");
+      if (s.dim() == 1) t.fail_key("sampling", "= \"grids\" is for 2D and 3D boxes; a 1D bar's nodes are a uniform grid or a file");
+      if (t.has("adapt"))
+        t.fail_key("sampling", "= \"grids\" cannot be combined with 'nodes.adapt', which refines by the Poisson-disk sampler");
+      n.sampling = SceneNodes::Sampling::nested_grids;
+    }
   }
   if (t.has("adapt")) {
     if (n.kind != SceneNodes::Kind::spacing) t.fail_key("adapt", "refines the nodes generated for 'nodes.spacing'");
