@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The 2D fracture studies of docs/fracture.md, one after the other (hours on 2 cores; make bench
 # runs only the 1D study, gamma_convergence.py --quick): SENT and SENS force-displacement, surfing
-# with AT2 and AT1, the anisotropic crack at three orientations, SENT on nodes that follow the
+# with AT2 and AT1 (and AT2 on nested grids, against FEniCSx on the same strip), the anisotropic crack at three orientations, SENT on nodes that follow the
 # crack, SENT to complete failure (sent_fast.toml) and SENS at l = 0.015 on following nodes (40 equal steps,
 # and steps of 2e-5 near the peak: sens_fine_steps.toml), and SENT and SENS at l = 0.0075 (sent_l0.0075.toml,
 # sens_l0.0075.toml).
@@ -14,9 +14,16 @@ out="$build/bench"
 here=$(cd "$(dirname "$0")" && pwd)
 mkdir -p "$out"
 /usr/bin/python3 "$here/gamma_convergence.py" "$lmeform" "$out"
-for case in surfing surfing_at1; do
+for case in surfing surfing_at1 surfing_grids; do
   "$lmeform" run "$here/$case.toml" --output "$build/demo/fracture/$case"
   /usr/bin/python3 "$here/surfing.py" "$build/demo/fracture/$case" --out "$out" --case "$case"
+done
+# The same strip on linear elements (FEniCSx): the effective toughness Gc (1 + h/(2l)) the surfing
+# records take as their reference, at h = l/2, l/4, l/8 (about 10 minutes), and the opening test.
+source "$here/../../scripts/fenicsx-env.sh"
+for h in 0.01 0.005 0.0025; do
+  "$py" "$here/fenicsx_surfing.py" --h "$h" --out "$out/fenicsx_surfing_h$h.json"
+  "$py" "$here/fenicsx_opening.py" --h "$h" --out "$out/fenicsx_opening_h$h.json"
 done
 for deg in 0 20 45; do
   rad=$(/usr/bin/python3 -c "import math; print(math.radians($deg))")
