@@ -41,6 +41,9 @@ done
 # l = 0.015 on nodes that follow the crack; force records ("sent", "sens") with the FEniCSx peaks.
 OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 mpirun -n 2 "$lmeform" run "$here/sent_fast.toml" --output "$build/demo/fracture/sent_fast"
 /usr/bin/python3 "$here/force_displacement.py" "$build/demo/fracture/sent_fast" sent "$out" --fenicsx "$here/fenicsx_fracture_sent_l0.015.json" --l 0.015 --h 0.0075
+# The same on nested grids aligned with y = 0.5 (h = 0.00625 there).
+OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 mpirun -n 2 "$lmeform" run "$here/sent_grids.toml" --output "$build/demo/fracture/sent_grids"
+/usr/bin/python3 "$here/force_displacement.py" "$build/demo/fracture/sent_grids" sent "$out" --fenicsx "$here/fenicsx_fracture_sent_l0.015.json" --l 0.015 --h 0.00625
 "$lmeform" run "$here/sens_adaptive.toml" --output "$build/demo/fracture/sens_adaptive"
 /usr/bin/python3 "$here/force_displacement.py" "$build/demo/fracture/sens_adaptive" sens "$out" --fenicsx "$here/fenicsx_fracture_sens_l0.015.json" --l 0.015 --h 0.006
 OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 mpirun -n 2 "$lmeform" run "$here/sens_fine_steps.toml" --output "$build/demo/fracture/sens_fine_steps"
