@@ -9,6 +9,8 @@
 # breaks, the steps whose damage reached coarse nodes are solved again on refined ones, every node
 # near the crack ends fine enough, the dissipated energy never falls across a refinement, and a
 # run restarted before a refinement equals the uninterrupted one; a followed field that is no unknown and a scene without load steps are refused.
+# The same on nested grids: every refinement keeps all the old nodes, the crack ends on the finest
+# grid, and a first step whose default line search cycles is solved with the critical-point one.
 #
 #   test_fracture.sh LMEFORM OUT_DIR
 set -euo pipefail
@@ -168,6 +170,21 @@ if "$lmeform" run "$out/adaptive_static.toml" > "$out/adaptive_static.log" 2>&1;
 grep -q "key 'nodes.adapt': nodes follow a field through load steps (\[steps\]); this scene is solved by the staggered" "$out/adaptive_static.log" ||
   { cat "$out/adaptive_static.log"; fail "adapt without [steps]: no clear message"; }
 
+# The same on nested grids ([nodes] sampling = "grids", the box's boundary names): each refinement is
+# the grids of the adapted spacing, so it keeps every old node. The first step's u solve also
+# needs the critical-point line search: the default one cycles on the split's kinks there.
+sed -e 's#^name = "adaptive"#name = "adaptive_grids"#' -e 's#^polygon = .*#lower = [0.0, 0.0]\nupper = [1.0, 1.0]#' -e '/^parts = /d' \
+  -e 's#"bottom"#"y_min"#' -e 's#"top"#"y_max"#' -e 's#^spacing = 0.1$#spacing = 0.1\nsampling = "grids"#' "$out/adaptive.toml" > "$out/adaptive_grids.toml"
+grep -q '^sampling = "grids"$' "$out/adaptive_grids.toml" && grep -q '^lower = ' "$out/adaptive_grids.toml" ||
+  fail "could not make the nested-grids adaptive scene"
+run adaptive_grids
+grep -q "^start: v < 0.8: the grids refined to 0.027 within 0.09 of it add [0-9]* nodes" "$out/adaptive_grids.log" ||
+  fail "adaptive_grids: the notch was not refined at the start"
+grep -Eq "^  step [0-9]+: v < 0.8: the grids .*: ([0-9]+) -> [0-9]+ nodes \(\1 kept\)" "$out/adaptive_grids.log" ||
+  fail "adaptive_grids: no step was refined keeping all its nodes"
+grep -q "increments cut" "$out/adaptive_grids.log" && ! grep -q "^steps *7 of 7 (load 7), 0 increments cut" "$out/adaptive_grids.log" &&
+  fail "adaptive_grids: a load increment was cut"
+
 /usr/bin/python3 - "$out" <<'PY'
 import csv, json, sys, pathlib
 import h5py, numpy as np
@@ -263,6 +280,29 @@ worst = float(np.max(nearest[near]))
 print(f"adaptive: {int(near.sum())} nodes within 0.09 of v < 0.8, their largest nearest distance {worst:.4f} (allowed 1.4 x 0.027)")
 if not worst <= 1.4 * 0.027:
     print("FAIL: nodes near the final crack are coarser than the adaptation asks"); ok = False
+# On nested grids: every step's nodes hold the previous step's, and the nodes near the final crack
+# are the finest grid's (0.1 halved twice: 0.025, the first level at or below 0.027).
+grids = sorted((out / "adaptive_grids" / "series").glob("adaptive_grids_*.h5"))
+sets = []
+for path in grids:
+    with h5py.File(path, "r") as f:
+        sets.append((np.array(f["nodes"]), np.array(f["fields"]["v"]).ravel()))
+lost = [int(np.sum(cKDTree(b).query(a)[0] > 1e-12)) for (a, _), (b, _) in zip(sets, sets[1:])]
+print("adaptive_grids: nodes per step", [len(x) for x, _ in sets], "old nodes missing from the next step", lost)
+if len(sets) != 8 or max(lost) != 0 or not len(sets[-1][0]) > len(sets[0][0]):
+    print("FAIL: the nested-grids refinements did not keep every node (or did not refine)"); ok = False
+x, v = sets[-1]
+nearest = cKDTree(x).query(x, k=2)[0][:, 1]
+near = cKDTree(x[v < 0.8]).query(x)[0] <= 0.09
+worst = float(np.max(nearest[near]))
+print(f"adaptive_grids: {int(near.sum())} nodes within 0.09 of v < 0.8, their largest nearest distance {worst:.4f} (the finest grid: 0.025)")
+if not worst <= 0.025 * (1 + 1e-9):
+    print("FAIL: nodes near the final crack are not on the finest grid"); ok = False
+history = json.loads((out / "adaptive_grids" / "history.json").read_text())
+rows = history["steps"] if isinstance(history, dict) else history
+force = [r["quantities"]["force"] if "quantities" in r else r["force"] for r in rows]
+if not force[-1] < 0.2 * max(force):
+    print(f"FAIL: adaptive_grids: the notched square did not break (last force {force[-1]:.3g}, peak {max(force):.3g})"); ok = False
 whole = out / "adaptive" / "series" / "adaptive_000007.h5"
 parts = out / "adaptive_restarted" / "series" / "adaptive_000007.h5"
 with h5py.File(whole, "r") as a, h5py.File(parts, "r") as b:

@@ -553,7 +553,7 @@ TEST(SceneMutations, TheReaderRefusesGridsAndBasesThatCannotRun) {
                  {"key 'nodes.spacing' = 1e-08 gives 100000000 intervals on axis x"});
   expect_refused(p, replaced(p.text, "spacing = 0.05 ", "counts = [60000, 60000] "),
                  {"key 'nodes.counts' gives a grid of 3600000000 nodes", "32-bit"});
-  // Nested grids: a box's graded set; not a polygon, not another kind of node set, not with adapt.
+  // Nested grids: a box's graded set; not a polygon, not another kind of node set.
   const std::string graded = "spacing = 0.05\nrefine = [{ path = [[0.0, 0.25], [0.5, 0.25]], spacing = 0.0125, width = 0.02 }]\n";
   EXPECT_EQ(refusal(p, replaced(p.text, "spacing = 0.05 ", graded + "sampling = \"grids\" ")), "");
   EXPECT_EQ(refusal(p, replaced(p.text, "spacing = 0.05 ", graded + "sampling = \"poisson\" ")), "");

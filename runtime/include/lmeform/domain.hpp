@@ -116,7 +116,11 @@ struct SpacingFunction {
 /// finest grid in every direction. Deterministic; nodes ordered x fastest. Throws
 /// std::invalid_argument for a box that is not 2D or 3D, a spacing that is not positive and finite,
 /// or more than max_nodes nodes (the message gives the count).
-[[nodiscard]] NodeSet nested_grids(const Box& box, const SpacingFunction& spacing, std::size_t max_nodes = 2'000'000);
+/// `level0_spacing` (> 0) fixes level 0 instead of the largest sampled h: sets made for spacings
+/// that differ only where they are finer (a refinement that follows a field) then share their
+/// grids, so each contains the nodes of every coarser one.
+[[nodiscard]] NodeSet nested_grids(const Box& box, const SpacingFunction& spacing, std::size_t max_nodes = 2'000'000,
+                                   double level0_spacing = 0);
 
 /// Quadrature on the faces of a boundary part: points grouped into facets (segments between
 /// consecutive boundary nodes in 2D, triangles of a face's boundary nodes in 3D), each with its

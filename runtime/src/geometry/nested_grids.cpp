@@ -40,13 +40,16 @@ double largest_spacing(const Box& box, const SpacingFunction& spacing) {
 
 }  // namespace
 
-NodeSet nested_grids(const Box& box, const SpacingFunction& spacing, std::size_t max_nodes) {
+NodeSet nested_grids(const Box& box, const SpacingFunction& spacing, std::size_t max_nodes, double level0_spacing) {
   box.validate("nested_grids");
   if (box.dim != 2 && box.dim != 3) throw std::invalid_argument(fmt::format("nested_grids: a 2D or 3D box, got dimension {}", box.dim));
   if (!(spacing.h_min > 0) || !std::isfinite(spacing.h_min) || !spacing.h)
     throw std::invalid_argument(fmt::format("nested_grids: h_min = {} must be positive and finite, with a spacing function", spacing.h_min));
   const auto dim = std::size_t(box.dim);
-  const double coarsest = largest_spacing(box, spacing);
+  if (level0_spacing < 0 || !std::isfinite(level0_spacing))
+    throw std::invalid_argument(fmt::format("nested_grids: level0_spacing = {} must be positive and finite (or 0: the largest h)", level0_spacing));
+  const double largest = largest_spacing(box, spacing);
+  const double coarsest = level0_spacing > 0 ? std::max(level0_spacing, largest) : largest;
 
   // Level 0: about the coarsest spacing on every axis; level l halves it l times.
   std::array<std::int64_t, 3> cells0{1, 1, 1};

@@ -212,9 +212,7 @@ void LoadStepper::refine_start() {
     rebuild(std::move(nodes), {});
     input_.log = ctx_.log;
     if (ctx_.log != nullptr)
-      *ctx_.log << fmt::format("start: {} < {:.3g} within {:.3g} of {} nodes coarser than {} x {:.3g} (up to {:.3g}): {} -> {} nodes, {:.2f} s\n",
-                               adapt.field, adapt.below, adapt.width, coarse.count, kCoarseRatio, adapt.spacing, coarse.coarsest, before,
-                               input_.nodes.size(), clock.seconds());
+      *ctx_.log << fmt::format("start: {}: {} -> {} nodes, {:.2f} s\n", describe(*ctx_.scene, coarse), before, input_.nodes.size(), clock.seconds());
   }
 }
 
@@ -231,8 +229,7 @@ bool LoadStepper::follow_field(int step, std::vector<double> before, double lamb
     const CoarseNodes coarse = coarse_nodes(*ctx_.scene, input_.nodes, marked);
     if (coarse.count == 0) return true;
     if (round == kMaxRefinementsPerStep) {
-      const std::string message = fmt::format("step {}: {} nodes within {:.3g} of {} < {:.3g} are still coarser than {} x {:.3g} after {} refinements",
-                                              step, coarse.count, adapt.width, adapt.field, adapt.below, kCoarseRatio, adapt.spacing, round);
+      const std::string message = fmt::format("step {}: {}, still after {} refinements", step, describe(*ctx_.scene, coarse), round);
       run_.warnings.push_back(message);
       if (ctx_.log != nullptr) *ctx_.log << "lmeform: warning: " << message << std::endl;
       return true;
@@ -263,11 +260,9 @@ bool LoadStepper::follow_field(int step, std::vector<double> before, double lamb
     const double energy_after = space_.energy(u_);
     ++run_.refinements;
     if (ctx_.log != nullptr)
-      *ctx_.log << fmt::format("  step {}: {} < {:.3g} within {:.3g} of {} nodes coarser than {} x {:.3g} (up to {:.3g}): {} -> {} nodes ({} kept), "
-                               "energy carried {:+.2e} (relative), {:.2f} s; solving the step again\n",
-                               step, adapt.field, adapt.below, adapt.width, coarse.count, kCoarseRatio, adapt.spacing, coarse.coarsest,
-                               old_nodes.size(), input_.nodes.size(), kept, (energy_after - energy_before) / std::max(std::abs(energy_before), 1e-300),
-                               clock.seconds());
+      *ctx_.log << fmt::format("  step {}: {}: {} -> {} nodes ({} kept), energy carried {:+.2e} (relative), {:.2f} s; solving the step again\n", step,
+                               describe(*ctx_.scene, coarse), old_nodes.size(), input_.nodes.size(), kept,
+                               (energy_after - energy_before) / std::max(std::abs(energy_before), 1e-300), clock.seconds());
     set_load(lambda_before);
     lambda_ = lambda_before;
     run_.history.pop_back();

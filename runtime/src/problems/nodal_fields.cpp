@@ -140,7 +140,7 @@ NodeSet initial_nodes(const Scene& scene, MPI_Comm comm, std::ostream* log) {
     case SceneNodes::Kind::spacing:
       // A box without refinement keeps its uniform grid; anything else is generated for the domain.
       if (scene.geometry.is_box() && scene.nodes.refine.empty() && !scene.nodes.adapt) return uniform_grid(scene.domain, scene.nodes.spacing);
-      if (scene.nodes.sampling == SceneNodes::Sampling::nested_grids) return nested_grids(scene.domain, scene_spacing(scene));
+      if (scene.nodes.sampling == SceneNodes::Sampling::nested_grids) return scene_grids(scene, scene_spacing(scene));
       return domain_nodes(scene.geometry, scene_spacing(scene));
     case SceneNodes::Kind::counts: return uniform_grid(scene.domain, scene.nodes.counts);
     case SceneNodes::Kind::count: return cvt_nodes(scene, log);

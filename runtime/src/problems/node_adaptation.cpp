@@ -4,6 +4,8 @@
 #include <cmath>
 #include <memory>
 
+#include <fmt/format.h>
+
 #include "field_transfer.hpp"
 #include "lmeform/neighbour_search.hpp"
 
@@ -71,10 +73,39 @@ NodeSet marked_nodes(const SceneAdaptation& adapt, const StateLayout& layout, co
   return marked;
 }
 
+namespace {
+
+bool on_nested_grids(const Scene& scene) { return scene.nodes.sampling == SceneNodes::Sampling::nested_grids; }
+
+/// The points of `candidates` that no node of `nodes` sits on (to a relative 1e-12).
+std::size_t points_missing(const NodeSet& candidates, const NodeSet& nodes) {
+  double scale = 1;
+  for (const double c : nodes.coords) scale = std::max(scale, std::abs(c));
+  const KdTree tree(nodes);
+  std::vector<int> nearest;
+  std::vector<double> d;
+  std::size_t missing = 0;
+  for (std::size_t a = 0; a < candidates.size(); ++a) {
+    tree.knn(candidates.point(a), 1, nearest, &d);
+    if (d.front() > 1e-12 * scale) ++missing;
+  }
+  return missing;
+}
+
+}  // namespace
+
+NodeSet scene_grids(const Scene& scene, const SpacingFunction& spacing) {
+  return nested_grids(scene.domain, spacing, 2'000'000, scene.nodes.spacing);
+}
+
 CoarseNodes coarse_nodes(const Scene& scene, const NodeSet& nodes, const NodeSet& marked) {
   CoarseNodes out;
   if (!scene.nodes.adapt || marked.size() == 0) return out;
   const SpacingFunction h = adapted_spacing(scene, marked);
+  if (on_nested_grids(scene)) {
+    out.count = points_missing(scene_grids(scene, h), nodes);
+    return out;
+  }
   const MarkedDistance distance(marked);
   const KdTree tree(nodes);
   std::vector<int> nearest;
@@ -92,8 +123,17 @@ CoarseNodes coarse_nodes(const Scene& scene, const NodeSet& nodes, const NodeSet
   return out;
 }
 
+std::string describe(const Scene& scene, const CoarseNodes& coarse) {
+  const SceneAdaptation& a = *scene.nodes.adapt;
+  if (on_nested_grids(scene))
+    return fmt::format("{} < {:.3g}: the grids refined to {:.3g} within {:.3g} of it add {} nodes", a.field, a.below, a.spacing, a.width, coarse.count);
+  return fmt::format("{} < {:.3g} within {:.3g} of {} nodes coarser than {} x {:.3g} (up to {:.3g})", a.field, a.below, a.width, coarse.count,
+                     kCoarseRatio, a.spacing, coarse.coarsest);
+}
+
 NodeSet refined_nodes(const Scene& scene, const NodeSet& nodes, const NodeSet& marked) {
   const SpacingFunction h = adapted_spacing(scene, marked);
+  if (on_nested_grids(scene)) return scene_grids(scene, h);
   const KdTree tree(nodes);
   std::vector<int> nearest;
   std::vector<double> d;

@@ -6,6 +6,7 @@
 
 #include <cstddef>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "lmeform/domain.hpp"
@@ -35,15 +36,28 @@ namespace lmeform::problems {
 /// beyond `kCoarseRatio`, so that the sample's own scatter never asks for one.
 inline constexpr double kKeptRatio = 1.3;
 inline constexpr double kCoarseRatio = 1.4;
+/// On nested grids ([nodes] sampling = "grids") the refinement is exact instead: `count` is the
+/// number of vertices the grids for the adapted spacing have and the nodes lack.
 struct CoarseNodes {
   std::size_t count = 0;
-  double coarsest = 0;  ///< the largest nearest distance among them
+  double coarsest = 0;  ///< the largest nearest distance among them (Poisson-disk sampling)
 };
 [[nodiscard]] CoarseNodes coarse_nodes(const Scene& scene, const NodeSet& nodes, const NodeSet& marked);
 
+/// What `coarse_nodes` found, for the log: "v < 0.8 within 0.09 of 12 nodes coarser than 1.4 x
+/// 0.027 (up to 0.05)", or on nested grids "v < 0.8: the grids refined to 0.027 within 0.09 of it
+/// add 120 nodes".
+[[nodiscard]] std::string describe(const Scene& scene, const CoarseNodes& coarse);
+
 /// The nodes of a refinement: the old nodes where they are fine enough for the adapted spacing
-/// (nearest other node within kKeptRatio times it), the boundary and the gaps sampled anew.
+/// (nearest other node within kKeptRatio times it), the boundary and the gaps sampled anew. On
+/// nested grids, the grids of the adapted spacing, which hold the old ones where the marked points
+/// only grew (an irreversible crack).
 [[nodiscard]] NodeSet refined_nodes(const Scene& scene, const NodeSet& nodes, const NodeSet& marked);
+
+/// The nested grids of the scene's box for a spacing, level 0 at nodes.spacing for every spacing
+/// (so that a finer spacing's grids contain a coarser one's).
+[[nodiscard]] NodeSet scene_grids(const Scene& scene, const SpacingFunction& spacing);
 
 /// A state (dofs interleaved, `dofs_per_node` per node) carried to other nodes: a node at the place
 /// of an old one keeps its coefficients (counted in `kept_nodes`); the others get the old field's

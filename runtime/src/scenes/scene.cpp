@@ -127,8 +127,6 @@ void read_nodes(const Section& root, const std::filesystem::path& folder, Scene&
       if (!s.geometry.is_box())
         t.fail_key("sampling", "= \"grids\" nests uniform grids in a box; a polygon or polyhedron is sampled by \"poisson\"");
       if (s.dim() == 1) t.fail_key("sampling", "= \"grids\" is for 2D and 3D boxes; a 1D bar's nodes are a uniform grid or a file");
-      if (t.has("adapt"))
-        t.fail_key("sampling", "= \"grids\" cannot be combined with 'nodes.adapt', which refines by the Poisson-disk sampler");
       n.sampling = SceneNodes::Sampling::nested_grids;
     }
   }
