@@ -253,6 +253,31 @@ TEST(NestedGrids, NodesNearTheInterfaceFormTheFinestGridAndTheFarOnesTheCoarsest
   }
 }
 
+TEST(NestedGrids, AFinerSpacingWithTheSameLevelZeroContainsTheCoarserSet) {
+  // A refinement that follows a field: the spacing finer only around one more point. With level 0
+  // fixed, the finer set holds every node of the coarser one (without it, level 0 follows the
+  // largest sampled h, which a spacing fine over much of the box would lower).
+  const Box box = Box::unit(2);
+  const double h0 = 0.1, fine = 0.0125;
+  const auto near = [=](std::vector<std::array<double, 2>> points) {
+    return SpacingFunction{[=](std::span<const double> x) {
+                             double h = h0;
+                             for (const auto& p : points) h = std::min(h, fine + 0.6 * std::max(0.0, std::hypot(x[0] - p[0], x[1] - p[1]) - 0.02));
+                             return h;
+                           },
+                           fine};
+  };
+  const NodeSet coarse = nested_grids(box, near({{0.3, 0.3}}), 2'000'000, h0);
+  const NodeSet finer = nested_grids(box, near({{0.3, 0.3}, {0.7, 0.6}}), 2'000'000, h0);
+  ASSERT_GT(finer.size(), coarse.size());
+  std::set<std::pair<long, long>> in_finer;
+  for (std::size_t a = 0; a < finer.size(); ++a) in_finer.insert({std::lround(finer.point(a)[0] / fine), std::lround(finer.point(a)[1] / fine)});
+  for (std::size_t a = 0; a < coarse.size(); ++a)
+    EXPECT_TRUE(in_finer.count({std::lround(coarse.point(a)[0] / fine), std::lround(coarse.point(a)[1] / fine)}))
+        << "node (" << coarse.point(a)[0] << ", " << coarse.point(a)[1] << ") of the coarser set is missing";
+  EXPECT_THROW((void)nested_grids(box, uniform(0.1), 1000, -1.0), std::invalid_argument);
+}
+
 TEST(NestedGrids, BadSpacingsAndBudgetsAreRefused) {
   const Box box = Box::unit(3);
   EXPECT_THROW((void)nested_grids(box, uniform(0.0)), std::invalid_argument);
