@@ -332,6 +332,9 @@ void StaggeredDriver::solve(MPI_Comm comm, const BoundScene& b, ProblemSpace& sp
       omega = std::clamp(1.0 / (1.0 - rho), 1.0, s.relaxation);
     }
     last_change = change;
+    if (b.scene->solver.monitor && input.log != nullptr)
+      *input.log << fmt::format("    round {}: change {:.3e}, omega {:.3f}{}\n", iterations + 1, change, omega,
+                                anderson ? fmt::format(", anderson steps {}", anderson->accelerated()) : "");
     // With Anderson acceleration the stretch ω applies to the combined round instead.
     if (anderson && failure.empty() && !converged)
       anderson->mix(u, space.bounded() ? static_cast<Vec>(space.lower_bound) : nullptr,
