@@ -94,7 +94,7 @@ sed -e 's#^max_iterations = 2000#max_iterations = 2000\nrelaxation = 1.5#' "$out
 run relaxed
 # So does the Anderson-accelerated one (with and without the stretch), in fewer rounds; a negative
 # depth is refused naming the key.
-sed -e 's#^max_iterations = 2000#max_iterations = 2000\nanderson = 5#' "$out/cycle.toml" > "$out/anderson.toml"
+sed -e 's#^max_iterations = 2000#max_iterations = 2000\nanderson = 5#' -e 's#^\[staggered\]#[solver]\nmonitor = true\n\n[staggered]#' "$out/cycle.toml" > "$out/anderson.toml"
 run anderson
 sed -e 's#^max_iterations = 2000#max_iterations = 2000\nanderson = 5\nrelaxation = 1.5#' "$out/cycle.toml" > "$out/anderson_relaxed.toml"
 run anderson_relaxed
@@ -240,6 +240,11 @@ for run in ("anderson", "anderson_relaxed"):
                 print(f"FAIL: the accelerated alternation on 2 ranks ends {d:.1e} from 1 rank"); ok = False
     rounds = alternations(run)
     print(f"{run}: {rounds} rounds against {plain_rounds} plain")
+    if run == "anderson":  # [solver] monitor = true: one line per round of every solved step
+        printed = sum(1 for line in open(out / "anderson.log") if line.startswith("    round ") and ": change " in line)
+        print(f"anderson: {printed} rounds printed by the monitor")
+        if printed != rounds:
+            print(f"FAIL: the monitor printed {printed} rounds, the history counts {rounds}"); ok = False
     if not rounds < plain_rounds:
         print(f"FAIL: the {run} alternation took no fewer rounds than the plain one"); ok = False
 whole = out / "cycle" / "series" / "cycle_000006.h5"
