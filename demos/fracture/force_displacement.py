@@ -45,6 +45,7 @@ def main():
         record["reference"] = float(arg("--reference"))
         record["reference_source"] = arg("--cite", "")
         record["rel_error"] = abs(force[i] - record["reference"]) / record["reference"]
+    out.mkdir(parents=True, exist_ok=True)
     path = out / "fracture.json"
     old = json.loads(path.read_text()) if path.exists() else {"records": []}
     old["records"] = [r for r in old["records"] if r.get("case") != case or r.get("l") != length] + [record]
