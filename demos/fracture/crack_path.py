@@ -33,6 +33,7 @@ def main():
     ax.set_title(title, fontsize=9)
     fig.colorbar(s, ax=ax, label="v")
     fig.tight_layout()
+    pathlib.Path(out).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)
 
 
