@@ -121,6 +121,49 @@ ProblemSpace::KeptNewtonSolver& kept_solver(MPI_Comm comm, ProblemSpace& space, 
   return kept.back();
 }
 
+struct SnesOutcome {
+  SNESConvergedReason reason = SNES_CONVERGED_ITERATING;
+  PetscInt iterations = 0;
+  PetscReal norm = 0;
+};
+
+SnesOutcome outcome_of(SNES snes) {
+  SnesOutcome o;
+  LMEFORM_PETSC_CHECK(SNESGetConvergedReason(snes, &o.reason));
+  LMEFORM_PETSC_CHECK(SNESGetIterationNumber(snes, &o.iterations));
+  LMEFORM_PETSC_CHECK(SNESGetFunctionNorm(snes, &o.norm));
+  return o;
+}
+
+/// A Hessian's Newton direction minimizes; the default line search asks |R| to fall, which an
+/// energy with kinks in its second derivative (a tension-compression split's max(tr ε, 0)²) can
+/// refuse forever while the energy still falls: the Newton steps then cycle between active
+/// patterns (measured: SENT on nested grids, |R| stuck at 4.5e-6 for 25 steps, the same with
+/// every cut of the load, as the energy is homogeneous in it). A minimization that failed so is
+/// solved again from `start` with the critical-point line search, which minimizes the energy
+/// along the direction (R·direction = 0): 15 Newton steps there. Returns what the log should say
+/// of the retry (empty: none); `outcome` becomes the retry's, its iterations both solves'.
+std::string resolve_along_energy(SNES snes, Vec start, Vec u, SnesOutcome& outcome) {
+  if (outcome.reason > 0 || outcome.reason == SNES_DIVERGED_FNORM_NAN || outcome.reason == SNES_DIVERGED_FUNCTION_DOMAIN) return {};
+  SNESLineSearch line_search = nullptr;
+  LMEFORM_PETSC_CHECK(SNESGetLineSearch(snes, &line_search));
+  SNESLineSearchType type = nullptr;
+  LMEFORM_PETSC_CHECK(SNESLineSearchGetType(line_search, &type));
+  const std::string kept_type = type != nullptr ? type : SNESLINESEARCHBT;
+  if (kept_type == SNESLINESEARCHCP) return {};
+  const std::string said = fmt::format(" (the {} line search gave {} after {} steps, |R| = {:.3e}; solved again with the critical-point one)",
+                                       kept_type, SNESConvergedReasons[outcome.reason], outcome.iterations, outcome.norm);
+  const PetscInt first_iterations = outcome.iterations;
+  LMEFORM_PETSC_CHECK(VecCopy(start, u));
+  LMEFORM_PETSC_CHECK(SNESLineSearchSetType(line_search, SNESLINESEARCHCP));
+  const PetscErrorCode solved = SNESSolve(snes, nullptr, u);
+  LMEFORM_PETSC_CHECK(SNESLineSearchSetType(line_search, kept_type.c_str()));  // the kept solver keeps its default
+  LMEFORM_PETSC_CHECK(solved);
+  outcome = outcome_of(snes);
+  outcome.iterations += first_iterations;
+  return said;
+}
+
 }  // namespace
 
 NonlinearSolve solve_nonlinear(MPI_Comm comm, ProblemSpace& space, Vec u, const SceneSolver& solver,
@@ -136,14 +179,7 @@ NonlinearSolve solve_nonlinear(MPI_Comm comm, ProblemSpace& space, Vec u, const 
   LMEFORM_PETSC_CHECK(SNESSetFunction(snes, kept.residual, snes_residual, &ctx));
   LMEFORM_PETSC_CHECK(SNESSetJacobian(snes, kept.matrix, kept.matrix, snes_jacobian, &ctx));
   if (variational_inequality) LMEFORM_PETSC_CHECK(SNESVISetVariableBounds(snes, space.lower_bound, space.upper_bound));
-  // A Hessian's Newton direction minimizes; the default line search asks |R| to fall, which an
-  // energy with kinks in its second derivative (a tension-compression split's max(tr ε, 0)²) can
-  // refuse forever while the energy still falls: the Newton steps then cycle between active
-  // patterns (measured: SENT on nested grids, |R| stuck at 4.5e-6 for 25 steps, the same with
-  // every cut of the load, as the energy is homogeneous in it). A failed unbounded minimization is
-  // solved again from its start with the critical-point line search, which minimizes the energy
-  // along the direction (R·direction = 0): 15 Newton steps there. Runs that converge keep the
-  // default and their iterates.
+  // A minimization keeps its start, from which resolve_along_energy solves it again if it fails.
   const bool minimizes = spec.symmetry == MatrixSymmetry::Symmetric && !variational_inequality;
   PetscVector start;
   if (minimizes) {
@@ -151,42 +187,17 @@ NonlinearSolve solve_nonlinear(MPI_Comm comm, ProblemSpace& space, Vec u, const 
     LMEFORM_PETSC_CHECK(VecCopy(u, start));
   }
   LMEFORM_PETSC_CHECK(SNESSolve(snes, nullptr, u));
-  SNESConvergedReason reason = SNES_CONVERGED_ITERATING;
-  PetscInt its = 0;
-  PetscReal norm = 0;
-  LMEFORM_PETSC_CHECK(SNESGetConvergedReason(snes, &reason));
-  LMEFORM_PETSC_CHECK(SNESGetIterationNumber(snes, &its));
-  LMEFORM_PETSC_CHECK(SNESGetFunctionNorm(snes, &norm));
+  SnesOutcome outcome = outcome_of(snes);
   std::string retried;
-  if (minimizes && reason < 0 && reason != SNES_DIVERGED_FNORM_NAN && reason != SNES_DIVERGED_FUNCTION_DOMAIN) {
-    SNESLineSearch line_search = nullptr;
-    LMEFORM_PETSC_CHECK(SNESGetLineSearch(snes, &line_search));
-    SNESLineSearchType type = nullptr;
-    LMEFORM_PETSC_CHECK(SNESLineSearchGetType(line_search, &type));
-    const std::string kept_type = type != nullptr ? type : SNESLINESEARCHBT;
-    if (kept_type != SNESLINESEARCHCP) {
-      retried = fmt::format(" (the {} line search gave {} after {} steps, |R| = {:.3e}; solved again with the critical-point one)", kept_type,
-                            SNESConvergedReasons[reason], its, norm);
-      const PetscInt first_its = its;
-      LMEFORM_PETSC_CHECK(VecCopy(start, u));
-      LMEFORM_PETSC_CHECK(SNESLineSearchSetType(line_search, SNESLINESEARCHCP));
-      const PetscErrorCode solved = SNESSolve(snes, nullptr, u);
-      LMEFORM_PETSC_CHECK(SNESLineSearchSetType(line_search, kept_type.c_str()));
-      LMEFORM_PETSC_CHECK(solved);
-      LMEFORM_PETSC_CHECK(SNESGetConvergedReason(snes, &reason));
-      LMEFORM_PETSC_CHECK(SNESGetIterationNumber(snes, &its));
-      LMEFORM_PETSC_CHECK(SNESGetFunctionNorm(snes, &norm));
-      its += first_its;
-    }
-  }
+  if (minimizes) retried = resolve_along_energy(snes, start, u, outcome);
   NonlinearSolve out;
-  out.converged = reason > 0;
-  out.iterations = static_cast<int>(its);
+  out.converged = outcome.reason > 0;
+  out.iterations = static_cast<int>(outcome.iterations);
   // SNES leaves the norm unset (0) when the residual is not finite: say so rather than print 0.
-  if (reason == SNES_DIVERGED_FNORM_NAN) norm = std::numeric_limits<double>::quiet_NaN();
-  out.residual_norm = norm;
-  out.message = fmt::format("SNES {}{} after {} Newton steps, |R| = {:.3e}{}", variational_inequality ? "VI " : "", SNESConvergedReasons[reason], its,
-                            norm, retried);
+  if (outcome.reason == SNES_DIVERGED_FNORM_NAN) outcome.norm = std::numeric_limits<double>::quiet_NaN();
+  out.residual_norm = outcome.norm;
+  out.message = fmt::format("SNES {}{} after {} Newton steps, |R| = {:.3e}{}", variational_inequality ? "VI " : "",
+                            SNESConvergedReasons[outcome.reason], outcome.iterations, outcome.norm, retried);
   if (space.bounded()) {
     std::tie(out.active_lower, out.active_upper) = active_set(space, u);
     out.message += fmt::format("; active set: {} dofs at the lower bound, {} at the upper", out.active_lower, out.active_upper);
