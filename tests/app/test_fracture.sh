@@ -9,6 +9,7 @@
 # breaks, the steps whose damage reached coarse nodes are solved again on refined ones, every node
 # near the crack ends fine enough, the dissipated energy never falls across a refinement, and a
 # run restarted before a refinement equals the uninterrupted one; a followed field that is no unknown and a scene without load steps are refused.
+# With the crawling rounds stretched ([staggered] extrapolation) it ends at the same forces in fewer rounds.
 # The same on nested grids: every refinement keeps all the old nodes, the crack ends on the finest
 # grid, and a first step whose default line search cycles is solved with the critical-point one.
 #
@@ -100,6 +101,10 @@ sed -e 's#^max_iterations = 2000#max_iterations = 2000\nanderson = 5\nrelaxation
 run anderson_relaxed
 mpirun -n 2 "$lmeform" run "$out/anderson_relaxed.toml" --output "$out/anderson_ranks" > "$out/anderson_ranks.log" 2>&1 ||
   { tail -20 "$out/anderson_ranks.log"; fail "the accelerated cycle on 2 ranks failed (log: $out/anderson_ranks.log)"; }
+# A stretch of 1 ([staggered] extrapolation) is refused naming the key.
+sed -e 's#^max_iterations = 2000#max_iterations = 2000\nextrapolation = 1#' "$out/cycle.toml" > "$out/extrapolation_one.toml"
+if "$lmeform" run "$out/extrapolation_one.toml" > "$out/extrapolation_one.log" 2>&1; then fail "extrapolation = 1 was not refused"; fi
+grep -q "key 'staggered.extrapolation'.*must be 0 (none) or at least 2" "$out/extrapolation_one.log" || { cat "$out/extrapolation_one.log"; fail "extrapolation = 1: no clear message"; }
 sed -e 's#^max_iterations = 2000#max_iterations = 2000\nanderson = -1#' "$out/cycle.toml" > "$out/anderson_negative.toml"
 if "$lmeform" run "$out/anderson_negative.toml" > "$out/anderson_negative.log" 2>&1; then fail "anderson = -1 was not refused"; fi
 grep -q "key 'staggered.anderson'.*must lie in \[0, 20\]" "$out/anderson_negative.log" || { cat "$out/anderson_negative.log"; fail "anderson = -1: no clear message"; }
@@ -150,6 +155,10 @@ run adaptive
 grep -q "^start: v < 0.8 within 0.09 of .* nodes coarser than 1.4 x 0.027" "$out/adaptive.log" || fail "adaptive: the notch was not refined at the start"
 grep -q "^  step [0-9]*: v < 0.8 .* solving the step again" "$out/adaptive.log" || fail "adaptive: no step was refined and solved again"
 grep -q "recommends" "$out/adaptive.log" && fail "adaptive: the crack band was warned of as under-resolved: the nodes did not follow it"
+# The same with the rounds whose change grew (the crack running) stretched while the energy falls.
+sed -e 's#^anderson = 5 .*#anderson = 5\nextrapolation = 64#' "$out/adaptive.toml" > "$out/adaptive_extrapolated.toml"
+grep -q '^extrapolation = 64$' "$out/adaptive_extrapolated.toml" || fail "could not add extrapolation to the adaptive scene"
+run adaptive_extrapolated
 sed -e 's#^count = 7#count = 7\nuntil = 5#' "$out/adaptive.toml" > "$out/adaptive_restarted.toml"
 run adaptive_restarted
 "$lmeform" run "$out/adaptive.toml" --output "$out/adaptive_restarted" --restart > "$out/adaptive_restart.log" 2>&1 ||
@@ -285,6 +294,27 @@ worst = float(np.max(nearest[near]))
 print(f"adaptive: {int(near.sum())} nodes within 0.09 of v < 0.8, their largest nearest distance {worst:.4f} (allowed 1.4 x 0.027)")
 if not worst <= 1.4 * 0.027:
     print("FAIL: nodes near the final crack are coarser than the adaptation asks"); ok = False
+# Stretching the growing rounds: the same forces in fewer rounds (every solve of a step counted,
+# those solved again after a refinement too).
+def solved_steps(run):
+    rows = []
+    for line in open(out / f"{run}.log"):
+        if line.startswith("step "):
+            words = line.split()
+            rows.append({k: float(v) for k, v in zip(words[2::2], words[3::2]) if k in ("force", "alternations", "extrapolations")})
+    return rows
+plain, stretched = solved_steps("adaptive"), solved_steps("adaptive_extrapolated")
+rounds = [sum(r["alternations"] for r in rows) for rows in (plain, stretched)]
+stretches = sum(r.get("extrapolations", 0) for r in stretched)
+peaks = [max(r["force"] for r in rows) for rows in (plain, stretched)]
+print(f"adaptive_extrapolated: {rounds[1]:.0f} rounds ({stretches:.0f} stretched) against {rounds[0]:.0f}, peak force {peaks[1]:.6f} against {peaks[0]:.6f}, "
+      f"last {stretched[-1]['force']:.6f} against {plain[-1]['force']:.6f}")
+if not stretches > 0:
+    print("FAIL: adaptive_extrapolated: no round was stretched: the comparison proves nothing"); ok = False
+if not rounds[1] < rounds[0]:
+    print("FAIL: adaptive_extrapolated: stretching the growing rounds did not save rounds"); ok = False
+if not (abs(peaks[1] - peaks[0]) <= 1e-3 * peaks[0] and abs(stretched[-1]["force"] - plain[-1]["force"]) <= 1e-2 * plain[-1]["force"]):
+    print("FAIL: adaptive_extrapolated: the stretched alternation ends at other forces"); ok = False
 # On nested grids: every step's nodes hold the previous step's, and the nodes near the final crack
 # are the finest grid's (0.1 halved twice: 0.025, the first level at or below 0.027).
 grids = sorted((out / "adaptive_grids" / "series").glob("adaptive_grids_*.h5"))
