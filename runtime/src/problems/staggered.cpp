@@ -12,9 +12,9 @@
 //   extrapolation = 0          # the largest stretch of a round whose change keeps growing (0: none)
 //
 // With `anderson`, the over-relaxation stretches the combined round instead of each group's update.
-// With `extrapolation`, a round that ends a run of growing changes (the state leaving a saddle,
-// e.g. a crack that starts to run) is stretched by 2, 4, ... up to this factor while the energy,
-// the first group solved again, falls.
+// With `extrapolation`, once the change has grown several rounds in a row (the state leaving a
+// saddle, e.g. a crack that starts to run), each growing round is stretched by 2, 4, ... up to
+// this factor while the energy, the first group solved again, falls.
 // Each group's Newton solves read PETSc options under its unknowns' names joined by "_" as
 // prefix ("v_" for ["v"]): `-v_ksp_type cg -v_pc_type hypre` sets one group's linear solver.
 // Each group's solve is the problem's own stationary solve (with its bounds), the other groups'
@@ -110,6 +110,18 @@ double relative_change(MPI_Comm comm, Vec u, Vec before, const std::vector<Petsc
   return both[0] / both[1];
 }
 
+/// Writes `values` into u's `dofs` (global numbers, `first` the first owned one), each put within
+/// [lower, max(lower, upper)] when `lower` is given.
+void write_within_bounds(Vec u, Vec lower, Vec upper, const std::vector<PetscInt>& dofs, PetscInt first, const std::vector<double>& values) {
+  const VecWriteView w(u);
+  std::optional<VecReadView> lo, hi;
+  if (lower != nullptr) lo.emplace(lower), hi.emplace(upper);
+  for (std::size_t i = 0; i < dofs.size(); ++i) {
+    const PetscInt d = dofs[i] - first;
+    w[d] = lo ? std::clamp(values[i], (*lo)[d], std::max((*lo)[d], (*hi)[d])) : values[i];
+  }
+}
+
 /// Anderson acceleration of the alternation. One round (every group solved once) maps the state of
 /// the groups after the first, x, to G(x); the first group's values are a function of the others and
 /// are solved again at the start of each round. From the last m rounds' x_j and f_j = G(x_j) - x_j,
@@ -178,13 +190,7 @@ class AndersonMixer {
       }
       next[i] = x + beta * r;
     }
-    const VecWriteView w(u);
-    std::optional<VecReadView> lo, hi;
-    if (lower != nullptr) lo.emplace(lower), hi.emplace(upper);
-    for (std::size_t i = 0; i < dofs_.size(); ++i) {
-      const PetscInt d = dofs_[i] - first_;
-      w[d] = lo ? std::clamp(next[i], (*lo)[d], std::max((*lo)[d], (*hi)[d])) : next[i];
-    }
+    write_within_bounds(u, lower, upper, dofs_, first_, next);
     if (m > 0) ++accelerated_;
   }
 
@@ -257,16 +263,10 @@ int stretch_round(const ProblemSpace& space, Vec u, Vec start, const std::vector
   // nothing when its solve fails.
   auto energy_after = [&](int f) -> std::optional<double> {
     LMEFORM_PETSC_CHECK(VecCopy(best, trial));
-    {
-      const VecWriteView w(trial);
-      std::optional<VecReadView> lo, hi;
-      if (space.bounded()) lo.emplace(space.lower_bound), hi.emplace(space.upper_bound);
-      for (std::size_t i = 0; i < later.size(); ++i) {
-        const PetscInt d = later[i] - first;
-        const double x = from[i] + f * move[i];
-        w[d] = lo ? std::clamp(x, (*lo)[d], std::max((*lo)[d], (*hi)[d])) : x;
-      }
-    }
+    std::vector<double> stretched(later.size());
+    for (std::size_t i = 0; i < later.size(); ++i) stretched[i] = from[i] + f * move[i];
+    write_within_bounds(trial, space.bounded() ? static_cast<Vec>(space.lower_bound) : nullptr,
+                        space.bounded() ? static_cast<Vec>(space.upper_bound) : nullptr, later, first, stretched);
     if (!resolve(static_cast<Vec>(trial))) return std::nullopt;
     return space.energy(trial);
   };
