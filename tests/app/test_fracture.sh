@@ -10,6 +10,8 @@
 # near the crack ends fine enough, the dissipated energy never falls across a refinement, and a
 # run restarted before a refinement equals the uninterrupted one; a followed field that is no unknown and a scene without load steps are refused.
 # With the crawling rounds stretched ([staggered] extrapolation) it ends at the same forces in fewer rounds.
+# With the displacement's factorization kept over Newton steps as CG's preconditioner (PETSc's lagged
+# preconditioner under the group's prefix) it ends at the same forces.
 # The same on nested grids: every refinement keeps all the old nodes, the crack ends on the finest
 # grid, and a first step whose default line search cycles is solved with the critical-point one.
 #
@@ -159,6 +161,15 @@ grep -q "recommends" "$out/adaptive.log" && fail "adaptive: the crack band was w
 sed -e 's#^anderson = 5 .*#anderson = 5\nextrapolation = 64#' "$out/adaptive.toml" > "$out/adaptive_extrapolated.toml"
 grep -q '^extrapolation = 64$' "$out/adaptive_extrapolated.toml" || fail "could not add extrapolation to the adaptive scene"
 run adaptive_extrapolated
+# The same with the displacement's factorization kept as the preconditioner of conjugate gradients
+# over later Newton steps and rounds (PETSc's lagged preconditioner under the group's prefix u_):
+# CG then takes more than one iteration, and the forces are the direct solves'.
+sed -e 's#^\[steps\]#[solver]\npetsc_options = "-u_ksp_type cg -u_ksp_rtol 1e-8 -u_snes_lag_preconditioner 10 -u_snes_lag_preconditioner_persists -u_ksp_converged_reason"\n\n[steps]#' \
+  "$out/adaptive.toml" > "$out/adaptive_lagged.toml"
+grep -q '^petsc_options = "-u_ksp_type cg' "$out/adaptive_lagged.toml" || fail "could not add the lagged preconditioner to the adaptive scene"
+run adaptive_lagged
+grep -Eq "Linear u_ solve converged due to CONVERGED_RTOL iterations ([2-9]|[1-9][0-9])" "$out/adaptive_lagged.log" ||
+  fail "adaptive_lagged: no CG solve of u took more than one iteration: the factorization was not reused"
 sed -e 's#^count = 7#count = 7\nuntil = 5#' "$out/adaptive.toml" > "$out/adaptive_restarted.toml"
 run adaptive_restarted
 "$lmeform" run "$out/adaptive.toml" --output "$out/adaptive_restarted" --restart > "$out/adaptive_restart.log" 2>&1 ||
@@ -315,6 +326,12 @@ if not rounds[1] < rounds[0]:
     print("FAIL: adaptive_extrapolated: stretching the growing rounds did not save rounds"); ok = False
 if not (abs(peaks[1] - peaks[0]) <= 1e-3 * peaks[0] and abs(stretched[-1]["force"] - plain[-1]["force"]) <= 1e-2 * plain[-1]["force"]):
     print("FAIL: adaptive_extrapolated: the stretched alternation ends at other forces"); ok = False
+lagged = solved_steps("adaptive_lagged")
+peak_lagged = max(r["force"] for r in lagged)
+print(f"adaptive_lagged: peak force {peak_lagged:.8f} against {peaks[0]:.8f}, last {lagged[-1]['force']:.8f} against {plain[-1]['force']:.8f}, "
+      f"{sum(r['alternations'] for r in lagged):.0f} rounds against {rounds[0]:.0f}")
+if not (abs(peak_lagged - peaks[0]) <= 1e-5 * peaks[0] and abs(lagged[-1]["force"] - plain[-1]["force"]) <= 1e-3 * plain[-1]["force"]):
+    print("FAIL: adaptive_lagged: the lagged factorization ends at other forces"); ok = False
 # On nested grids: every step's nodes hold the previous step's, and the nodes near the final crack
 # are the finest grid's (0.1 halved twice: 0.025, the first level at or below 0.027).
 grids = sorted((out / "adaptive_grids" / "series").glob("adaptive_grids_*.h5"))
