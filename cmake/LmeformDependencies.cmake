@@ -15,6 +15,11 @@ find_package(CLI11 CONFIG)                          # command lines
 find_package(nlohmann_json 3 REQUIRED CONFIG)       # every JSON writer and reader
 find_package(fmt REQUIRED CONFIG)                   # message formatting
 
+# BLAS through Debian's libblas.so.3 alternative (OpenBLAS's serial flavour, install-deps): the
+# cells' dense products (runtime/src/kernel/contractions.cpp) run on kernels chosen for the CPU.
+set(BLA_VENDOR Generic)
+find_package(BLAS REQUIRED)
+
 # MPI: the C bindings only (MPI::MPI_CXX drags in the deprecated C++ bindings).
 find_package(MPI REQUIRED COMPONENTS C)
 

@@ -2,7 +2,8 @@
 // and their size; per kernel (form, output, dimension) the flops per quadrature point of the value,
 // gradient and Hessian, the ratios gradient/value and Hessian/value next to the bounds of the
 // differentiation method, and the Hessian kernel's time on a check cell with the runtime's dense
-// contractions and with the contract's plain loops (the two ways a kernel can contract); for
+// contractions (the n x n product by BLAS), with Eigen's products alone (eigen_contractions.hpp, the
+// runtime's way before) and with the contract's plain loops (the way without routines); for
 // helfrich_axisymmetric and helfrich_lagrangian also the generated Hessian against a naive
 // thesis-style one (tests/bench/naive_kernels.hpp) on the same cell (they must agree to 1e-10).
 //
@@ -11,6 +12,7 @@
 // Baked in at build time: LMEFORMC (path of lmeformc), LMEFORM_CXX + LMEFORM_CXX_FLAGS (the
 // compiler and flags of this build), LMEFORM_KERNEL_INCLUDES (runtime/include and Eigen),
 // LMEFORM_FORMS_DIR and LMEFORM_FORM_LIST (the .form files, '|'-separated).
+#include "eigen_contractions.hpp"
 #include "naive_kernels.hpp"
 #include "test_cells.hpp"
 
@@ -219,8 +221,9 @@ int main(int argc, char** argv) {
   // Per kernel: flops per point from the module JSON, method bounds, and the Hessian's time per
   // cell with the runtime's dense contractions and with the plain loops of the contract.
   nlohmann::json kernels_json = nlohmann::json::array();
-  std::printf("\n%-34s %-12s %3s %3s %10s %10s %10s %7s %7s %8s %12s %12s %7s\n", "form", "output", "dim", "m", "flops_v/pt",
-              "flops_g/pt", "flops_H/pt", "g/v", "H/v", "H bound", "H_dense_s", "H_plain_s", "plain/d");
+  std::printf("\n%-34s %-12s %3s %3s %10s %10s %10s %7s %7s %8s %12s %12s %7s %12s %7s\n", "form", "output", "dim", "m",
+              "flops_v/pt", "flops_g/pt", "flops_H/pt", "g/v", "H/v", "H bound", "H_dense_s", "H_plain_s", "plain/d", "H_eigen_s",
+              "eigen/d");
   for (const Record& r : records) {
     const lmeform::FormModule& module = lmeform::load_form(r.form);
     std::string reason;
@@ -248,7 +251,7 @@ int main(int argc, char** argv) {
                          {"cxx_compile_s", r.cxx_compile_s}};
       if (fv > 0 && fg > 0) rec["ratio_gradient_value"] = fg / fv, rec["bound_gradient_value"] = kGradientBound;
       if (fv > 0 && fh > 0) rec["ratio_hessian_value"] = fh / fv, rec["bound_hessian_value"] = hessian_bound(m);
-      double dense_s = 0, plain_s = 0;
+      double dense_s = 0, plain_s = 0, eigen_s = 0;
       if (k->matrix != nullptr && fh > 0) {
         fc::GeometryOptions go;
         go.dim = k->dim;
@@ -265,29 +268,39 @@ int main(int argc, char** argv) {
             if (c.name == k->constants[i]) values.push_back(c.value);
         std::mt19937_64 case_rng(17);
         const fc::CheckCase cc = fc::generic_case(*k, cell, geometry, values, fc::StateOptions{}, case_rng);
-        std::vector<double> Hd, Hp;
-        dense_s = time_hessian(*k, cell, cc.state, reps, Hd);
-        plain_s = time_hessian(*k, cell, cc.state, reps, Hp, nullptr);
+        std::vector<double> Hd, Hp, He;
+        // Interleaved, so that a change of the machine's speed during the run hits all three.
+        std::vector<double> dense_t, plain_t, eigen_t;
+        for (int round = 0; round < 3; ++round) {
+          dense_t.push_back(time_hessian(*k, cell, cc.state, reps, Hd));
+          plain_t.push_back(time_hessian(*k, cell, cc.state, reps, Hp, nullptr));
+          eigen_t.push_back(time_hessian(*k, cell, cc.state, reps, He, &lmeform::bench::eigen_contractions()));
+        }
+        dense_s = *std::min_element(dense_t.begin(), dense_t.end());
+        plain_s = *std::min_element(plain_t.begin(), plain_t.end());
+        eigen_s = *std::min_element(eigen_t.begin(), eigen_t.end());
         double big = 0, diff = 0;
         for (std::size_t i = 0; i < Hd.size(); ++i) {
           big = std::max(big, std::abs(Hd[i]));
-          diff = std::max(diff, std::abs(Hd[i] - Hp[i]));
+          diff = std::max({diff, std::abs(Hd[i] - Hp[i]), std::abs(Hd[i] - He[i])});
         }
         const double rel = big > 0 ? diff / big : diff;
         rec["hessian_cell_s_dense"] = dense_s;
         rec["hessian_cell_s_plain"] = plain_s;
         rec["plain_over_dense"] = plain_s / dense_s;
+        rec["hessian_cell_s_eigen"] = eigen_s;
+        rec["eigen_over_dense"] = eigen_s / dense_s;
         rec["dense_plain_max_rel_diff"] = rel;
         rec["cell_nodes"] = cell.n;
         rec["cell_points"] = cell.nq;
         if (!(rel <= 1e-12)) {
-          std::fprintf(stderr, "bench_kernels: %s: dense and plain contractions differ by %.3e (relative)\n", symbol.c_str(), rel);
+          std::fprintf(stderr, "bench_kernels: %s: dense, Eigen and plain contractions differ by %.3e (relative)\n", symbol.c_str(), rel);
           agree = false;
         }
       }
       std::printf("%-34s %-12s %3d %3d %10.0f %10.0f %10.0f %7.2f %7.2f %8.0f", r.form.c_str(), k->name, k->dim, m, fv, fg,
                   fh, fv > 0 ? fg / fv : 0.0, fv > 0 ? fh / fv : 0.0, hessian_bound(m));
-      if (dense_s > 0) std::printf(" %12.3e %12.3e %7.2f", dense_s, plain_s, plain_s / dense_s);
+      if (dense_s > 0) std::printf(" %12.3e %12.3e %7.2f %12.3e %7.2f", dense_s, plain_s, plain_s / dense_s, eigen_s, eigen_s / dense_s);
       std::printf("\n");
       kernels_json.push_back(rec);
     }
