@@ -219,7 +219,7 @@ int main(int argc, char** argv) {
   }
 
   // Per kernel: flops per point from the module JSON, method bounds, and the Hessian's time per
-  // cell with the runtime's dense contractions and with the plain loops of the contract.
+  // cell with the runtime's dense contractions, with the Eigen-only ones and with the plain loops.
   nlohmann::json kernels_json = nlohmann::json::array();
   std::printf("\n%-34s %-12s %3s %3s %10s %10s %10s %7s %7s %8s %12s %12s %7s %12s %7s\n", "form", "output", "dim", "m",
               "flops_v/pt", "flops_g/pt", "flops_H/pt", "g/v", "H/v", "H bound", "H_dense_s", "H_plain_s", "plain/d", "H_eigen_s",
