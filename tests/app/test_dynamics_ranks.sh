@@ -3,7 +3,8 @@
 # run: 1 and 2 MPI ranks take the same steps and reach the same energy to 1e-9 (relative); the run
 # writes its XDMF time series and history; --restart resumes from the checkpoint and ends where the
 # uninterrupted run ends; --restart of a scene without [dynamics] is refused; [solver] monitor prints
-# the Newton iterations of each step.
+# the Newton iterations of each step. The same with resets of the reference configuration (the
+# carried quadrature points split over the ranks), resumed on 1 rank from a 2-rank checkpoint.
 #
 #   test_dynamics_ranks.sh LMEFORM OUT_DIR
 set -euo pipefail
@@ -62,6 +63,34 @@ for name, drift in one["max_relative_drift"].items():
     print(f"drift of {name}: {drift:.2e}")
     if drift > 1e-10:
         print(f"FAIL: {name} drifts"); ok = False
+sys.exit(0 if ok else 1)
+PY
+# Resets of the reference configuration every third step: the carried quadrature points are split
+# over the ranks (each keeps its cells' points), and 1 and 2 ranks still agree; a checkpoint written
+# after a reset on 2 ranks resumes on 1 and ends where the uninterrupted run ends.
+sed -e 's/^dt_max = .*/dt_max = 1e-3/' -e 's/^t_end = .*/t_end = 0.012/' -e 's/^output_every = .*/output_every = 5\nreset_every = 3/' \
+    "$out/oblate.toml" > "$out/reset.toml"
+grep -q '^reset_every = 3$' "$out/reset.toml" || fail "could not make the reset scene"
+sed 's/^t_end = .*/t_end = 0.006/' "$out/reset.toml" > "$out/reset_half.toml"
+"$lmeform" run "$out/reset.toml" --json "$out/reset_1.json" --output "$out/reset_1" > "$out/reset_1.log" 2>&1 ||
+  { tail -20 "$out/reset_1.log"; fail "resets on 1 rank"; }
+mpirun -n 2 "$lmeform" run "$out/reset.toml" --json "$out/reset_2.json" --output "$out/reset_2" > "$out/reset_2.log" 2>&1 ||
+  { tail -20 "$out/reset_2.log"; fail "resets on 2 ranks"; }
+mpirun -n 2 "$lmeform" run "$out/reset_half.toml" --output "$out/reset_resumed" > "$out/reset_half.log" 2>&1 ||
+  { tail -20 "$out/reset_half.log"; fail "the first half with resets on 2 ranks"; }
+"$lmeform" run "$out/reset.toml" --output "$out/reset_resumed" --restart --json "$out/reset_resumed.json" > "$out/reset_resumed.log" 2>&1 ||
+  { tail -20 "$out/reset_resumed.log"; fail "the 1-rank restart of a 2-rank checkpoint after a reset"; }
+grep -q "resumed from .* at step 5, .* 1 resets" "$out/reset_resumed.log" || { head -5 "$out/reset_resumed.log"; fail "did not resume after the reset of step 3"; }
+/usr/bin/python3 - "$out" <<'PY'
+import json, sys
+out = sys.argv[1]
+one, two, resumed = (json.load(open(f"{out}/{n}.json")) for n in ("reset_1", "reset_2", "reset_resumed"))
+ok = True
+for name, other in (("2 ranks", two), ("resumed on 1 rank", resumed)):
+    d = abs(one["energy"] - other["energy"]) / abs(one["energy"])
+    print(f"resets: energy 1 rank {one['energy']:.15f}, {name} {other['energy']:.15f}, relative difference {d:.2e}")
+    if d > 1e-10 or one["steps"] != other["steps"]:
+        print(f"FAIL: {name} ends elsewhere"); ok = False
 sys.exit(0 if ok else 1)
 PY
 echo "PASS"

@@ -6,6 +6,9 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
+#include <cmath>
+#include <span>
 #include <map>
 #include <string>
 
@@ -213,21 +216,81 @@ TEST(DistributedSetup, NoRankHoldsEveryPointsList) {
   }
 }
 
-TEST(DistributedSetup, ARunThatCarriesItsPointsKeepsThemAllOnEveryRank) {
+// A Lagrangian run's reset carries the quadrature points to the deformed nodes: the points of
+// every cell come in, and each rank keeps those of its cells. A smooth map moves nodes and points;
+// a few points are pushed out of their cells as a compressive map does (their lists then take the
+// vertices of an enclosing cell of the current nodes, which any rank may own).
+TEST(DistributedSetup, CarriedPointsAreSplitAndKeepTheSerialBasis) {
   const Box box = Box::unit(2);
-  const NodeSet nodes = jitter_interior(uniform_grid(box, {21, 21, 1}), box, 0.2 / 20, 5);
+  const NodeSet original = jitter_interior(uniform_grid(box, {41, 41, 1}), box, 0.2 / 40, 5);
   DiscretizationOptions o;
   o.gamma = {1.6};
-  o.partition = PartitionMethod::Hilbert;
-  o.every_point_on_every_rank = true;
+  o.quadrature_points = 3;
+  o.basis_order = 2;
+  const Discretization start(PETSC_COMM_SELF, original, o);  // one rank: cells and points in the original numbering
+  const auto map = [](std::span<const double> x, double* y) {
+    y[0] = x[0] + 0.04 * std::sin(M_PI * x[0]) * std::sin(M_PI * x[1]);
+    y[1] = x[1] + 0.03 * std::sin(2 * M_PI * x[0]) * std::sin(M_PI * x[1]);
+  };
+  std::vector<double> moved(original.coords.size());
+  for (std::size_t a = 0; a < original.size(); ++a) map(original.point(a), moved.data() + 2 * a);
+  const NodeSet nodes(2, moved);
+  CarriedQuadrature carried;
+  carried.cells = start.cells();
+  carried.quadrature = start.quadrature();
+  const auto per_cell = static_cast<std::size_t>(carried.quadrature.points_per_cell);
+  std::size_t pushed = 0;
+  for (std::size_t c = 0; c < carried.cells.size(); ++c) {
+    for (std::size_t k = 0; k < per_cell; ++k) {
+      const std::size_t q = c * per_cell + k;
+      std::array<double, 2> x{carried.quadrature.points[2 * q], carried.quadrature.points[2 * q + 1]};
+      map(x, carried.quadrature.points.data() + 2 * q);
+    }
+    // Every 29th cell well inside: its first point beyond its first vertex, out of the cell.
+    const auto v = carried.cells.cell(c);
+    const auto x0 = nodes.point(std::size_t(v[0]));
+    double centroid[2] = {0, 0};
+    for (const int w : v)
+      for (int i = 0; i < 2; ++i) centroid[i] += nodes.point(std::size_t(w))[std::size_t(i)] / 3;
+    if (c % 29 == 0 && centroid[0] > 0.2 && centroid[0] < 0.8 && centroid[1] > 0.2 && centroid[1] < 0.8) {
+      for (int i = 0; i < 2; ++i) carried.quadrature.points[2 * c * per_cell + std::size_t(i)] = x0[std::size_t(i)] + 0.3 * (x0[std::size_t(i)] - centroid[i]);
+      ++pushed;
+    }
+  }
+  ASSERT_GT(pushed, 5u);
+  o.carried = carried;
+  o.partition = PartitionMethod::Metis;
   const Discretization serial(PETSC_COMM_SELF, nodes, o);
   const Discretization parallel(PETSC_COMM_WORLD, nodes, o);
-  EXPECT_TRUE(parallel.points_on_every_rank());
-  ASSERT_EQ(parallel.quadrature().size(), serial.quadrature().size());
-  EXPECT_EQ(parallel.quadrature().points, serial.quadrature().points);
-  EXPECT_EQ(parallel.quadrature().weights, serial.quadrature().weights);
-  for (int e = 0; e < parallel.n_elements(); ++e)
-    EXPECT_EQ(parallel.element_first_point(e), parallel.cells_domain().element_id(e) * parallel.quadrature().points_per_cell);
+  // Every rank holds the cells of the points pushed out: each counts them all.
+  EXPECT_EQ(serial.points_outside_carried_cells(), pushed);
+  EXPECT_EQ(parallel.points_outside_carried_cells(), pushed);
+  EXPECT_FALSE(parallel.points_on_every_rank());
+  EXPECT_LT(double(parallel.quadrature().size()), 0.5 * double(serial.quadrature().size()));
+  EXPECT_LT(double(parallel.point_lists().total()), 0.5 * double(serial.point_lists().total()));
+  const ElementSet& sd = serial.cells_domain();
+  const ElementSet& pd = parallel.cells_domain();
+  std::map<int, int> serial_element_of_point;
+  for (int e = 0; e < sd.n_elements(); ++e) serial_element_of_point[sd.element_first_point(e)] = e;
+  double worst = 0, largest = 0;
+  long long owned = 0;
+  for (int e = 0; e < pd.n_elements(); ++e) {
+    owned += pd.element_owned(e) ? 1 : 0;
+    if (const std::string m = compare_element(parallel, pd, e, serial, serial_element_of_point, worst, largest); !m.empty()) {
+      ADD_FAILURE() << "carried: " << m;
+      break;
+    }
+  }
+  EXPECT_LE(worst, 1e-12 * largest);
+  long long total = owned;
+  MPI_Allreduce(MPI_IN_PLACE, &total, 1, MPI_LONG_LONG, MPI_SUM, PETSC_COMM_WORLD);
+  EXPECT_EQ(total, sd.n_elements());
+  // A rank's point q is point global_point(q) of the carried quadrature.
+  for (std::size_t q = 0; q < parallel.quadrature().size(); ++q) {
+    const std::size_t g = parallel.global_point(q);
+    ASSERT_EQ(parallel.quadrature().weights[q], carried.quadrature.weights[g]);
+    ASSERT_EQ(parallel.quadrature().points[2 * q + 1], carried.quadrature.points[2 * g + 1]);
+  }
 }
 
 }  // namespace

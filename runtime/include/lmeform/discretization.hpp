@@ -17,9 +17,9 @@
 // background cells (connectivity and measures), a few numbers per node or cell. Distributed: the
 // quadrature points, their weights and primal lists (a rank maps the rule onto the cells that can
 // reach one of its nodes only, and numbers their points locally), elements, pattern, basis storage
-// and assembly. A rank works only on the elements that touch its rows. A Lagrangian run, which
-// carries the points from one reference configuration to the next, keeps every point on every
-// rank (DiscretizationOptions::every_point_on_every_rank).
+// and assembly. A rank works only on the elements that touch its rows. Points carried from an
+// earlier reference configuration (DiscretizationOptions::carried) come in for every cell; a rank
+// keeps those of its cells.
 #pragma once
 
 #include <mpi.h>
@@ -86,11 +86,10 @@ struct DiscretizationOptions {
   /// How the nodes are split among ranks (partition.hpp). METIS needs every node's list on every
   /// rank first; the Hilbert curve needs the coordinates only.
   PartitionMethod partition = PartitionMethod::Metis;
-  std::optional<CarriedQuadrature> carried;  ///< set: these cells and points, no triangulation
-  /// Every rank holds the points of every cell, numbered as the cells (set by a run that carries
-  /// its points to a new reference configuration, and implied by `carried`). Otherwise a rank holds
-  /// the points of the cells that can reach its nodes.
-  bool every_point_on_every_rank = false;
+  /// Set: these cells and points, no triangulation. The points of every cell come in (numbered
+  /// cell × points_per_cell + k, on every rank); the rank keeps those of its cells and the options
+  /// keep the cells alone.
+  std::optional<CarriedQuadrature> carried;
   /// Background cells flatter than this (area over longest edge squared, DelaunayOptions) are
   /// dropped. Nodes that moved off a straight boundary leave slivers along it whose quadrature
   /// points lie on the hull to round-off, where the LME derivatives are undefined: a moving node
@@ -231,7 +230,7 @@ class Discretization {
   [[nodiscard]] const BackgroundCells& cells() const noexcept { return cells_; }
   [[nodiscard]] const QuadratureRule& rule() const noexcept { return rule_; }
   /// The cells whose points this rank holds, ascending: those that can reach one of its nodes
-  /// (every cell on one rank, or with every_point_on_every_rank).
+  /// (every cell on one rank).
   [[nodiscard]] std::span<const int> local_cells() const noexcept { return local_cells_; }
   /// True when this rank holds every cell's points, numbered as the cells number them.
   [[nodiscard]] bool points_on_every_rank() const noexcept { return local_cells_.size() == cells_.size(); }
@@ -239,6 +238,12 @@ class Discretization {
   [[nodiscard]] const CellQuadrature& quadrature() const noexcept { return quadrature_; }
   [[nodiscard]] int point_cell(std::size_t q) const noexcept {
     return local_cells_[q / static_cast<std::size_t>(quadrature_.points_per_cell)];
+  }
+  /// The number every rank gives local point q: cell × points per cell + its place in the cell
+  /// (the numbering of a carried quadrature).
+  [[nodiscard]] std::size_t global_point(std::size_t q) const noexcept {
+    const auto per_cell = static_cast<std::size_t>(quadrature_.points_per_cell);
+    return static_cast<std::size_t>(point_cell(q)) * per_cell + q % per_cell;
   }
   /// Primal list (renumbered nodes) of every point of quadrature().
   [[nodiscard]] const CsrLists& point_lists() const noexcept { return point_lists_; }

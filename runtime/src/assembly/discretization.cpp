@@ -104,6 +104,11 @@ CsrLists with_facet_lists(const CsrLists& cell_lists, const detail::CellFacets& 
   });
 }
 
+bool outside_its_cell(const BackgroundCells& cells, const NodeSet& nodes, std::size_t cell, std::span<const double> x) {
+  const auto b = barycentric(cells, nodes, cell, x);
+  return std::any_of(b.begin(), b.begin() + static_cast<std::ptrdiff_t>(nodes.dim + 1), [](double v) { return v < -1e-10; });
+}
+
 // Carried quadrature points move with the map and their cells with its nodal values, but the map
 // is not affine on a cell: where it compresses strongly, a point leaves its cell and can lie
 // outside the hull of its list (measured: beside the axis, where the neck of the eps = 0.01
@@ -117,11 +122,8 @@ std::size_t add_enclosing_cells(CsrLists& lists, const CellQuadrature& quadratur
   const auto dim = static_cast<std::size_t>(nodes.dim);
   std::vector<std::size_t> outside;
   for (std::size_t q = 0; q < quadrature.size(); ++q) {
-    const std::span<const double> x(quadrature.points.data() + q * dim, dim);
     const auto cell = static_cast<std::size_t>(local_cells[q / static_cast<std::size_t>(quadrature.points_per_cell)]);
-    const auto b = barycentric(cells, nodes, cell, x);
-    if (std::any_of(b.begin(), b.begin() + static_cast<std::ptrdiff_t>(dim + 1), [](double v) { return v < -1e-10; }))
-      outside.push_back(q);
+    if (outside_its_cell(cells, nodes, cell, quadrature.point(q))) outside.push_back(q);
   }
   if (outside.empty()) return 0;
   const BackgroundCells current = delaunay(original_nodes);
@@ -239,6 +241,8 @@ std::vector<char> Discretization::cells_reaching_owned_nodes() const {
   const auto& mirrors = options_.lme.mirrors;
   std::vector<int> near;
   std::array<double, 3> centroid{}, image{};
+  // With carried points the quadrature still holds every cell's points here (select_local_cells).
+  const auto per_cell = static_cast<std::size_t>(quadrature_.points_per_cell);
   for (std::size_t c = 0; c < cells_.size(); ++c) {
     const auto vertices = cells_.cell(c);
     centroid.fill(0);
@@ -249,6 +253,23 @@ std::vector<char> Discretization::cells_reaching_owned_nodes() const {
       double r2 = 0;
       for (std::size_t i = 0; i < d; ++i) r2 += std::pow(nodes_.coords[std::size_t(v) * d + i] - centroid[i], 2);
       extent = std::max(extent, std::sqrt(r2));
+    }
+    if (options_.carried) {
+      // Carried points need not lie in their cells (add_enclosing_cells). One outside its cell
+      // takes the vertices of a cell of the current triangulation, which any rank may own: every
+      // rank searches such a cell.
+      bool outside = false;
+      for (std::size_t k = 0; k < per_cell; ++k) {
+        const auto x = quadrature_.point(c * per_cell + k);
+        double r2 = 0;
+        for (std::size_t i = 0; i < d; ++i) r2 += std::pow(x[i] - centroid[i], 2);
+        extent = std::max(extent, std::sqrt(r2));
+        outside = outside || outside_its_cell(cells_, nodes_, c, x);
+      }
+      if (outside) {
+        searched[c] = 1;
+        continue;
+      }
     }
     const auto reaches = [&](const std::array<double, 3>& x) {
       tree.radius_search(std::span<const double>(x.data(), d), largest + extent, near);
@@ -371,7 +392,8 @@ Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, Discretizati
                                     " cells for " + std::to_string(c.cells.size()) + " background cells");
       for (const int v : c.cells.connectivity)
         if (v < 0 || v >= n) throw std::invalid_argument("Discretization: a carried cell names node " + std::to_string(v));
-      quadrature_ = c.quadrature;
+      // Moved, not copied: the options keep the cells, not every point.
+      quadrature_ = std::move(options_.carried->quadrature);
       cells_ = c.cells;
     } else {
       DelaunayOptions delaunay_options;
@@ -448,7 +470,7 @@ Discretization::Discretization(MPI_Comm comm, const NodeSet& nodes, Discretizati
 void Discretization::select_local_cells() {
   // The neighbour search is the costliest part of the setup, and the points and their lists the
   // largest per-point arrays: a rank maps the rule onto the cells where its elements can be only.
-  const bool every_cell = size_ == 1 || options_.carried || options_.every_point_on_every_rank;
+  const bool every_cell = size_ == 1;
   std::vector<char> searched = every_cell ? std::vector<char>(cells_.size(), 1) : cells_reaching_owned_nodes();
   const auto marked = [&] {
     std::vector<int> ids;
@@ -473,6 +495,23 @@ void Discretization::select_local_cells() {
     if (!every_cell) search_cells_whose_facets_list_owned_nodes(searched);
   }
   local_cells_ = marked();
+  if (options_.carried && !every_cell) {
+    // The carried points of every cell came in; this rank keeps those of its cells.
+    CellQuadrature mine;
+    mine.dim = quadrature_.dim;
+    mine.points_per_cell = quadrature_.points_per_cell;
+    const auto per_cell = static_cast<std::size_t>(quadrature_.points_per_cell), d = static_cast<std::size_t>(dim());
+    mine.points.reserve(local_cells_.size() * per_cell * d);
+    mine.weights.reserve(local_cells_.size() * per_cell);
+    for (const int c : local_cells_) {
+      const auto first = std::size_t(c) * per_cell;
+      mine.points.insert(mine.points.end(), quadrature_.points.begin() + std::ptrdiff_t(first * d),
+                         quadrature_.points.begin() + std::ptrdiff_t((first + per_cell) * d));
+      mine.weights.insert(mine.weights.end(), quadrature_.weights.begin() + std::ptrdiff_t(first),
+                          quadrature_.weights.begin() + std::ptrdiff_t(first + per_cell));
+    }
+    quadrature_ = std::move(mine);
+  }
 }
 
 void Discretization::build_cell_domain() {

@@ -134,7 +134,6 @@ std::unique_ptr<ReferenceConfiguration> DynamicsIntegrator::build_reference(
   input.lme = bound_.lme(AxisParity::odd);  // y_r is odd in r: no mirror
   input.initial = state;
   input.carried = std::move(carried);
-  input.every_point_on_every_rank = true;  // resets carry every point (carry_reference)
   input.qdata_values = std::move(qdata);
   input.coefficient_values = std::move(coefficients);
   input.dirichlet_nodes = dirichlet_sets_;
@@ -362,7 +361,7 @@ bool DynamicsIntegrator::advance() {
       if (!(a.measures.min_jacobian > settings_.min_jacobian)) {
         a.ok = false;
         a.folded = true;
-        const auto x = ref_->space.disc->quadrature().point(std::size_t(a.measures.point));
+        const auto& x = a.measures.position;
         a.why = fmt::format("det F = {:.3e} at quadrature point {} (reference position ({:.4g}, {:.4g}){})", a.measures.min_jacobian,
                             a.measures.point, x[0], dim_ > 1 ? x[1] : 0.0, run_.resets > 0 ? fmt::format(", reference {}", run_.resets) : "");
       }

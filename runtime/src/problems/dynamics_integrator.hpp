@@ -3,6 +3,7 @@
 // top to bottom in run().
 #pragma once
 
+#include <array>
 #include <filesystem>
 #include <limits>
 #include <map>
@@ -24,7 +25,8 @@ namespace lmeform::problems {
 /// largest distortion, the ratio of F's extreme singular values.
 struct DeformationMeasures {
   double min_jacobian = std::numeric_limits<double>::infinity();
-  int point = -1;
+  long point = -1;                   ///< where: its number on every rank (Discretization::global_point)
+  std::array<double, 3> position{};  ///< and its reference position
   double max_distortion = 1;
 };
 

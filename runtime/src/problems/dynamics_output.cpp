@@ -120,17 +120,25 @@ void DynamicsIntegrator::write_checkpoint() {
     attributes.emplace(fmt::format("target_{}", i), targets_[i]);
   }
   if (run_.resets > 0 || run_.remeshes > 0) {
-    // The quadrature as a point set (no cells) with its weights and jets as point data.
-    const CellQuadrature& quad = ref_->space.disc->quadrature();
+    // The quadrature as a point set (no cells) with its weights and jets as point data, every
+    // point in the numbering of a carried quadrature (the ranks hold their cells' points).
+    const Discretization& disc = *ref_->space.disc;
+    const CarriedQuadrature quad = every_point_quadrature(disc, run_.cells);
+    std::map<std::string, std::vector<double>, std::less<>> qdata;
+    for (const auto& [name, values] : ref_->space.qdata) {
+      long size = disc.quadrature().size() > 0 ? long(values.size() / disc.quadrature().size()) : 0;
+      MPI_Allreduce(MPI_IN_PLACE, &size, 1, MPI_LONG, MPI_MAX, comm_);
+      qdata[name] = every_point_values(disc, values, std::size_t(size));
+    }
     FieldViews qfields;
-    qfields.emplace("weight", FieldView{quad.weights, 1});
-    for (const auto& [name, values] : ref_->space.qdata) qfields.emplace("qdata_" + name, FieldView{values, static_cast<int>(values.size() / quad.size())});
+    qfields.emplace("weight", FieldView{quad.quadrature.weights, 1});
+    for (const auto& [name, values] : qdata) qfields.emplace("qdata_" + name, FieldView{values, static_cast<int>(values.size() / quad.quadrature.size())});
     BackgroundCells none;
     none.dim = dim_;
     none.vertices_per_cell = dim_ + 1;
-    const ReplicatedShare quadrature_share(comm_, quad.size(), qfields);
-    write_field_hdf5(comm_, quadrature_path_, NodeSet(dim_, quad.points), none, quadrature_share.part(),
-                     {{"step", count(step_)}, {"points_per_cell", static_cast<std::int64_t>(quad.points_per_cell)}});
+    const ReplicatedShare quadrature_share(comm_, quad.quadrature.size(), qfields);
+    write_field_hdf5(comm_, quadrature_path_, NodeSet(dim_, quad.quadrature.points), none, quadrature_share.part(),
+                     {{"step", count(step_)}, {"points_per_cell", static_cast<std::int64_t>(quad.quadrature.points_per_cell)}});
   }
   if (rank_ == 0) write_text_atomically(history_path_, history_json().dump(1) + "\n");
   // After a re-mesh the material nodes, their triangulation and the projected nodal fields are new.

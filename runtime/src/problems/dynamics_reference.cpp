@@ -90,27 +90,59 @@ DeformationMeasures deformation_measures(const ReferenceConfiguration& ref, cons
     double det = M.determinant();
     const Eigen::VectorXd sv = Eigen::JacobiSVD<Eigen::MatrixXd>(M).singularValues();
     double largest = sv.maxCoeff(), smallest = sv.minCoeff();
-    const double R = disc.quadrature().point(std::size_t(p.point))[0];
-    if (axisymmetric && R > 0) {
-      const double hoop = p.position[0] / R;
+    const auto X = disc.quadrature().point(std::size_t(p.point));
+    if (axisymmetric && X[0] > 0) {
+      const double hoop = p.position[0] / X[0];
       det *= hoop;
       largest = std::max(largest, std::abs(hoop));
       smallest = std::min(smallest, std::abs(hoop));
     }
     if (det < local.min_jacobian) {
       local.min_jacobian = det;
-      local.point = p.point;
+      local.point = long(disc.global_point(std::size_t(p.point)));
+      std::copy(X.begin(), X.end(), local.position.begin());
     }
     if (smallest > 0) local.max_distortion = std::max(local.max_distortion, largest / smallest);
   }
+  // The rank holding the smallest det F tells where it is.
+  int rank = 0;
+  MPI_Comm_rank(disc.comm(), &rank);
   struct {
     double value;
-    int point;
-  } in{local.min_jacobian, local.point}, out{};
+    int rank;
+  } in{local.min_jacobian, rank}, out{};
   MPI_Allreduce(&in, &out, 1, MPI_DOUBLE_INT, MPI_MINLOC, disc.comm());
-  double distortion = local.max_distortion;
-  MPI_Allreduce(MPI_IN_PLACE, &distortion, 1, MPI_DOUBLE, MPI_MAX, disc.comm());
-  return {out.value, out.point, distortion};
+  DeformationMeasures all = local;
+  all.min_jacobian = out.value;
+  MPI_Bcast(&all.point, 1, MPI_LONG, out.rank, disc.comm());
+  MPI_Bcast(all.position.data(), 3, MPI_DOUBLE, out.rank, disc.comm());
+  MPI_Allreduce(MPI_IN_PLACE, &all.max_distortion, 1, MPI_DOUBLE, MPI_MAX, disc.comm());
+  return all;
+}
+
+std::vector<double> every_point_values(const Discretization& disc, std::span<const double> local, std::size_t size) {
+  const ElementSet& cells = disc.cells_domain();
+  std::vector<double> out(disc.cells().size() * std::size_t(disc.quadrature().points_per_cell) * size, 0.0);
+  for (int e = 0; e < cells.n_elements(); ++e) {
+    if (!cells.element_owned(e)) continue;
+    for (int k = 0; k < cells.element_point_count(e); ++k) {
+      const auto q = std::size_t(cells.element_first_point(e) + k);
+      std::copy_n(local.begin() + std::ptrdiff_t(q * size), size, out.begin() + std::ptrdiff_t(disc.global_point(q) * size));
+    }
+  }
+  sum_over_ranks(out, disc.comm());
+  return out;
+}
+
+CarriedQuadrature every_point_quadrature(const Discretization& disc, const BackgroundCells& cells) {
+  const CellQuadrature& quad = disc.quadrature();
+  CarriedQuadrature out;
+  out.cells = cells;
+  out.quadrature.dim = quad.dim;
+  out.quadrature.points_per_cell = quad.points_per_cell;
+  out.quadrature.points = every_point_values(disc, quad.points, std::size_t(quad.dim));
+  out.quadrature.weights = every_point_values(disc, quad.weights, 1);
+  return out;
 }
 
 CarriedReference carry_reference(const ReferenceConfiguration& ref, const BackgroundCells& cells, const std::vector<double>& y,
@@ -119,7 +151,7 @@ CarriedReference carry_reference(const ReferenceConfiguration& ref, const Backgr
   const int dim = disc.dim();
   const auto d = std::size_t(dim);
   const CellQuadrature& quad = disc.quadrature();
-  const std::size_t Q = quad.size();
+  const std::size_t Q = disc.cells().size() * std::size_t(quad.points_per_cell);  // every point, numbered as the cells
   const auto& qdata = ref.space.qdata;
   CarriedReference out;
   out.quadrature.cells = cells;
@@ -134,23 +166,26 @@ CarriedReference carry_reference(const ReferenceConfiguration& ref, const Backgr
     if (qdata.contains(j.value)) c.value = j.value;
     if (qdata.contains(j.gradient)) c.gradient = j.gradient;
     if (qdata.contains(j.hessian) && !c.gradient.empty()) c.hessian = j.hessian;
-    if (!c.value.empty()) out.jets[c.value] = qdata.at(c.value);  // material: unchanged
+    if (!c.value.empty()) out.jets[c.value].assign(Q, 0.0);  // material: unchanged
     if (!c.gradient.empty()) out.jets[c.gradient].assign(Q * d, 0.0);
     if (!c.hessian.empty()) out.jets[c.hessian].assign(Q * d * d, 0.0);
     carried[field] = c;
   }
   // D²y only where a Hessian is pushed forward (positions and F need the gradients alone).
   const bool hessians = std::any_of(carried.begin(), carried.end(), [](const auto& c) { return !c.second.hessian.empty(); });
+  // Each rank computes the points of its owned elements (each point on one rank), in their
+  // numbering on every rank; the sums over the ranks put them together.
   for (const PointKinematics& k : point_kinematics(ref, y, hessians ? 2 : 1)) {
-    const auto p = std::size_t(k.point);
-    for (std::size_t i = 0; i < d; ++i) out.quadrature.quadrature.points[p * d + i] = k.position[i];
+    const auto p = std::size_t(k.point), g = disc.global_point(p);
+    for (std::size_t i = 0; i < d; ++i) out.quadrature.quadrature.points[g * d + i] = k.position[i];
     const Eigen::MatrixXd F = matrix_of(k.F, dim);
-    out.quadrature.quadrature.weights[p] = quad.weights[p] * F.determinant();
+    out.quadrature.quadrature.weights[g] = quad.weights[p] * F.determinant();
     const Eigen::MatrixXd Fi = F.inverse();  // Fi(I, i) = ∂X_I / ∂y_i
     for (const auto& [field, j] : carried) {
+      if (!j.value.empty()) out.jets[j.value][g] = qdata.at(j.value)[p];
       if (j.gradient.empty()) continue;
-      const Eigen::VectorXd g = Fi.transpose() * Eigen::Map<const Eigen::VectorXd>(qdata.at(j.gradient).data() + p * d, dim);
-      for (std::size_t i = 0; i < d; ++i) out.jets[j.gradient][p * d + i] = g[Eigen::Index(i)];
+      const Eigen::VectorXd grad = Fi.transpose() * Eigen::Map<const Eigen::VectorXd>(qdata.at(j.gradient).data() + p * d, dim);
+      for (std::size_t i = 0; i < d; ++i) out.jets[j.gradient][g * d + i] = grad[Eigen::Index(i)];
       if (j.hessian.empty()) continue;
       // ∂²φ/∂y_i∂y_j = Fi_Ii Fi_Jj (∂²φ0/∂X_I∂X_J − Σ_k ∂φ/∂y_k ∂²y_k/∂X_I∂X_J)
       const auto& h0 = qdata.at(j.hessian);
@@ -158,21 +193,17 @@ CarriedReference carry_reference(const ReferenceConfiguration& ref, const Backgr
       for (std::size_t I = 0; I < d; ++I)
         for (std::size_t K = 0; K < d; ++K) {
           double m = h0[p * d * d + I * d + K];
-          for (std::size_t kk = 0; kk < d; ++kk) m -= g[Eigen::Index(kk)] * k.H[(kk * d + I) * d + K];
+          for (std::size_t kk = 0; kk < d; ++kk) m -= grad[Eigen::Index(kk)] * k.H[(kk * d + I) * d + K];
           M(Eigen::Index(I), Eigen::Index(K)) = m;
         }
       const Eigen::MatrixXd h = Fi.transpose() * M * Fi;
       for (std::size_t i = 0; i < d; ++i)
-        for (std::size_t jj = 0; jj < d; ++jj) out.jets[j.hessian][p * d * d + i * d + jj] = h(Eigen::Index(i), Eigen::Index(jj));
+        for (std::size_t jj = 0; jj < d; ++jj) out.jets[j.hessian][g * d * d + i * d + jj] = h(Eigen::Index(i), Eigen::Index(jj));
     }
   }
-  // Each point was computed on the rank owning its element.
   sum_over_ranks(out.quadrature.quadrature.points, disc.comm());
   sum_over_ranks(out.quadrature.quadrature.weights, disc.comm());
-  for (const auto& [field, j] : carried) {
-    if (!j.gradient.empty()) sum_over_ranks(out.jets[j.gradient], disc.comm());
-    if (!j.hessian.empty()) sum_over_ranks(out.jets[j.hessian], disc.comm());
-  }
+  for (auto& [name, values] : out.jets) sum_over_ranks(values, disc.comm());
   return out;
 }
 

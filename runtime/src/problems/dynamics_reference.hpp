@@ -6,6 +6,7 @@
 #include <array>
 #include <map>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -36,7 +37,7 @@ struct ReferenceConfiguration {
 
 /// The position y(X), F and ∂²y/∂X∂X at one quadrature point.
 struct PointKinematics {
-  int point = 0;                       ///< the global quadrature point
+  int point = 0;                       ///< this rank's quadrature point (Discretization::quadrature())
   std::array<double, 3> position{};
   std::array<double, 9> F{};           ///< F[k * dim + I] = ∂y_k / ∂X_I
   std::array<double, 27> H{};          ///< H[(k * dim + I) * dim + J] = ∂²y_k / ∂X_I ∂X_J
@@ -49,6 +50,13 @@ struct PointKinematics {
 /// Axisymmetric: F of the body of revolution, whose hoop stretch y_r / R joins the (r, z) block,
 /// so that a map carrying points across the axis counts as folded.
 [[nodiscard]] DeformationMeasures deformation_measures(const ReferenceConfiguration& ref, const std::vector<double>& y, bool axisymmetric);
+
+/// Per-point values of this rank's points (`size` each) for every point, numbered as a carried
+/// quadrature (Discretization::global_point): each point from the rank owning its element, summed
+/// over the ranks. What a reset, a re-mesh or a checkpoint needs of the points all at once.
+[[nodiscard]] std::vector<double> every_point_values(const Discretization& disc, std::span<const double> local, std::size_t size);
+/// The quadrature of every point (positions and weights) with the cells (original numbering).
+[[nodiscard]] CarriedQuadrature every_point_quadrature(const Discretization& disc, const BackgroundCells& cells);
 
 /// A reset's new reference: the quadrature points carried (x̂ → y(x̂), w → w det F), the field
 /// jets at the points pushed forward (values kept, gradients F⁻ᵀ ∇φ0, Hessians with the D²y term).

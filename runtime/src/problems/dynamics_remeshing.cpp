@@ -40,21 +40,26 @@ std::pair<std::vector<double>, std::vector<double>> DynamicsIntegrator::material
   std::vector<double> state = y;
   const LmeBasis basis(ref_->nodes, std::vector<double>(n_nodes_, bound_.discretization.gamma), bound_.lme(AxisParity::odd));
   const auto bs = std::size_t(bs_), d = std::size_t(dim_), offset = std::size_t(offset_);
-  for (std::size_t a = 0; a < n_nodes_; ++a) {
-    std::array<double, 3> x{};
-    for (std::size_t i = 0; i < d; ++i) x[i] = y[a * bs + offset + i];
-    if (held[a] < dim_) {
-      const auto X = ref_->nodes.point(a);
-      const auto list = basis.neighbours(X);
-      const auto p = basis.evaluate(X, list, 0);
-      for (std::size_t i = 0; i < d; ++i) {
-        double v = 0;
-        for (std::size_t m = 0; m < list.size(); ++m) v += p[m] * y[std::size_t(list[m]) * bs + offset + i];
-        x[i] = v;
-      }
-    }
-    for (std::size_t i = 0; i < d; ++i) positions[a * d + i] = state[a * bs + offset + i] = x[i];
+  // y(X_a) by blocks of nodes over the ranks (a solve of the dual problem per node), put together
+  // by a sum: each value comes from one rank, so the sum is exact.
+  int rank = 0, size = 1;
+  MPI_Comm_rank(comm_, &rank);
+  MPI_Comm_size(comm_, &size);
+  const std::size_t begin = n_nodes_ * std::size_t(rank) / std::size_t(size), end = n_nodes_ * std::size_t(rank + 1) / std::size_t(size);
+  for (std::size_t a = begin; a < end; ++a) {
+    if (held[a] == dim_) continue;
+    const auto X = ref_->nodes.point(a);
+    const auto list = basis.neighbours(X);
+    const auto p = basis.evaluate(X, list, 0);
+    for (std::size_t i = 0; i < d; ++i)
+      for (std::size_t m = 0; m < list.size(); ++m) positions[a * d + i] += p[m] * y[std::size_t(list[m]) * bs + offset + i];
   }
+  MPI_Allreduce(MPI_IN_PLACE, positions.data(), static_cast<int>(positions.size()), MPI_DOUBLE, MPI_SUM, comm_);
+  for (std::size_t a = 0; a < n_nodes_; ++a)
+    for (std::size_t i = 0; i < d; ++i) {
+      if (held[a] == dim_) positions[a * d + i] = y[a * bs + offset + i];
+      state[a * bs + offset + i] = positions[a * d + i];
+    }
   return {positions, state};
 }
 
@@ -207,7 +212,7 @@ std::map<std::string, std::vector<double>, std::less<>> DynamicsIntegrator::proj
     PointProjection fit;
     try {
       fit = project_point_values(nodes, gamma, lme, carried->quadrature.quadrature.points, carried->quadrature.quadrature.weights,
-                                 ref_->space.qdata.at(j.value), interpolated, 1e-8, 5000,
+                                 carried->jets.at(j.value), interpolated, 1e-8, 5000,
                                  h1 ? PointGradients{carried->jets.at(j.gradient), settings_.remesh_gradient_length} : PointGradients{});
     } catch (const LmeEvaluationError& e) {
       // Measured on the eps = 0.01 prolate at step 120 (f = 1000 and 300): a carried quadrature

@@ -32,7 +32,6 @@ std::shared_ptr<Discretization> discretization_of(MPI_Comm comm, const BoundScen
   options.partition = b.discretization.partition;
   options.basis_order = std::max(b.basis_order, 1);  // |∇u| at the nodes and H1 errors need gradients
   options.carried = input.carried;
-  options.every_point_on_every_rank = input.every_point_on_every_rank;
   options.flat_cell_tolerance = input.flat_cell_tolerance;
   // The facet rule is the boundary rule: hull facets then carry the points of ds, and a traction
   // balances the corrected gradients exactly.

@@ -38,12 +38,9 @@ struct ProblemInput {
   bool clamp_start_to_bounds = false;
   /// Cells and quadrature points carried from a previous reference configuration (a reset).
   std::optional<CarriedQuadrature> carried;
-  /// Every rank holds every quadrature point (DiscretizationOptions::every_point_on_every_rank):
-  /// a run that carries its points to a later reference configuration.
-  bool every_point_on_every_rank = false;
-  /// Quadrature data given by value, by name (every point of every cell, the datum's size each;
-  /// with every_point_on_every_rank or carried): they replace the scene's source (a reset's
-  /// pushed-forward reference field).
+  /// Quadrature data given by value, by name (every point of every cell, numbered as a carried
+  /// quadrature, the datum's size each; each rank keeps its points' values): they replace the
+  /// scene's source (a reset's pushed-forward reference field).
   std::map<std::string, std::vector<double>, std::less<>> qdata_values;
   /// Nodal values of scalar [coefficients] fields, by name (input.nodes order): they replace the
   /// scene's (a re-mesh's projected reference field).
@@ -83,7 +80,9 @@ struct ProblemSpace {
   std::vector<std::pair<int, int>> fixed_pairs;          ///< (original node, dof within the node) with Dirichlet values
   std::vector<PetscInt> fixed;                           ///< the same as owned global dofs
   std::vector<double> state;                             ///< the start (original order), Dirichlet values imposed
-  /// Every quadrature datum the assemblers read, by name: all global points, the datum's size each.
+  /// The quadrature data the driver gave or computed from fields (ProblemInput::qdata_values, [qdata]
+  /// field jets), by name: the points this rank holds (Discretization::quadrature()), the datum's
+  /// size each.
   std::map<std::string, std::vector<double>, std::less<>> qdata;
   /// [bounds]: the lower and upper bound of every dof (±infinity where free or prescribed);
   /// empty when the problem has none.

@@ -124,10 +124,14 @@ std::vector<double> QuadratureData::compute(const BoundQdata& source, const Elem
       throw SceneError(fmt::format("{}: quadrature data '{}' given by the driver exist at the cells' points only; a boundary "
                                    "integral cannot read them",
                                    bound_.source, source.name));
-    if (given->second.size() != points * size)
+    const std::size_t every_point = disc_.cells().size() * static_cast<std::size_t>(disc_.quadrature().points_per_cell);
+    if (given->second.size() != every_point * size)
       throw std::invalid_argument(fmt::format("build_problem_space: {} values of '{}' for {} points x {}", given->second.size(),
-                                              given->first, points, size));
-    return given->second;
+                                              given->first, every_point, size));
+    std::vector<double> mine(points * size);
+    for (std::size_t q = 0; q < points; ++q)
+      std::copy_n(given->second.begin() + std::ptrdiff_t(disc_.global_point(q) * size), size, mine.begin() + std::ptrdiff_t(q * size));
+    return mine;
   }
   using Source = SceneQdata::Source;
   switch (source.source) {
