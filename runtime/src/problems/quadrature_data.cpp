@@ -14,20 +14,22 @@ namespace {
 /// points it holds.
 bool shared_points(const Discretization& disc, const ElementSet& domain) { return domain.boundary() || disc.points_on_every_rank(); }
 
-/// φ, ∇φ or ∇∇φ of a scalar nodal field (original node order) at the domain's points,
-/// jet-size values each: the reference field of a Lagrangian form. `field_basis` interpolates (its
-/// nodes in the original numbering); with a null basis the discretization's own.
-std::vector<double> interpolated_field_qdata(const Discretization& disc, const ElementSet& domain, std::span<const double> original_values,
-                                             int derivative, const LmeBasis* field_basis) {
+/// φ and its derivatives up to `order` (∇φ, then ∇∇φ) of a scalar nodal field (original node order)
+/// at the domain's points, one array per derivative, jet-size values each: the reference field of a
+/// Lagrangian form. One neighbour search and one evaluation of the basis per point serve every
+/// derivative. `field_basis` interpolates (its nodes in the original numbering); with a null basis
+/// the discretization's own.
+std::vector<std::vector<double>> interpolated_field_jets(const Discretization& disc, const ElementSet& domain,
+                                                         std::span<const double> original_values, int order, const LmeBasis* field_basis) {
   const auto& lists = domain.point_lists();
   const int dim = disc.dim();
+  const auto d = std::size_t(dim);
   // A cell's vertices restore the hull of a point's list where the field's own basis sees too few
   // neighbours (boundary points lie on the hull of their lists' facets already).
   const bool cells = !domain.boundary();
-  const std::size_t size = derivative == 0 ? 1 : derivative == 1 ? std::size_t(dim) : std::size_t(dim * dim);
-  const std::size_t first = derivative == 0 ? 0 : derivative == 1 ? 1 : 1 + std::size_t(dim);
   const auto original = disc.original_index();
-  std::vector<double> out(domain.n_points() * size, 0.0);
+  std::vector<std::vector<double>> out;
+  for (int k = 0; k <= order; ++k) out.emplace_back(domain.n_points() * (k == 0 ? 1 : k == 1 ? d : d * d), 0.0);
   std::vector<int> own_list;
   const bool shared = shared_points(disc, domain);
   for (int e = 0; e < domain.n_elements(); ++e) {
@@ -38,7 +40,7 @@ std::vector<double> interpolated_field_qdata(const Discretization& disc, const E
       std::vector<double> jet;
       if (field_basis != nullptr) {
         own_list = field_basis->neighbours(x);
-        jet = evaluate_with_cell_fallback(*field_basis, x, own_list, derivative, [&] {
+        jet = evaluate_with_cell_fallback(*field_basis, x, own_list, order, [&] {
           std::vector<int> vertices;
           if (cells)
             for (const int v : disc.cells().cell(std::size_t(disc.point_cell(std::size_t(q))))) vertices.push_back(original[std::size_t(v)]);
@@ -46,26 +48,28 @@ std::vector<double> interpolated_field_qdata(const Discretization& disc, const E
         });
         list = own_list;
       } else {
-        jet = disc.basis().evaluate(x, list, derivative);
+        jet = disc.basis().evaluate(x, list, order);
       }
+      const auto p = std::size_t(q);
       for (std::size_t m = 0; m < list.size(); ++m) {
         const auto node = field_basis != nullptr ? std::size_t(list[m]) : std::size_t(original[std::size_t(list[m])]);
         const double phi = original_values[node];
-        if (derivative < 2) {
-          for (std::size_t c = 0; c < size; ++c) out[std::size_t(q) * size + c] += jet[(first + c) * list.size() + m] * phi;
-          continue;
-        }
+        out[0][p] += jet[m] * phi;
+        if (order < 1) continue;
+        for (std::size_t c = 0; c < d; ++c) out[1][p * d + c] += jet[(1 + c) * list.size() + m] * phi;
+        if (order < 2) continue;
         for (int i = 0; i < dim; ++i)
           for (int j = i; j < dim; ++j) {
             const auto row = static_cast<std::size_t>(kernel::hessian_slot(i, j, dim));
             const double v = jet[row * list.size() + m] * phi;
-            out[std::size_t(q) * size + std::size_t(i * dim + j)] += v;
-            if (i != j) out[std::size_t(q) * size + std::size_t(j * dim + i)] += v;
+            out[2][p * d * d + std::size_t(i * dim + j)] += v;
+            if (i != j) out[2][p * d * d + std::size_t(j * dim + i)] += v;
           }
       }
     }
   }
-  if (shared) MPI_Allreduce(MPI_IN_PLACE, out.data(), static_cast<int>(out.size()), MPI_DOUBLE, MPI_SUM, disc.comm());
+  if (shared)
+    for (auto& values : out) MPI_Allreduce(MPI_IN_PLACE, values.data(), static_cast<int>(values.size()), MPI_DOUBLE, MPI_SUM, disc.comm());
   return out;
 }
 
@@ -167,7 +171,12 @@ std::vector<double> QuadratureData::field_jets(const BoundQdata& source, const E
     lme.mirrors = {MirrorPlane{0, 0.0}};
     field_basis_.emplace(input_.nodes, std::vector<double>{bound_.discretization.gamma}, lme);
   }
-  values = interpolated_field_qdata(disc_, domain, field, source.derivative, field_basis_ ? &*field_basis_ : nullptr);
+  // Every jet of the field the scene reads, from one evaluation of the basis per point.
+  int order = source.derivative;
+  for (const BoundQdata& q : bound_.qdata)
+    if (q.source == SceneQdata::Source::field && q.field == source.field) order = std::max(order, q.derivative);
+  std::vector<std::vector<double>> jets = interpolated_field_jets(disc_, domain, field, order, field_basis_ ? &*field_basis_ : nullptr);
+  for (int k = 0; k <= order; ++k) field_jets_[{&domain, source.field, k}] = std::move(jets[std::size_t(k)]);
   return values;
 }
 
