@@ -284,6 +284,7 @@ class LmeBasis {
   std::vector<int> image_offsets_;  // node a's images are image_offsets_[a] .. image_offsets_[a + 1]
   std::vector<double> all_coords_, all_beta_, all_radius_, all_gap_;
   std::optional<KdTree> all_tree_;
+  RadiusRange radius_range_, all_radius_range_;  // of radius_ and all_radius_
 };
 
 }  // namespace lmeform

@@ -88,4 +88,14 @@ class KdTree {
 /// its own tree and largest radius, else with the largest radius) or a single entry for all nodes.
 [[nodiscard]] CsrLists primal_lists(const KdTree& tree, std::span<const double> points, std::span<const double> radii);
 
+/// The smallest and largest of a set of support radii.
+struct RadiusRange {
+  double smallest = 0;
+  double largest = 0;
+};
+[[nodiscard]] RadiusRange radius_range(std::span<const double> radii);
+/// The same, with the radii's range known: a caller that asks point by point (one list at a time)
+/// keeps it, instead of a scan of every radius per call.
+[[nodiscard]] CsrLists primal_lists(const KdTree& tree, std::span<const double> points, std::span<const double> radii, RadiusRange range);
+
 }  // namespace lmeform

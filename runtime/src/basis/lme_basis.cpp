@@ -315,6 +315,8 @@ void LmeBasis::init(std::span<const double> gamma, std::vector<double> spacing) 
   }
   if (second_order()) init_gaps();
   if (mirrored()) init_mirror();
+  radius_range_ = radius_range(radius_);
+  all_radius_range_ = radius_range(all_radius_);
 }
 
 void LmeBasis::init_gaps() {
@@ -484,9 +486,9 @@ std::vector<int> LmeBasis::neighbours(std::span<const double> x) const {
 }
 
 CsrLists LmeBasis::neighbour_lists(std::span<const double> points) const {
-  if (!mirrored()) return primal_lists(tree_, points, radius_);
+  if (!mirrored()) return primal_lists(tree_, points, radius_, radius_range_);
   // Lists over nodes and images, images mapped to their nodes (a node may reach x twice).
-  const CsrLists all = primal_lists(*all_tree_, points, all_radius_);
+  const CsrLists all = primal_lists(*all_tree_, points, all_radius_, all_radius_range_);
   const auto n = static_cast<int>(nodes_.size());
   CsrLists out;
   out.offsets.assign(all.offsets.size(), 0);

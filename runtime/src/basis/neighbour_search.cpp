@@ -208,15 +208,16 @@ double support_radius(double beta, double tol0) {
 
 namespace {
 
-// The lists of points 0..n-1, list_of(q, list) writing point q's. The index array is reserved from
-// a sample of the points: grown by doubling it would leave freed copies of up to its whole size in
-// the heap (which PETSc's SuperLU_DIST keeps from being returned to the system).
+// The lists of points 0..n-1, list_of(q, list) writing point q's. The index array of many points is
+// reserved from a sample of them: grown by doubling it would leave freed copies of up to its whole
+// size in the heap (which PETSc's SuperLU_DIST keeps from being returned to the system). A few
+// points are not sampled, which would search each of them twice.
 template <class ListOf>
 CsrLists lists_of_points(std::size_t n, ListOf&& list_of) {
   CsrLists lists;
   lists.offsets.reserve(n + 1);
   std::vector<int> list;
-  const std::size_t samples = std::min<std::size_t>(n, 256);
+  const std::size_t samples = n >= 4096 ? 256 : 0;
   std::size_t sampled = 0;
   for (std::size_t k = 0; k < samples; ++k) {
     list_of(k * n / samples, list);
@@ -233,7 +234,17 @@ CsrLists lists_of_points(std::size_t n, ListOf&& list_of) {
 
 }  // namespace
 
+RadiusRange radius_range(std::span<const double> radii) {
+  if (radii.empty()) return {};
+  const auto [smallest, largest] = std::minmax_element(radii.begin(), radii.end());
+  return {*smallest, *largest};
+}
+
 CsrLists primal_lists(const KdTree& tree, std::span<const double> points, std::span<const double> radii) {
+  return primal_lists(tree, points, radii, radius_range(radii));
+}
+
+CsrLists primal_lists(const KdTree& tree, std::span<const double> points, std::span<const double> radii, RadiusRange range) {
   const auto d = static_cast<std::size_t>(tree.dim());
   if (points.size() % d != 0) {
     throw std::invalid_argument("primal_lists: " + std::to_string(points.size()) +
@@ -243,8 +254,7 @@ CsrLists primal_lists(const KdTree& tree, std::span<const double> points, std::s
     throw std::invalid_argument("primal_lists: " + std::to_string(radii.size()) + " radii for " +
                                 std::to_string(tree.size()) + " nodes (need 1 or one per node)");
   }
-  const double rmax = *std::max_element(radii.begin(), radii.end());
-  const double rmin = *std::min_element(radii.begin(), radii.end());
+  const double rmax = range.largest, rmin = range.smallest;
   const NodeSet& nodes = tree.nodes();
   const std::size_t nq = points.size() / d;
   std::vector<int> cand;
