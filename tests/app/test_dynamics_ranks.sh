@@ -66,7 +66,7 @@ for name, drift in one["max_relative_drift"].items():
 sys.exit(0 if ok else 1)
 PY
 # Resets of the reference configuration every third step: the carried quadrature points are split
-# over the ranks (each keeps its cells' points), and 1 and 2 ranks still agree; a checkpoint written
+# over the ranks (each keeps its cells' points), and 1, 2 and 4 ranks still agree; a checkpoint written
 # after a reset on 2 ranks resumes on 1 and ends where the uninterrupted run ends.
 sed -e 's/^dt_max = .*/dt_max = 1e-3/' -e 's/^t_end = .*/t_end = 0.012/' -e 's/^output_every = .*/output_every = 5\nreset_every = 3/' \
     "$out/oblate.toml" > "$out/reset.toml"
@@ -76,6 +76,8 @@ sed 's/^t_end = .*/t_end = 0.006/' "$out/reset.toml" > "$out/reset_half.toml"
   { tail -20 "$out/reset_1.log"; fail "resets on 1 rank"; }
 mpirun -n 2 "$lmeform" run "$out/reset.toml" --json "$out/reset_2.json" --output "$out/reset_2" > "$out/reset_2.log" 2>&1 ||
   { tail -20 "$out/reset_2.log"; fail "resets on 2 ranks"; }
+mpirun -n 4 "$lmeform" run "$out/reset.toml" --json "$out/reset_4.json" --output "$out/reset_4" > "$out/reset_4.log" 2>&1 ||
+  { tail -20 "$out/reset_4.log"; fail "resets on 4 ranks"; }
 mpirun -n 2 "$lmeform" run "$out/reset_half.toml" --output "$out/reset_resumed" > "$out/reset_half.log" 2>&1 ||
   { tail -20 "$out/reset_half.log"; fail "the first half with resets on 2 ranks"; }
 "$lmeform" run "$out/reset.toml" --output "$out/reset_resumed" --restart --json "$out/reset_resumed.json" > "$out/reset_resumed.log" 2>&1 ||
@@ -84,9 +86,9 @@ grep -q "resumed from .* at step 5, .* 1 resets" "$out/reset_resumed.log" || { h
 /usr/bin/python3 - "$out" <<'PY'
 import json, sys
 out = sys.argv[1]
-one, two, resumed = (json.load(open(f"{out}/{n}.json")) for n in ("reset_1", "reset_2", "reset_resumed"))
+one, two, four, resumed = (json.load(open(f"{out}/{n}.json")) for n in ("reset_1", "reset_2", "reset_4", "reset_resumed"))
 ok = True
-for name, other in (("2 ranks", two), ("resumed on 1 rank", resumed)):
+for name, other in (("2 ranks", two), ("4 ranks", four), ("resumed on 1 rank", resumed)):
     d = abs(one["energy"] - other["energy"]) / abs(one["energy"])
     print(f"resets: energy 1 rank {one['energy']:.15f}, {name} {other['energy']:.15f}, relative difference {d:.2e}")
     if d > 1e-10 or one["steps"] != other["steps"]:
