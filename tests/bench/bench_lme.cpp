@@ -1,11 +1,13 @@
 // bench_lme: LME basis evaluation speed and full vs compressed storage (seed Table B.2), and the
 // neighbour search on a strongly graded node set.
-//   bench_lme [--quick] [--out DIR]   writes DIR/lme_basis.json and DIR/graded_lists.json (default DIR: .)
+//   bench_lme [--quick] [--out DIR]   writes DIR/lme_basis.json, DIR/graded_lists.json and
+//                                     DIR/point_lists.json (default DIR: .)
 // One record per (dim, gamma): nodes on a jittered grid of [0,1]^d, evaluation points uniform in
 // the inner half of the box (full supports), their primal lists from the Tol0 = 1e-6 cutoff.
 // graded_lists: the nested grids of a 3D box graded to a sphere (spacings 1 : 8), the lists of
 // points spread over the box from per-node supports, searched by radius classes (primal_lists)
-// against one search with the largest radius, filtered (the same lists, checked).
+// against one search with the largest radius, filtered (the same lists, checked). point_lists: the
+// lists of points asked for one at a time against one call for all, on 10^4 and 10^5 nodes.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -21,6 +23,7 @@
 
 #include "lmeform/domain.hpp"
 #include "lmeform/kernel.hpp"
+#include "lmeform/lme_basis.hpp"
 #include "lmeform/lme_storage.hpp"
 #include "lmeform/neighbour_search.hpp"
 
@@ -101,6 +104,41 @@ nlohmann::json graded_lists(bool quick) {
               equal ? "equal" : "DIFFERENT");
   return {{"case", "graded_lists_3d"}, {"nodes", nodes.size()}, {"points", by_class.size()}, {"mean_list", by_class.mean_size()},
           {"classes_s", classes_s}, {"one_search_s", one_s}, {"speedup", one_s / classes_s}, {"equal", equal}, {"quick", quick}};
+}
+
+/// Lists asked for one point at a time (LmeBasis::neighbours, as field jets, transfers and point
+/// values ask) against one call for all points, on jittered 2D grids of two sizes: the cost per
+/// point must not grow with the nodes (it did while every call scanned every support radius).
+nlohmann::json point_by_point_lists(bool quick) {
+  nlohmann::json records = nlohmann::json::array();
+  for (const int per_side : quick ? std::vector<int>{51, 161} : std::vector<int>{101, 317}) {
+    const lmeform::NodeSet nodes = jittered_grid(2, per_side, 4);
+    const lmeform::LmeBasis basis(nodes, std::vector<double>{0.8});
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    std::vector<double> pts(std::size_t(2) * (quick ? 2000 : 20000));
+    for (double& v : pts) v = u(rng);
+    auto t0 = Clock::now();
+    const lmeform::CsrLists all = basis.neighbour_lists(pts);
+    const double batched_s = seconds_since(t0);
+    t0 = Clock::now();
+    bool equal = true;
+    for (std::size_t q = 0; q < all.size(); ++q) {
+      const std::vector<int> one = basis.neighbours(std::span<const double>(pts).subspan(2 * q, 2));
+      equal = equal && std::equal(one.begin(), one.end(), all[q].begin(), all[q].end());
+    }
+    const double one_by_one_s = seconds_since(t0);
+    const double points = double(all.size());
+    std::printf("lists point by point: %zu nodes, %zu points, mean list %.1f: %.2f us per point one by one, %.2f us batched "
+                "(%.2fx), lists %s\n",
+                nodes.size(), all.size(), all.mean_size(), 1e6 * one_by_one_s / points, 1e6 * batched_s / points,
+                one_by_one_s / batched_s, equal ? "equal" : "DIFFERENT");
+    records.push_back({{"case", "point_by_point_lists_2d"}, {"nodes", nodes.size()}, {"points", all.size()},
+                       {"mean_list", all.mean_size()}, {"one_by_one_us_per_point", 1e6 * one_by_one_s / points},
+                       {"batched_us_per_point", 1e6 * batched_s / points}, {"ratio", one_by_one_s / batched_s},
+                       {"equal", equal}, {"quick", quick}});
+  }
+  return records;
 }
 
 struct Record {
@@ -229,5 +267,11 @@ int main(int argc, char** argv) {
   std::ofstream gs(graded_path);
   gs << graded.dump(2) << "\n";
   std::printf("wrote %s\n", graded_path.string().c_str());
-  return js && gs && graded["equal"].get<bool>() ? 0 : 1;
+  const nlohmann::json by_point = point_by_point_lists(quick);
+  const auto by_point_path = std::filesystem::path(out) / "point_lists.json";
+  std::ofstream ps(by_point_path);
+  ps << by_point.dump(2) << "\n";
+  std::printf("wrote %s\n", by_point_path.string().c_str());
+  const bool lists_equal = std::all_of(by_point.begin(), by_point.end(), [](const nlohmann::json& r) { return r["equal"].get<bool>(); });
+  return js && gs && ps && graded["equal"].get<bool>() && lists_equal ? 0 : 1;
 }
