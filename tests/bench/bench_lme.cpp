@@ -244,23 +244,23 @@ int main(int argc, char** argv) {
 
   std::filesystem::create_directories(out);
   const auto path = std::filesystem::path(out) / "lme_basis.json";
+  nlohmann::json basis_records = nlohmann::json::array();
+  for (const auto& r : records)
+    basis_records.push_back({{"dim", r.dim},
+                             {"gamma", r.gamma},
+                             {"points", r.points},
+                             {"mean_neighbours", r.mean_neighbours},
+                             {"full_storage_doubles", r.full_doubles},
+                             {"compressed_storage_doubles", r.compressed_doubles},
+                             {"memory_ratio", r.memory_ratio},
+                             {"seed_memory_ratio_estimate", r.seed_ratio},
+                             {"evals_per_s_values", r.evals_values},
+                             {"evals_per_s_hessians", r.evals_hessians},
+                             {"reconstruct_over_full_time_ratio", r.reconstruct_over_full},
+                             {"reconstruct_over_evaluate_time_ratio", r.reconstruct_over_evaluate},
+                             {"quick", quick}});
   std::ofstream js(path);
-  js << "[\n";
-  for (std::size_t i = 0; i < records.size(); ++i) {
-    const auto& r = records[i];
-    char buf[1024];
-    std::snprintf(buf, sizeof buf,
-                  "  {\"dim\": %d, \"gamma\": %.1f, \"points\": %zu, \"mean_neighbours\": %.3f, "
-                  "\"full_storage_doubles\": %.0f, \"compressed_storage_doubles\": %.0f, \"memory_ratio\": %.3f, "
-                  "\"seed_memory_ratio_estimate\": %.3f, \"evals_per_s_values\": %.1f, \"evals_per_s_hessians\": %.1f, "
-                  "\"reconstruct_over_full_time_ratio\": %.3f, \"reconstruct_over_evaluate_time_ratio\": %.4f, "
-                  "\"quick\": %s}%s\n",
-                  r.dim, r.gamma, r.points, r.mean_neighbours, r.full_doubles, r.compressed_doubles, r.memory_ratio,
-                  r.seed_ratio, r.evals_values, r.evals_hessians, r.reconstruct_over_full, r.reconstruct_over_evaluate,
-                  quick ? "true" : "false", i + 1 < records.size() ? "," : "");
-    js << buf;
-  }
-  js << "]\n";
+  js << basis_records.dump(2) << "\n";
   std::printf("wrote %s\n", path.string().c_str());
   const nlohmann::json graded = graded_lists(quick);
   const auto graded_path = std::filesystem::path(out) / "graded_lists.json";
